@@ -1,0 +1,1 @@
+//! Rays, boxes and the watertight triangle test.

@@ -1,0 +1,8 @@
+//! subfield: ray tracing of animated scenes with unstructured motion by parallel subfields.
+//!
+//! The data flows one way (see README): `scene` → `psf` (bake, dynamic, traverse) →
+//! `format` (write, open) → `render`. A module does not reach back up.
+
+pub mod geometry;
+pub mod psf;
+pub mod scene;

@@ -1,0 +1,1 @@
+//! Parallel subfields: directions, tile grids, conservative raster, 1D BSP, traversal.

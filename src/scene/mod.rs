@@ -1,0 +1,1 @@
+//! Scene model, glTF import/export, animation sampling, static/dynamic split.
