@@ -6,3 +6,7 @@
 pub mod geometry;
 pub mod psf;
 pub mod scene;
+pub mod synth;
+
+pub use geometry::{Aabb, BruteForce, Hit, Intersector, Ray};
+pub use psf::{Psf, PsfError, PsfParams};

@@ -1,1 +1,103 @@
-//! Rays, boxes and the watertight triangle test.
+//! Rays, boxes and the watertight triangle test: the vocabulary every later stage shares.
+
+mod aabb;
+mod brute;
+mod triangle;
+
+pub use aabb::Aabb;
+pub use brute::BruteForce;
+pub use triangle::{intersect_triangle, RayPre};
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// A ray `origin + t * dir` over `t` in `[t_min, t_max]`. `dir` need not be unit length:
+/// `t` is measured in multiples of `dir`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub t_min: f32,
+    pub t_max: f32,
+}
+
+impl Ray {
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        Ray {
+            origin,
+            dir,
+            t_min: 0.0,
+            t_max: f32::INFINITY,
+        }
+    }
+
+    pub fn segment(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Self {
+        Ray {
+            origin,
+            dir,
+            t_min,
+            t_max,
+        }
+    }
+
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+
+    /// A ray is traceable when its numbers are finite and its direction is not zero.
+    /// Queries on other rays return no hit.
+    pub fn is_valid(&self) -> bool {
+        self.origin.is_finite()
+            && self.dir.is_finite()
+            && self.dir != Vec3::ZERO
+            && !self.t_min.is_nan()
+            && !self.t_max.is_nan()
+    }
+}
+
+/// A ray-triangle hit: parameter `t` along the ray, the triangle's index, and the
+/// barycentric weights `u` of vertex 1 and `v` of vertex 2 (vertex 0 has `1 - u - v`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub tri: u32,
+    pub u: f32,
+    pub v: f32,
+}
+
+impl Hit {
+    /// The tie rule every intersector in this crate follows: the smaller `t` wins; at an
+    /// exactly equal `t` the smaller triangle index wins. It makes "the closest hit" a
+    /// function of the scene and the ray alone, so different structures can be compared
+    /// hit for hit.
+    #[inline]
+    pub fn is_closer_than(&self, other: &Hit) -> bool {
+        self.t < other.t || (self.t == other.t && self.tri < other.tri)
+    }
+}
+
+/// Closest-hit and any-hit queries over a set of triangles. Batch calls trace in
+/// parallel with rayon; results come back in the order of the rays.
+pub trait Intersector: Sync {
+    /// The closest hit in `[t_min, t_max]` under the tie rule of [`Hit::is_closer_than`].
+    fn intersect(&self, ray: &Ray) -> Option<Hit>;
+
+    /// Whether anything is hit in `[t_min, t_max]` (shadow rays).
+    fn occluded(&self, ray: &Ray) -> bool;
+
+    fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        assert_eq!(rays.len(), out.len(), "one output slot per ray");
+        rays.par_iter()
+            .zip(out.par_iter_mut())
+            .with_min_len(64)
+            .for_each(|(r, o)| *o = self.intersect(r));
+    }
+
+    fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len(), "one output slot per ray");
+        rays.par_iter()
+            .zip(out.par_iter_mut())
+            .with_min_len(64)
+            .for_each(|(r, o)| *o = self.occluded(r));
+    }
+}

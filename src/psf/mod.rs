@@ -1,1 +1,369 @@
-//! Parallel subfields: directions, tile grids, conservative raster, 1D BSP, traversal.
+//! Parallel subfields (the paper's PSF): for each of a set of directions, the scene's
+//! triangles rasterised into a grid of beams (tiles) with a 1D BSP along the beam.
+//!
+//! * [`directions`]: subdivided tetrahedron, subfields shared by `d` and `-d`, lookup table.
+//! * [`grid`]: a subfield's frame and tiles; conservative raster with per-tile depths.
+//! * [`bsp`]: the per-tile 1D BSP, flattened to slabs.
+//! * [`bake`](Psf::build): all of it for a static triangle set, in parallel and deterministic.
+//! * `traverse`: closest-hit and any-hit queries (2D DDA near to far, early exit).
+
+pub mod bsp;
+pub mod directions;
+pub mod grid;
+mod stats;
+mod storage;
+mod traverse;
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+pub use bsp::{Entry, TileHeader};
+pub use directions::{subfield_directions, tetrahedron_directions, DirectionTable, MAX_LEVEL};
+pub use grid::GridFrame;
+pub use stats::{Histogram, PsfStats, RayStats};
+pub use storage::{Buf, SharedBytes};
+#[allow(unused_imports)] // the dynamic layer walks tiles too
+pub(crate) use traverse::walk_tiles;
+
+use crate::geometry::Aabb;
+
+/// How a PSF is built. The defaults come from `cargo bench --bench trace` (see README).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PsfParams {
+    /// Tetrahedron subdivision level, 0..=4 (4, 10, 34, 130, 514 directions).
+    pub level: u32,
+    /// Tiles along the longer side of each subfield's base rectangle, 1..=4096.
+    pub tiles: u32,
+}
+
+impl Default for PsfParams {
+    fn default() -> Self {
+        PsfParams {
+            level: 2,
+            tiles: 64,
+        }
+    }
+}
+
+impl PsfParams {
+    pub const MAX_TILES: u32 = 4096;
+
+    pub fn validate(&self) -> Result<(), PsfError> {
+        if self.level > MAX_LEVEL {
+            return Err(PsfError::Params(format!(
+                "level {} is above the maximum {MAX_LEVEL}",
+                self.level
+            )));
+        }
+        if self.tiles == 0 || self.tiles > Self::MAX_TILES {
+            return Err(PsfError::Params(format!(
+                "tiles {} is outside 1..={}",
+                self.tiles,
+                Self::MAX_TILES
+            )));
+        }
+        Ok(())
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PsfError {
+    #[error("invalid parameters: {0}")]
+    Params(String),
+    #[error("triangle {triangle} has a non-finite coordinate at vertex {vertex}: {value:?}")]
+    NonFinite {
+        triangle: usize,
+        vertex: usize,
+        value: [f32; 3],
+    },
+    #[error("{count} triangles is more than a PSF can index ({max})")]
+    TooManyTriangles { count: usize, max: usize },
+    #[error("inconsistent subfield data in {what}: {detail}")]
+    Inconsistent { what: String, detail: String },
+}
+
+/// One subfield: its grid and, per tile, the BSP slabs listing triangle entries.
+#[derive(Debug)]
+pub struct Subfield {
+    pub frame: GridFrame,
+    /// `nu * nv` headers, row-major (`v` rows of `u` tiles).
+    pub tiles: Buf<TileHeader>,
+    /// Per tile, `slab_count + 1` offsets into `entries`.
+    pub slab_starts: Buf<u32>,
+    pub entries: Buf<Entry>,
+}
+
+/// The static scene's parallel subfields: triangles plus one [`Subfield`] per direction.
+#[derive(Debug)]
+pub struct Psf {
+    params: PsfParams,
+    bounds: Aabb,
+    margin: f32,
+    /// `bounds` grown by the rounding allowance: rays are clipped to it.
+    clip: Aabb,
+    triangles: Buf<[Vec3; 3]>,
+    subfields: Vec<Subfield>,
+    table: DirectionTable,
+}
+
+/// The rounding allowance for a scene within `bounds`: 1e-5 of its scale (the largest
+/// coordinate magnitude or extent), some 80 float ulps. Raster, depth ranges and the
+/// traversal's early exit all widen by it, so the PSF never misses a hit that the
+/// triangle test reports.
+pub fn margin_for(bounds: &Aabb) -> f32 {
+    let scale = bounds.magnitude().max(bounds.extent().max_element());
+    (1e-5 * scale).max(1e-30)
+}
+
+impl Psf {
+    /// Bakes the PSF of a static triangle set.
+    pub fn build(tris: &[[Vec3; 3]], params: &PsfParams) -> Result<Psf, PsfError> {
+        Self::build_with_progress(tris, params, &|_, _| {})
+    }
+
+    /// As [`Psf::build`], calling `progress(done, total)` as subfields complete (from
+    /// worker threads).
+    pub fn build_with_progress(
+        tris: &[[Vec3; 3]],
+        params: &PsfParams,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<Psf, PsfError> {
+        params.validate()?;
+        if tris.len() > u32::MAX as usize {
+            return Err(PsfError::TooManyTriangles {
+                count: tris.len(),
+                max: u32::MAX as usize,
+            });
+        }
+        for (i, t) in tris.iter().enumerate() {
+            for (k, v) in t.iter().enumerate() {
+                if !v.is_finite() {
+                    return Err(PsfError::NonFinite {
+                        triangle: i,
+                        vertex: k,
+                        value: v.to_array(),
+                    });
+                }
+            }
+        }
+        let bounds = Aabb::from_triangles(tris);
+        let margin = margin_for(&bounds);
+        let dirs = subfield_directions(params.level);
+        let grid_bounds = bounds.padded(2.0 * margin);
+        let done = AtomicUsize::new(0);
+        let subfields: Vec<Subfield> = if tris.is_empty() {
+            Vec::new()
+        } else {
+            dirs.par_iter()
+                .map(|d| {
+                    let frame = GridFrame::new(*d, &grid_bounds, params.tiles);
+                    let s = bake_subfield(frame, tris, margin);
+                    progress(done.fetch_add(1, Ordering::Relaxed) + 1, dirs.len());
+                    s
+                })
+                .collect()
+        };
+        Ok(Psf {
+            params: *params,
+            bounds,
+            margin,
+            clip: grid_bounds,
+            triangles: Buf::Owned(tris.to_vec()),
+            subfields,
+            table: DirectionTable::new(&dirs),
+        })
+    }
+
+    /// Assembles a PSF from stored parts (a baked file), checking every index the
+    /// traversal will follow: afterwards queries cannot go out of bounds.
+    pub fn from_parts(
+        params: PsfParams,
+        margin: f32,
+        triangles: Buf<[Vec3; 3]>,
+        subfields: Vec<Subfield>,
+    ) -> Result<Psf, PsfError> {
+        params.validate()?;
+        let bounds = Aabb::from_triangles(&triangles);
+        let dirs = subfield_directions(params.level);
+        let bad = |what: String, detail: String| PsfError::Inconsistent { what, detail };
+        if margin != margin_for(&bounds) {
+            return Err(bad(
+                "header".into(),
+                format!("margin {margin} does not match the triangles' bounds"),
+            ));
+        }
+        let expected = if triangles.is_empty() { 0 } else { dirs.len() };
+        if subfields.len() != expected {
+            return Err(bad(
+                "header".into(),
+                format!(
+                    "{} subfields, level {} needs {expected}",
+                    subfields.len(),
+                    params.level
+                ),
+            ));
+        }
+        for (i, t) in triangles.iter().enumerate() {
+            if !t.iter().all(|v| v.is_finite()) {
+                return Err(bad(
+                    "triangles".into(),
+                    format!("triangle {i} has a non-finite coordinate"),
+                ));
+            }
+        }
+        let ntri = triangles.len() as u64;
+        for (k, s) in subfields.iter().enumerate() {
+            let what = || format!("subfield[{k}]");
+            let f = &s.frame;
+            let nums = [f.d, f.u, f.v].iter().all(|v| v.is_finite())
+                && [f.u0, f.v0, f.tile, f.inv_tile]
+                    .iter()
+                    .all(|x| x.is_finite())
+                && f.tile > 0.0;
+            if !nums
+                || f.nu == 0
+                || f.nv == 0
+                || f.nu > PsfParams::MAX_TILES
+                || f.nv > PsfParams::MAX_TILES
+            {
+                return Err(bad(
+                    what(),
+                    "frame has non-finite numbers or a bad tile count".into(),
+                ));
+            }
+            if (f.d - dirs[k]).length() > 1e-6 {
+                return Err(bad(
+                    what(),
+                    format!(
+                        "direction {:?} is not direction {k} of level {}",
+                        f.d, params.level
+                    ),
+                ));
+            }
+            if s.tiles.len() != f.tile_count() {
+                return Err(bad(
+                    what(),
+                    format!(
+                        "{} tile headers for a {}x{} grid",
+                        s.tiles.len(),
+                        f.nu,
+                        f.nv
+                    ),
+                ));
+            }
+            let nslab = s.slab_starts.len() as u64;
+            for (ti, h) in s.tiles.iter().enumerate() {
+                if h.slab_count == 0 {
+                    continue;
+                }
+                let end = h.first_slab as u64 + h.slab_count as u64 + 1;
+                if h.slab_count as usize > bsp::MAX_SLABS
+                    || end > nslab
+                    || !h.z0.is_finite()
+                    || !h.inv_slab.is_finite()
+                {
+                    return Err(bad(
+                        what(),
+                        format!("tile {ti} header {h:?} is out of range"),
+                    ));
+                }
+                let st = &s.slab_starts[h.first_slab as usize..end as usize];
+                if st.windows(2).any(|w| w[0] > w[1]) || st[st.len() - 1] as usize > s.entries.len()
+                {
+                    return Err(bad(
+                        what(),
+                        format!("tile {ti} slab offsets are not ascending within the entries"),
+                    ));
+                }
+            }
+            if let Some((i, e)) = s
+                .entries
+                .iter()
+                .enumerate()
+                .find(|(_, e)| e.tri as u64 >= ntri)
+            {
+                return Err(bad(
+                    what(),
+                    format!("entry {i} names triangle {} of {ntri}", e.tri),
+                ));
+            }
+        }
+        Ok(Psf {
+            params,
+            bounds,
+            margin,
+            clip: bounds.padded(2.0 * margin),
+            triangles,
+            subfields,
+            table: DirectionTable::new(&dirs),
+        })
+    }
+
+    pub fn params(&self) -> &PsfParams {
+        &self.params
+    }
+
+    pub fn bounds(&self) -> &Aabb {
+        &self.bounds
+    }
+
+    pub fn margin(&self) -> f32 {
+        self.margin
+    }
+
+    pub fn triangles(&self) -> &[[Vec3; 3]] {
+        &self.triangles
+    }
+
+    pub fn subfields(&self) -> &[Subfield] {
+        &self.subfields
+    }
+}
+
+/// Rasterises every triangle into one subfield and builds each tile's BSP. Sequential
+/// within the subfield, so the layout depends on the input order alone.
+fn bake_subfield(frame: GridFrame, tris: &[[Vec3; 3]], margin: f32) -> Subfield {
+    let ntiles = frame.tile_count();
+    let mut raw: Vec<(u32, Entry)> = Vec::new();
+    for (i, t) in tris.iter().enumerate() {
+        frame.raster(t, margin, |tile, zmin, zmax| {
+            raw.push((
+                tile,
+                Entry {
+                    tri: i as u32,
+                    zmin,
+                    zmax,
+                },
+            ))
+        });
+    }
+    // Counting sort by tile; stable, so entries stay in triangle order.
+    let mut start = vec![0u32; ntiles + 1];
+    for (t, _) in &raw {
+        start[*t as usize + 1] += 1;
+    }
+    for i in 0..ntiles {
+        start[i + 1] += start[i];
+    }
+    let mut by_tile = vec![Entry::default(); raw.len()];
+    let mut cursor = start.clone();
+    for (t, e) in raw {
+        by_tile[cursor[t as usize] as usize] = e;
+        cursor[t as usize] += 1;
+    }
+    let mut tiles = Vec::with_capacity(ntiles);
+    let mut slab_starts = Vec::new();
+    let mut entries = Vec::with_capacity(by_tile.len());
+    for i in 0..ntiles {
+        let list = &by_tile[start[i] as usize..start[i + 1] as usize];
+        tiles.push(bsp::build_tile(list, &mut slab_starts, &mut entries));
+    }
+    Subfield {
+        frame,
+        tiles: tiles.into(),
+        slab_starts: slab_starts.into(),
+        entries: entries.into(),
+    }
+}

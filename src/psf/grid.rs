@@ -1,0 +1,254 @@
+//! A subfield's tile grid: the frame `(u, v, d)`, the base rectangle of the scene bounds
+//! in that frame cut into square tiles, and the conservative rasterisation of triangles
+//! into those tiles with the depth range each covers over each tile.
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+
+use super::directions::frame_for;
+use crate::geometry::Aabb;
+
+/// The frame and tile grid of one subfield. `repr(C)` and plain: it is stored as is in
+/// the baked file.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct GridFrame {
+    /// The beam direction and the two axes of the base plane.
+    pub d: Vec3,
+    pub u: Vec3,
+    pub v: Vec3,
+    /// The base rectangle's lower corner in `(u, v)` coordinates.
+    pub u0: f32,
+    pub v0: f32,
+    /// Side of a square tile, and its inverse.
+    pub tile: f32,
+    pub inv_tile: f32,
+    /// Tiles along `u` and `v`.
+    pub nu: u32,
+    pub nv: u32,
+}
+
+const _: () = assert!(std::mem::size_of::<GridFrame>() == 60);
+
+impl GridFrame {
+    /// The grid for direction `d` over `bounds`: the longer side of the base rectangle
+    /// is cut into `tiles` tiles, the shorter into as many as it takes (at least one).
+    pub fn new(d: Vec3, bounds: &Aabb, tiles: u32) -> GridFrame {
+        let (u, v) = frame_for(d);
+        let (mut lo_u, mut hi_u, mut lo_v, mut hi_v) = (
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        );
+        for c in bounds.corners() {
+            let (pu, pv) = (c.dot(u), c.dot(v));
+            lo_u = lo_u.min(pu);
+            hi_u = hi_u.max(pu);
+            lo_v = lo_v.min(pv);
+            hi_v = hi_v.max(pv);
+        }
+        let tiles = tiles.max(1);
+        let ext = (hi_u - lo_u).max(hi_v - lo_v);
+        let tile = if ext > 0.0 && ext.is_finite() {
+            ext / tiles as f32
+        } else {
+            1.0
+        };
+        let count = |e: f32| ((e / tile).ceil() as u32).clamp(1, tiles);
+        GridFrame {
+            d,
+            u,
+            v,
+            u0: lo_u,
+            v0: lo_v,
+            tile,
+            inv_tile: 1.0 / tile,
+            nu: count(hi_u - lo_u),
+            nv: count(hi_v - lo_v),
+        }
+    }
+
+    pub fn tile_count(&self) -> usize {
+        self.nu as usize * self.nv as usize
+    }
+
+    /// A point in grid coordinates: tile units along `u` and `v` from the base corner,
+    /// and depth along `d`.
+    #[inline]
+    pub fn project(&self, p: Vec3) -> [f32; 3] {
+        [
+            (p.dot(self.u) - self.u0) * self.inv_tile,
+            (p.dot(self.v) - self.v0) * self.inv_tile,
+            p.dot(self.d),
+        ]
+    }
+
+    /// Calls `emit(tile_index, zmin, zmax)` for every tile the triangle touches, with the
+    /// depth range of the part of the triangle over that tile. Conservative: the tile
+    /// rectangles are grown by `margin` (world units) on every side, and depths by
+    /// `margin` plus a relative allowance for the rounding of the clip, so a triangle
+    /// that touches a tile, even at a corner, is listed in it whatever the rounding.
+    pub fn raster(&self, tri: &[Vec3; 3], margin: f32, mut emit: impl FnMut(u32, f32, f32)) {
+        let p = [
+            self.project(tri[0]),
+            self.project(tri[1]),
+            self.project(tri[2]),
+        ];
+        let m = margin * self.inv_tile;
+        let lo_u = p[0][0].min(p[1][0]).min(p[2][0]) - m;
+        let hi_u = p[0][0].max(p[1][0]).max(p[2][0]) + m;
+        let lo_v = p[0][1].min(p[1][1]).min(p[2][1]) - m;
+        let hi_v = p[0][1].max(p[1][1]).max(p[2][1]) + m;
+        let zmin = p[0][2].min(p[1][2]).min(p[2][2]);
+        let zmax = p[0][2].max(p[1][2]).max(p[2][2]);
+        let dz = margin + 1e-5 * (zmax - zmin);
+        let cell = |x: f32, n: u32| (x.floor() as i64).clamp(0, n as i64 - 1) as u32;
+        let (i0, i1) = (cell(lo_u, self.nu), cell(hi_u, self.nu));
+        let (j0, j1) = (cell(lo_v, self.nv), cell(hi_v, self.nv));
+        if i0 == i1 && j0 == j1 {
+            emit(j0 * self.nu + i0, zmin - dz, zmax + dz);
+            return;
+        }
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let rect = [
+                    i as f32 - m,
+                    i as f32 + 1.0 + m,
+                    j as f32 - m,
+                    j as f32 + 1.0 + m,
+                ];
+                if let Some((a, b)) = clipped_depth_range(&p, rect) {
+                    emit(j * self.nu + i, a - dz, b + dz);
+                }
+            }
+        }
+    }
+}
+
+/// Clips the triangle (grid coordinates, depth carried along) to the rectangle
+/// `[u_lo, u_hi] × [v_lo, v_hi]` (Sutherland-Hodgman, boundaries inclusive) and returns
+/// the depth range of what is left, or `None` when nothing is. Exact clipping by the
+/// prism over the rectangle, so it also holds for triangles seen edge-on.
+fn clipped_depth_range(tri: &[[f32; 3]; 3], rect: [f32; 4]) -> Option<(f32, f32)> {
+    let mut poly = [[0f32; 3]; 9];
+    let mut n = 3;
+    poly[..3].copy_from_slice(tri);
+    let mut tmp = [[0f32; 3]; 9];
+    // (axis, bound, keep the side >= bound when sign is +1)
+    let planes = [
+        (0usize, rect[0], 1.0f32),
+        (0, rect[1], -1.0),
+        (1, rect[2], 1.0),
+        (1, rect[3], -1.0),
+    ];
+    for (axis, bound, sign) in planes {
+        let mut m = 0;
+        for k in 0..n {
+            let a = poly[k];
+            let b = poly[(k + 1) % n];
+            let da = (a[axis] - bound) * sign;
+            let db = (b[axis] - bound) * sign;
+            if da >= 0.0 {
+                tmp[m] = a;
+                m += 1;
+            }
+            if (da >= 0.0) != (db >= 0.0) {
+                let s = da / (da - db);
+                tmp[m] = [
+                    a[0] + (b[0] - a[0]) * s,
+                    a[1] + (b[1] - a[1]) * s,
+                    a[2] + (b[2] - a[2]) * s,
+                ];
+                m += 1;
+            }
+        }
+        if m == 0 {
+            return None;
+        }
+        n = m;
+        poly[..n].copy_from_slice(&tmp[..n]);
+    }
+    let mut lo = f32::INFINITY;
+    let mut hi = f32::NEG_INFINITY;
+    for q in &poly[..n] {
+        lo = lo.min(q[2]);
+        hi = hi.max(q[2]);
+    }
+    Some((lo, hi))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid() -> GridFrame {
+        let b = Aabb {
+            min: Vec3::ZERO,
+            max: Vec3::splat(8.0),
+        };
+        GridFrame::new(Vec3::Z, &b, 8)
+    }
+
+    #[test]
+    fn grid_covers_the_bounds_with_square_tiles() {
+        let g = grid();
+        assert_eq!((g.nu, g.nv), (8, 8));
+        assert!((g.tile - 1.0).abs() < 1e-6);
+        let b = Aabb {
+            min: Vec3::ZERO,
+            max: Vec3::new(8.0, 2.0, 1.0),
+        };
+        let g = GridFrame::new(Vec3::Z, &b, 8);
+        assert_eq!(g.nu.max(g.nv), 8);
+        assert_eq!(g.nu.min(g.nv), 2);
+    }
+
+    fn tiles_of(g: &GridFrame, tri: [Vec3; 3], margin: f32) -> Vec<(u32, f32, f32)> {
+        let mut v = Vec::new();
+        g.raster(&tri, margin, |t, a, b| v.push((t, a, b)));
+        v
+    }
+
+    #[test]
+    fn corner_touch_is_listed() {
+        let g = grid();
+        // A frame in which u, v are some rotation of x, y: find the grid position of a
+        // tile corner and put a tiny triangle whose vertex sits exactly on it.
+        let corner = g.u * (g.u0 + 3.0 * g.tile) + g.v * (g.v0 + 5.0 * g.tile) + g.d * 4.0;
+        let tri = [corner, corner + g.u * 0.3, corner + g.v * 0.3];
+        let t = tiles_of(&g, tri, 1e-5);
+        let ids: Vec<u32> = t.iter().map(|x| x.0).collect();
+        for (i, j) in [(2, 4), (3, 4), (2, 5), (3, 5)] {
+            assert!(
+                ids.contains(&(j * g.nu + i)),
+                "tile ({i},{j}) missing from {ids:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn depth_range_is_per_tile() {
+        let g = grid();
+        // a slanted triangle: depth rises along u across many tiles
+        let a = g.u * (g.u0 + 0.5) + g.v * (g.v0 + 0.5);
+        let tri = [a, a + g.u * 6.0 + g.d * 6.0, a + g.v * 6.0];
+        for (tile, lo, hi) in tiles_of(&g, tri, 1e-5) {
+            let i = tile % g.nu;
+            // depth over tile column i is at most about (i + 1) - 0.5 and at least i - 0.5 (clamped at 0)
+            assert!(hi <= i as f32 + 0.6, "tile {tile}: hi {hi}");
+            assert!(lo >= (i as f32 - 0.6).max(-0.1), "tile {tile}: lo {lo}");
+        }
+    }
+
+    #[test]
+    fn edge_on_triangle_is_listed_where_its_segment_runs() {
+        let g = grid();
+        let a = g.u * (g.u0 + 0.5) + g.v * (g.v0 + 0.5);
+        // the triangle contains d: seen edge-on, a segment along u
+        let tri = [a, a + g.u * 4.0, a + g.d * 3.0];
+        let t = tiles_of(&g, tri, 1e-5);
+        let ids: Vec<u32> = t.iter().map(|x| x.0).collect();
+        assert_eq!(ids, vec![0, 1, 2, 3, 4]);
+    }
+}

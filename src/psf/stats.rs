@@ -1,0 +1,143 @@
+//! Statistics: the structure's occupancy, and the work done per ray.
+
+use super::Psf;
+
+/// Work counters for traced rays, summed with `+=`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayStats {
+    pub rays: u64,
+    pub tiles_visited: u64,
+    pub candidates_tested: u64,
+}
+
+impl RayStats {
+    pub fn tiles_per_ray(&self) -> f64 {
+        self.tiles_visited as f64 / self.rays.max(1) as f64
+    }
+
+    pub fn candidates_per_ray(&self) -> f64 {
+        self.candidates_tested as f64 / self.rays.max(1) as f64
+    }
+}
+
+impl std::ops::AddAssign for RayStats {
+    fn add_assign(&mut self, o: RayStats) {
+        self.rays += o.rays;
+        self.tiles_visited += o.tiles_visited;
+        self.candidates_tested += o.candidates_tested;
+    }
+}
+
+/// What the traversal counts; `NoCount` compiles to nothing.
+pub(crate) trait Counter {
+    fn tile(&mut self);
+    fn candidate(&mut self);
+}
+
+pub(crate) struct NoCount;
+
+impl Counter for NoCount {
+    #[inline(always)]
+    fn tile(&mut self) {}
+    #[inline(always)]
+    fn candidate(&mut self) {}
+}
+
+impl Counter for RayStats {
+    #[inline(always)]
+    fn tile(&mut self) {
+        self.tiles_visited += 1;
+    }
+    #[inline(always)]
+    fn candidate(&mut self) {
+        self.candidates_tested += 1;
+    }
+}
+
+/// Counts in power-of-two buckets: bucket 0 holds the value 0, bucket `k >= 1` holds
+/// values in `[2^(k-1), 2^k)`.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Histogram {
+    pub buckets: Vec<u64>,
+}
+
+impl Histogram {
+    pub fn add(&mut self, value: u64) {
+        let k = if value == 0 {
+            0
+        } else {
+            64 - value.leading_zeros() as usize
+        };
+        if self.buckets.len() <= k {
+            self.buckets.resize(k + 1, 0);
+        }
+        self.buckets[k] += 1;
+    }
+
+    /// `(low, high_exclusive, count)` per bucket.
+    pub fn rows(&self) -> impl Iterator<Item = (u64, u64, u64)> + '_ {
+        self.buckets.iter().enumerate().map(|(k, &c)| match k {
+            0 => (0, 1, c),
+            _ => (1u64 << (k - 1), 1u64 << k, c),
+        })
+    }
+}
+
+/// Occupancy of a PSF: triangles listed per tile (an entry counts once per tile, however
+/// many BSP slabs list it).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PsfStats {
+    pub triangles: usize,
+    pub subfields: usize,
+    pub tiles: usize,
+    pub empty_tiles: usize,
+    /// Entries over all slabs (with the BSP's duplicates).
+    pub slab_entries: usize,
+    pub entries_per_tile_mean: f64,
+    pub entries_per_tile_max: u64,
+    pub entries_per_tile: Histogram,
+    /// Bytes of triangles, tile headers, slab offsets and entries.
+    pub bytes: usize,
+}
+
+impl Psf {
+    pub fn stats(&self) -> PsfStats {
+        let mut s = PsfStats {
+            triangles: self.triangles().len(),
+            subfields: self.subfields().len(),
+            ..Default::default()
+        };
+        s.bytes = std::mem::size_of_val(self.triangles());
+        let mut total = 0u64;
+        for sf in self.subfields() {
+            s.bytes += std::mem::size_of_val(&*sf.tiles)
+                + std::mem::size_of_val(&*sf.slab_starts)
+                + std::mem::size_of_val(&*sf.entries);
+            s.slab_entries += sf.entries.len();
+            for h in sf.tiles.iter() {
+                s.tiles += 1;
+                let n = if h.slab_count == 0 {
+                    0
+                } else {
+                    let st = &sf.slab_starts
+                        [h.first_slab as usize..=(h.first_slab + h.slab_count) as usize];
+                    let mut tris: Vec<u32> = sf.entries[st[0] as usize..st[st.len() - 1] as usize]
+                        .iter()
+                        .map(|e| e.tri)
+                        .collect();
+                    tris.sort_unstable();
+                    tris.dedup();
+                    tris.len() as u64
+                };
+                if n == 0 {
+                    s.empty_tiles += 1;
+                }
+                total += n;
+                s.entries_per_tile_max = s.entries_per_tile_max.max(n);
+                s.entries_per_tile.add(n);
+            }
+        }
+        s.entries_per_tile_mean = total as f64 / s.tiles.max(1) as f64;
+        s
+    }
+}

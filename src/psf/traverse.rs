@@ -1,0 +1,199 @@
+//! Queries: pick the subfield of the closest direction (table lookup), clip the ray to
+//! the scene bounds, walk the tiles under its projection near to far (2D DDA, in f64 so
+//! far-away origins lose nothing), search each tile's BSP over the ray's depth interval
+//! there, and stop as soon as the best hit lies before the exit of the current tile.
+
+use glam::DVec3;
+
+use super::stats::{Counter, NoCount, RayStats};
+use super::{GridFrame, Psf};
+use crate::geometry::{intersect_triangle, Hit, Intersector, Ray, RayPre};
+
+/// Walks the tiles of `frame` that the line `o + t d`, `t` in `[t0, t1]`, passes through,
+/// in order of `t`, calling `visit(tile, t_enter, t_exit)` until it returns `false`.
+/// Amanatides-Woo, with the crossing parameters recomputed from the tile index at every
+/// step rather than accumulated, so there is no drift over long walks.
+#[inline]
+pub(crate) fn walk_tiles(
+    f: &GridFrame,
+    o: DVec3,
+    d: DVec3,
+    t0: f64,
+    t1: f64,
+    mut visit: impl FnMut(usize, f64, f64) -> bool,
+) {
+    let inv = f.inv_tile as f64;
+    let (u, v) = (f.u.as_dvec3(), f.v.as_dvec3());
+    let (ax, bx) = ((o.dot(u) - f.u0 as f64) * inv, d.dot(u) * inv);
+    let (ay, by) = ((o.dot(v) - f.v0 as f64) * inv, d.dot(v) * inv);
+    let (nu, nv) = (f.nu as i64, f.nv as i64);
+    let mut ix = ((ax + t0 * bx).floor() as i64).clamp(0, nu - 1);
+    let mut iy = ((ay + t0 * by).floor() as i64).clamp(0, nv - 1);
+    let (sx, sy) = (step(bx), step(by));
+    // Parameter at which the line leaves the current column / row.
+    let cross = |i: i64, s: i64, a: f64, b: f64| {
+        if s == 0 {
+            f64::INFINITY
+        } else {
+            ((i + (s > 0) as i64) as f64 - a) / b
+        }
+    };
+    let mut tx = cross(ix, sx, ax, bx);
+    let mut ty = cross(iy, sy, ay, by);
+    let mut t = t0;
+    loop {
+        let t_exit = tx.min(ty).min(t1).max(t);
+        if !visit((iy * nu + ix) as usize, t, t_exit) || t_exit >= t1 {
+            return;
+        }
+        t = t_exit;
+        if tx <= ty {
+            ix += sx;
+            if ix < 0 || ix >= nu {
+                return;
+            }
+            tx = cross(ix, sx, ax, bx);
+        } else {
+            iy += sy;
+            if iy < 0 || iy >= nv {
+                return;
+            }
+            ty = cross(iy, sy, ay, by);
+        }
+    }
+}
+
+#[inline]
+fn step(b: f64) -> i64 {
+    if b > 0.0 {
+        1
+    } else if b < 0.0 {
+        -1
+    } else {
+        0
+    }
+}
+
+impl Psf {
+    /// The closest hit, also counting the work done into `stats`.
+    pub fn intersect_counted(&self, ray: &Ray, stats: &mut RayStats) -> Option<Hit> {
+        stats.rays += 1;
+        self.trace::<false, _>(ray, stats)
+    }
+
+    /// Any hit, also counting the work done into `stats`.
+    pub fn occluded_counted(&self, ray: &Ray, stats: &mut RayStats) -> bool {
+        stats.rays += 1;
+        self.trace::<true, _>(ray, stats).is_some()
+    }
+
+    fn trace<const ANY: bool, C: Counter>(&self, ray: &Ray, count: &mut C) -> Option<Hit> {
+        if !ray.is_valid() || self.subfields.is_empty() {
+            return None;
+        }
+        let o = ray.origin.as_dvec3();
+        let d = ray.dir.as_dvec3();
+        let (ta, tb) = self.clip.clip_line(o.to_array(), d.to_array())?;
+        let t0 = ta.max(ray.t_min as f64);
+        let t1 = tb.min(ray.t_max as f64);
+        if !(t0 <= t1) {
+            return None;
+        }
+        let sf = &self.subfields[self.table.lookup(ray.dir)];
+        let (tiles, starts, entries, tris) =
+            (&*sf.tiles, &*sf.slab_starts, &*sf.entries, &*self.triangles);
+        let pre = RayPre::new(ray.origin, ray.dir);
+        let margin = self.margin;
+        // How far (in t) a computed hit may sit from where the line truly meets its
+        // triangle: the early exit waits that much longer.
+        let slack = (margin as f64 + 1e-6 * o.length()) / d.length();
+        let fd = sf.frame.d.as_dvec3();
+        let (oz, dz) = (o.dot(fd), d.dot(fd));
+        let ascending = dz >= 0.0;
+        let mut best: Option<Hit> = None;
+
+        walk_tiles(&sf.frame, o, d, t0, t1, |tile, t_enter, t_exit| {
+            count.tile();
+            let h = tiles[tile];
+            if h.slab_count == 0 {
+                return true;
+            }
+            // The ray's depth interval over this tile, cut at the best hit so far.
+            let (za, zb) = (oz + t_enter * dz, oz + t_exit * dz);
+            let (mut lo, mut hi) = ((za.min(zb) as f32) - margin, (za.max(zb) as f32) + margin);
+            let cut = |b: &Hit| (oz + (b.t as f64 + slack) * dz) as f32;
+            if let Some(b) = &best {
+                if ascending {
+                    hi = hi.min(cut(b) + margin);
+                } else {
+                    lo = lo.max(cut(b) - margin);
+                }
+            }
+            if lo > hi {
+                return true;
+            }
+            let (s_lo, s_hi) = (h.slab_of(lo) as i64, h.slab_of(hi) as i64);
+            // Near to far: forwards along +d, backwards along -d.
+            let (mut s, mut s_end, dir) = if ascending {
+                (s_lo, s_hi, 1)
+            } else {
+                (s_hi, s_lo, -1)
+            };
+            let s_first = s;
+            while (s - s_end) * dir <= 0 {
+                let base = h.first_slab as usize + s as usize;
+                for e in &entries[starts[base] as usize..starts[base + 1] as usize] {
+                    if e.zmax < lo || e.zmin > hi {
+                        continue;
+                    }
+                    // Tested already in an earlier slab of this walk?
+                    if s != s_first
+                        && h.slab_of(if ascending { e.zmin } else { e.zmax }) as i64 != s
+                    {
+                        continue;
+                    }
+                    count.candidate();
+                    let t_max = best.map_or(ray.t_max, |b| b.t);
+                    if let Some((t, u, v)) =
+                        intersect_triangle(&pre, &tris[e.tri as usize], ray.t_min, t_max)
+                    {
+                        let hit = Hit {
+                            t,
+                            tri: e.tri,
+                            u,
+                            v,
+                        };
+                        if ANY {
+                            best = Some(hit);
+                            return false;
+                        }
+                        if best.is_none_or(|b| hit.is_closer_than(&b)) {
+                            best = Some(hit);
+                            if ascending {
+                                hi = hi.min(cut(&hit) + margin);
+                                s_end = h.slab_of(hi) as i64;
+                            } else {
+                                lo = lo.max(cut(&hit) - margin);
+                                s_end = h.slab_of(lo) as i64;
+                            }
+                        }
+                    }
+                }
+                s += dir;
+            }
+            // Every triangle hit before the tile's exit is listed in a tile walked so far.
+            !matches!(&best, Some(b) if b.t as f64 + slack <= t_exit)
+        });
+        best
+    }
+}
+
+impl Intersector for Psf {
+    fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.trace::<false, _>(ray, &mut NoCount)
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        self.trace::<true, _>(ray, &mut NoCount).is_some()
+    }
+}
