@@ -53,9 +53,9 @@ impl TileHeader {
     /// The slab holding depth `z`, clamped into the tile. Monotone in `z`.
     #[inline]
     pub fn slab_of(&self, z: f32) -> u32 {
-        let s = ((z - self.z0) * self.inv_slab).floor();
-        // `as` saturates (NaN gives 0); then clamp to the last slab.
-        (s.max(0.0) as u32).min(self.slab_count - 1)
+        // Truncation is floor once negatives are clamped to 0 (and `floor` is a libm call
+        // on baseline x86-64: 5% of trace time). `as` saturates; NaN gives 0.
+        (((z - self.z0) * self.inv_slab).max(0.0) as u32).min(self.slab_count - 1)
     }
 }
 

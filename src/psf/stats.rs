@@ -8,6 +8,8 @@ pub struct RayStats {
     pub rays: u64,
     pub tiles_visited: u64,
     pub candidates_tested: u64,
+    /// Tile entries looked at, whether or not their depth range let them through.
+    pub entries_scanned: u64,
 }
 
 impl RayStats {
@@ -25,6 +27,7 @@ impl std::ops::AddAssign for RayStats {
         self.rays += o.rays;
         self.tiles_visited += o.tiles_visited;
         self.candidates_tested += o.candidates_tested;
+        self.entries_scanned += o.entries_scanned;
     }
 }
 
@@ -32,6 +35,7 @@ impl std::ops::AddAssign for RayStats {
 pub(crate) trait Counter {
     fn tile(&mut self);
     fn candidate(&mut self);
+    fn scanned(&mut self, n: usize);
 }
 
 pub(crate) struct NoCount;
@@ -41,6 +45,8 @@ impl Counter for NoCount {
     fn tile(&mut self) {}
     #[inline(always)]
     fn candidate(&mut self) {}
+    #[inline(always)]
+    fn scanned(&mut self, _: usize) {}
 }
 
 impl Counter for RayStats {
@@ -51,6 +57,10 @@ impl Counter for RayStats {
     #[inline(always)]
     fn candidate(&mut self) {
         self.candidates_tested += 1;
+    }
+    #[inline(always)]
+    fn scanned(&mut self, n: usize) {
+        self.entries_scanned += n as u64;
     }
 }
 
