@@ -329,16 +329,18 @@ impl Importer<'_> {
                     .and_then(|x| x.checked_add(elem));
                 match need {
                     Some(n) if n <= bytes.len() => {}
-                    _ => return Err(self.acc_err(
-                        ai,
-                        usage,
-                        format!(
+                    _ => {
+                        return Err(self.acc_err(
+                            ai,
+                            usage,
+                            format!(
                             "{count} elements of {elem} bytes (stride {stride}) from byte {start} \
                                  run past bufferViews[{}] ({} bytes)",
                             view.index(),
                             bytes.len()
                         ),
-                    )),
+                        ))
+                    }
                 }
             }
             for e in 0..count {
