@@ -19,9 +19,11 @@ use super::{
     Skin, Texture, TextureRef, Trs, Warning, Wrap,
 };
 
-/// Refuse accessors claiming more components than this (an accessor without a buffer view
-/// is all zeros and could otherwise ask for any amount of memory).
+/// Refuse accessors claiming more components than this.
 const MAX_COMPONENTS: usize = 1 << 28;
+/// An accessor without a buffer view is all zeros (plus sparse values): its count is not
+/// bounded by any buffer, so it gets a tighter cap (16 Mi components, 128 MiB decoded).
+const MAX_ZERO_COMPONENTS: usize = 1 << 24;
 
 /// Extensions whose absence from our reader would change the picture; files that
 /// require any other extension are refused rather than drawn wrongly.
@@ -55,6 +57,28 @@ pub(super) fn from_slice(bytes: &[u8], path: &Path, folder: &Path) -> Result<Sce
             path: path.to_path_buf(),
             reason: e.to_string(),
         })?;
+    // gltf-json's validation indexes `accessors` with the POSITION index unchecked (and
+    // panics when it is out of range): check that one first.
+    let mut problems = Vec::new();
+    for (mi, m) in root.meshes.iter().enumerate() {
+        for (pi, p) in m.primitives.iter().enumerate() {
+            let pos = gltf::json::validation::Checked::Valid(gltf::json::mesh::Semantic::Positions);
+            if let Some(i) = p.attributes.get(&pos) {
+                if i.value() >= root.accessors.len() {
+                    problems.push(format!(
+                        "meshes[{mi}].primitives[{pi}].attributes.POSITION: accessor {} out of range",
+                        i.value()
+                    ));
+                }
+            }
+        }
+    }
+    if !problems.is_empty() {
+        return Err(SceneError::Invalid {
+            path: path.to_path_buf(),
+            problems,
+        });
+    }
     let doc = gltf::Document::from_json(root).map_err(|e| match e {
         gltf::Error::Validation(list) => SceneError::Invalid {
             path: path.to_path_buf(),
@@ -240,15 +264,15 @@ impl Importer<'_> {
             }
         }
         let decoded = String::from_utf8(percent_decode(uri)).map_err(|_| refuse())?;
-        let rel = Path::new(&decoded);
-        let mut depth: i64 = 0;
-        for c in rel.components() {
+        // Resolved lexically ("a/../b" is "b" whether or not "a" exists), so the check
+        // and the file opened are the same path.
+        let mut rel = PathBuf::new();
+        for c in Path::new(&decoded).components() {
             match c {
-                Component::Normal(_) => depth += 1,
+                Component::Normal(part) => rel.push(part),
                 Component::CurDir => {}
                 Component::ParentDir => {
-                    depth -= 1;
-                    if depth < 0 {
+                    if !rel.pop() {
                         return Err(refuse());
                     }
                 }
@@ -307,7 +331,7 @@ impl Importer<'_> {
             .checked_mul(comps)
             .filter(|&n| n <= MAX_COMPONENTS)
             .ok_or_else(|| self.acc_err(ai, usage, format!("count {count} is too large")))?;
-        let mut values = vec![0.0f64; total];
+        let mut values = Vec::new();
         if let Some(view) = acc.view() {
             let bytes = self.view_bytes(&view, ai, usage)?;
             let stride = match view.stride() {
@@ -343,6 +367,7 @@ impl Importer<'_> {
                     }
                 }
             }
+            values.resize(total, 0.0);
             for e in 0..count {
                 let base = start + e * stride;
                 for c in 0..comps {
@@ -350,6 +375,14 @@ impl Importer<'_> {
                     values[e * comps + c] = component(&bytes[at..at + csize], data_type);
                 }
             }
+        } else if total <= MAX_ZERO_COMPONENTS {
+            values.resize(total, 0.0); // no buffer view: zeros (then sparse values)
+        } else {
+            return Err(self.acc_err(
+                ai,
+                usage,
+                format!("count {count} without a buffer view is too large"),
+            ));
         }
         if let Some(sparse) = acc.sparse() {
             let n = sparse.count();
@@ -925,11 +958,23 @@ impl Importer<'_> {
                     translation,
                     rotation,
                     scale,
-                } => NodeTransform::Trs(Trs {
-                    translation: Vec3::from_array(translation),
-                    rotation: Quat::from_array(rotation),
-                    scale: Vec3::from_array(scale),
-                }),
+                } => {
+                    let q = Quat::from_array(rotation);
+                    // The spec asks for a unit quaternion; tolerate rounding, refuse zero.
+                    if !(q.length() > 1e-3) {
+                        return Err(SceneError::Node {
+                            path: self.path.to_path_buf(),
+                            node: n.index(),
+                            name: n.name().map(str::to_string),
+                            reason: format!("rotation {rotation:?} is not a unit quaternion"),
+                        });
+                    }
+                    NodeTransform::Trs(Trs {
+                        translation: Vec3::from_array(translation),
+                        rotation: q.normalize(),
+                        scale: Vec3::from_array(scale),
+                    })
+                }
             };
             nodes.push(Node {
                 name: n.name().map(str::to_string),
@@ -939,7 +984,11 @@ impl Importer<'_> {
                 mesh: n.mesh().map(|m| m.index()),
                 skin: n.skin().map(|s| s.index()),
                 camera: n.camera().map(|c| c.index()),
-                light: n.light().map(|l| l.index()),
+                // From the JSON: the wrapper unwraps an index the validation may not cover.
+                light: self.doc.as_json().nodes.get(n.index()).and_then(|j| {
+                    let ext = j.extensions.as_ref()?.khr_lights_punctual.as_ref()?;
+                    Some(ext.light.value())
+                }),
                 weights: n.weights().map(<[f32]>::to_vec),
             });
         }
@@ -1019,30 +1068,56 @@ impl Importer<'_> {
             .collect()
     }
 
+    /// Read from the JSON rather than the `gltf` wrappers: the crate's validation does not
+    /// check channel targets, and its accessors unwrap them.
     fn animations(&self) -> Result<Vec<Animation>, SceneError> {
+        use gltf::json::validation::Checked;
+        let json = self.doc.as_json();
         let mut out = Vec::new();
-        for a in self.doc.animations() {
+        for (ai, a) in json.animations.iter().enumerate() {
             let mut channels = Vec::new();
-            for ch in a.channels() {
-                let sampler = ch.sampler();
-                let (input, output) = (sampler.input(), sampler.output());
-                let at = format!("animations[{}].channels[{}]", a.index(), ch.index());
+            for (ci, ch) in a.channels.iter().enumerate() {
+                let err = |reason: String| SceneError::Animation {
+                    path: self.path.to_path_buf(),
+                    animation: ai,
+                    channel: ci,
+                    reason,
+                };
+                let sampler = a
+                    .samplers
+                    .get(ch.sampler.value())
+                    .ok_or_else(|| err(format!("sampler {} missing", ch.sampler.value())))?;
+                let accessor = |i: usize| {
+                    self.doc
+                        .accessors()
+                        .nth(i)
+                        .ok_or_else(|| err(format!("accessor {i} missing")))
+                };
+                let (input, output) = (
+                    accessor(sampler.input.value())?,
+                    accessor(sampler.output.value())?,
+                );
+                let at = format!("animations[{ai}].channels[{ci}]");
                 let times = self.floats(&input, &format!("{at} input"), 1, false)?;
                 let comps = output.dimensions().multiplicity();
                 let values = self.floats(&output, &format!("{at} output"), comps, true)?;
-                let property = match ch.target().property() {
-                    gltf::animation::Property::Translation => Property::Translation,
-                    gltf::animation::Property::Rotation => Property::Rotation,
-                    gltf::animation::Property::Scale => Property::Scale,
-                    gltf::animation::Property::MorphTargetWeights => Property::Weights,
+                use gltf::json::animation::{Interpolation as I, Property as P};
+                let property = match ch.target.path {
+                    Checked::Valid(P::Translation) => Property::Translation,
+                    Checked::Valid(P::Rotation) => Property::Rotation,
+                    Checked::Valid(P::Scale) => Property::Scale,
+                    Checked::Valid(P::MorphTargetWeights) => Property::Weights,
+                    Checked::Invalid => return Err(err("unknown target path".into())),
                 };
-                let interpolation = match sampler.interpolation() {
-                    gltf::animation::Interpolation::Step => Interpolation::Step,
-                    gltf::animation::Interpolation::Linear => Interpolation::Linear,
-                    gltf::animation::Interpolation::CubicSpline => Interpolation::CubicSpline,
+                let interpolation = match sampler.interpolation {
+                    Checked::Valid(I::Step) => Interpolation::Step,
+                    Checked::Valid(I::Linear) => Interpolation::Linear,
+                    Checked::Valid(I::CubicSpline) => Interpolation::CubicSpline,
+                    Checked::Invalid => return Err(err("unknown interpolation".into())),
                 };
                 channels.push(Channel {
-                    node: ch.target().node().index(),
+                    // Range-checked by Scene::validate.
+                    node: ch.target.node.value(),
                     property,
                     interpolation,
                     times,
@@ -1050,7 +1125,7 @@ impl Importer<'_> {
                 });
             }
             out.push(Animation {
-                name: a.name().map(str::to_string),
+                name: a.name.clone(),
                 channels,
             });
         }

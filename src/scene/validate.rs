@@ -209,6 +209,59 @@ pub(super) fn validate(scene: &Scene) -> Result<(), SceneError> {
         return Err(node_err(r, "scene root has a parent".into()));
     }
 
+    for (ci, c) in scene.cameras.iter().enumerate() {
+        let ok = match c.projection {
+            super::Projection::Perspective {
+                yfov,
+                aspect,
+                znear,
+                zfar,
+            } => [yfov, aspect.unwrap_or(1.0), znear, zfar.unwrap_or(1.0)]
+                .iter()
+                .all(|x| x.is_finite()),
+            super::Projection::Orthographic {
+                xmag,
+                ymag,
+                znear,
+                zfar,
+            } => [xmag, ymag, znear, zfar].iter().all(|x| x.is_finite()),
+        };
+        if !ok {
+            return Err(model(format!("cameras[{ci}]: non-finite parameter")));
+        }
+    }
+    for (li, l) in scene.lights.iter().enumerate() {
+        let cone = match l.kind {
+            super::LightKind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => inner_cone_angle.is_finite() && outer_cone_angle.is_finite(),
+            _ => true,
+        };
+        if !(cone
+            && l.color.is_finite()
+            && l.intensity.is_finite()
+            && l.range.is_none_or(f32::is_finite))
+        {
+            return Err(model(format!("lights[{li}]: non-finite parameter")));
+        }
+    }
+    for (mi, m) in scene.materials.iter().enumerate() {
+        let scalars = [
+            m.metallic,
+            m.roughness,
+            m.emissive_strength,
+            m.transmission,
+            m.ior,
+        ];
+        if !(m.base_color.is_finite()
+            && m.emissive.is_finite()
+            && scalars.iter().all(|x| x.is_finite()))
+        {
+            return Err(model(format!("materials[{mi}]: non-finite parameter")));
+        }
+    }
+
     for (ai, a) in scene.animations.iter().enumerate() {
         for (ci, c) in a.channels.iter().enumerate() {
             let err = |reason: String| SceneError::Animation {
