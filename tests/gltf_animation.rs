@@ -5,8 +5,6 @@
 
 mod common;
 
-use std::path::Path;
-
 use common::{max_dist, RawGltf};
 use glam::{Mat4, Quat, Vec3};
 use subfield::scene::{
@@ -347,9 +345,9 @@ fn cubic_spline_vertices_by_hand() {
         let soup = dynamic_soup(&scene, t);
         assert_eq!(soup.len(), 1);
         let want = [Vec3::X + offset, Vec3::Y + offset, offset];
-        for k in 0..3 {
+        for (got, want) in soup.positions[0].iter().zip(want) {
             assert!(
-                soup.positions[0][k].abs_diff_eq(want[k], 1e-6),
+                got.abs_diff_eq(want, 1e-6),
                 "t={t}: {:?}",
                 soup.positions[0]
             );
@@ -494,5 +492,4 @@ fn split_rules() {
         assert_eq!(soup.len(), 2);
         assert_eq!(soup.positions.capacity(), cap);
     }
-    let _ = Path::new("");
 }

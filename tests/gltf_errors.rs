@@ -59,7 +59,10 @@ fn load_json(path: &Path, json: &Value) -> Result<Scene, SceneError> {
 
 fn assert_names(e: &SceneError, path: &Path, parts: &[&str]) {
     let msg = e.to_string();
-    assert!(msg.contains(&path.display().to_string()), "no file in: {msg}");
+    assert!(
+        msg.contains(&path.display().to_string()),
+        "no file in: {msg}"
+    );
     for p in parts {
         assert!(msg.contains(p), "{p:?} missing from: {msg}");
     }
@@ -91,13 +94,21 @@ fn accessor_outside_its_buffer() {
     json["accessors"][0]["count"] = json!(4);
     let e = load_json(&path, &json).unwrap_err();
     assert!(matches!(e, SceneError::Accessor { accessor: 0, .. }), "{e}");
-    assert_names(&e, &path, &["accessors[0]", "POSITION", "run past bufferViews[0]"]);
+    assert_names(
+        &e,
+        &path,
+        &["accessors[0]", "POSITION", "run past bufferViews[0]"],
+    );
 
     // A buffer view past the end of its buffer.
     let (path, mut json) = triangle_files("view", TRI, [0, 1, 2]);
     json["bufferViews"][1]["byteOffset"] = json!(40);
     let e = load_json(&path, &json).unwrap_err();
-    assert_names(&e, &path, &["accessors[1]", "indices", "outside buffers[0]"]);
+    assert_names(
+        &e,
+        &path,
+        &["accessors[1]", "indices", "outside buffers[0]"],
+    );
 
     // A buffer file shorter than its byteLength.
     let (path, mut json) = triangle_files("short", TRI, [0, 1, 2]);
@@ -116,13 +127,26 @@ fn index_past_the_vertex_count() {
 
 #[test]
 fn non_finite_positions() {
-    for (name, bad) in [("nan", f32::NAN), ("inf", f32::INFINITY), ("neginf", f32::NEG_INFINITY)] {
+    for (name, bad) in [
+        ("nan", f32::NAN),
+        ("inf", f32::INFINITY),
+        ("neginf", f32::NEG_INFINITY),
+    ] {
         let mut p = TRI;
         p[4] = bad;
         let (path, json) = triangle_files(name, p, [0, 1, 2]);
         let e = load_json(&path, &json).unwrap_err();
         assert!(matches!(e, SceneError::Accessor { accessor: 0, .. }), "{e}");
-        assert_names(&e, &path, &["accessors[0]", "POSITION", "element 1 component 1", "not finite"]);
+        assert_names(
+            &e,
+            &path,
+            &[
+                "accessors[0]",
+                "POSITION",
+                "element 1 component 1",
+                "not finite",
+            ],
+        );
     }
 }
 
@@ -152,7 +176,10 @@ fn uri_leaving_the_folder_is_refused() {
         let mut j = json.clone();
         j["buffers"][0]["uri"] = json!(uri);
         let e = load_json(&path, &j).unwrap_err();
-        assert!(matches!(e, SceneError::UriOutsideFolder { .. }), "{uri}: {e}");
+        assert!(
+            matches!(e, SceneError::UriOutsideFolder { .. }),
+            "{uri}: {e}"
+        );
         assert_names(&e, &path, &["buffers[0]", uri, "leaves the scene's folder"]);
     }
     // Going down and back up inside the folder is fine.
@@ -186,13 +213,10 @@ fn skin_with_a_missing_joint() {
     }
     std::fs::write(dir.join("tri.bin"), &bin).unwrap();
     json["buffers"][0]["byteLength"] = json!(bin.len());
-    json["bufferViews"]
-        .as_array_mut()
-        .unwrap()
-        .extend([
-            json!({"buffer": 0, "byteOffset": joints_at, "byteLength": 12}),
-            json!({"buffer": 0, "byteOffset": weights_at, "byteLength": 48}),
-        ]);
+    json["bufferViews"].as_array_mut().unwrap().extend([
+        json!({"buffer": 0, "byteOffset": joints_at, "byteLength": 12}),
+        json!({"buffer": 0, "byteOffset": weights_at, "byteLength": 48}),
+    ]);
     json["accessors"].as_array_mut().unwrap().extend([
         json!({"bufferView": 2, "componentType": 5121, "count": 3, "type": "VEC4"}),
         json!({"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC4"}),
@@ -228,7 +252,10 @@ fn bad_json_and_unsupported_extensions() {
     let dir = temp_dir("json");
     let path = dir.join("x.gltf");
     std::fs::write(&path, b"{ not json").unwrap();
-    assert!(matches!(Scene::load(&path).unwrap_err(), SceneError::Json { .. }));
+    assert!(matches!(
+        Scene::load(&path).unwrap_err(),
+        SceneError::Json { .. }
+    ));
     let (path, mut json) = triangle_files("draco", TRI, [0, 1, 2]);
     json["extensionsRequired"] = json!(["KHR_draco_mesh_compression"]);
     json["extensionsUsed"] = json!(["KHR_draco_mesh_compression"]);
@@ -268,18 +295,28 @@ fn sample_builder() -> GltfBuilder {
     });
     let light = b.add_light(LightDef {
         name: None,
-        kind: LightKind::Spot { inner_cone_angle: 0.1, outer_cone_angle: 0.5 },
+        kind: LightKind::Spot {
+            inner_cone_angle: 0.1,
+            outer_cone_angle: 0.5,
+        },
         color: Vec3::ONE,
         intensity: 10.0,
         range: Some(5.0),
     });
-    let child = b.add_node(NodeDesc { mesh: Some(mesh), ..Default::default() });
+    let child = b.add_node(NodeDesc {
+        mesh: Some(mesh),
+        ..Default::default()
+    });
     let root = b.add_node(NodeDesc {
         children: vec![child],
         rotation: Quat::from_rotation_y(0.3),
         ..Default::default()
     });
-    let c = b.add_node(NodeDesc { camera: Some(cam), light: Some(light), ..Default::default() });
+    let c = b.add_node(NodeDesc {
+        camera: Some(cam),
+        light: Some(light),
+        ..Default::default()
+    });
     b.add_root(root);
     b.add_root(c);
     b.add_animation(AnimationDesc {
@@ -380,8 +417,19 @@ fn mutate_json(rng: &mut Rng, input: &[u8]) -> Option<Vec<u8>> {
             return None;
         }
         let pick = slots[rng.below(slots.len())];
-        let awkward = [json!(0), json!(1), json!(-1), json!(2), json!(3), json!(255), json!(65536),
-            json!(1e9), json!(4294967295u64), json!(1.5), json!(1e39)];
+        let awkward = [
+            json!(0),
+            json!(1),
+            json!(-1),
+            json!(2),
+            json!(3),
+            json!(255),
+            json!(65536),
+            json!(1e9),
+            json!(4294967295u64),
+            json!(1.5),
+            json!(1e39),
+        ];
         // SAFETY: `pick` points into `v`, which is alive and not otherwise borrowed here.
         unsafe { *pick = awkward[rng.below(awkward.len())].clone() };
     }
@@ -413,18 +461,30 @@ fn fuzz_mutated_files_never_panic() {
         ("built.gltf".into(), b.to_gltf_json().unwrap().into_bytes()),
     ];
     if let Some(shared) = common::shared_gltf() {
-        for rel in ["SimpleSkin/SimpleSkin.gltf", "RiggedFigure/RiggedFigure.glb", "AnimatedMorphCube/AnimatedMorphCube.gltf"] {
+        for rel in [
+            "SimpleSkin/SimpleSkin.gltf",
+            "RiggedFigure/RiggedFigure.glb",
+            "AnimatedMorphCube/AnimatedMorphCube.gltf",
+        ] {
             let p = shared.join(rel);
             let bytes = std::fs::read(&p).unwrap();
             let folder = p.parent().unwrap().to_path_buf();
             // Shared files keep their folder (external .bin), so the name carries it.
-            corpus.push((folder.join(p.file_name().unwrap()).display().to_string(), bytes));
+            corpus.push((
+                folder.join(p.file_name().unwrap()).display().to_string(),
+                bytes,
+            ));
         }
     }
     for (name, bytes) in &corpus {
         let path = Path::new(name);
-        let folder = path.parent().filter(|p| p.is_dir()).unwrap_or(&dir).to_path_buf();
-        Scene::from_gltf_slice(bytes, path, &folder).unwrap_or_else(|e| panic!("unmutated {name}: {e}"));
+        let folder = path
+            .parent()
+            .filter(|p| p.is_dir())
+            .unwrap_or(&dir)
+            .to_path_buf();
+        Scene::from_gltf_slice(bytes, path, &folder)
+            .unwrap_or_else(|e| panic!("unmutated {name}: {e}"));
     }
     let (mut ok, mut err) = (0, 0);
     // 600 by default (well under a second); SUBFIELD_FUZZ_ITERS=N runs a longer campaign.
@@ -441,7 +501,11 @@ fn fuzz_mutated_files_never_panic() {
             mutate(&mut rng, original)
         };
         let path = Path::new(name);
-        let folder = path.parent().filter(|p| p.is_dir()).unwrap_or(&dir).to_path_buf();
+        let folder = path
+            .parent()
+            .filter(|p| p.is_dir())
+            .unwrap_or(&dir)
+            .to_path_buf();
         let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| {
             match Scene::from_gltf_slice(&bytes, path, &folder) {
                 Ok(scene) => {
@@ -458,7 +522,10 @@ fn fuzz_mutated_files_never_panic() {
                 Err(e) => {
                     // Every error names the input.
                     let m = e.to_string();
-                    assert!(m.contains(name.as_str()), "seed {seed}: error without file: {m}");
+                    assert!(
+                        m.contains(name.as_str()),
+                        "seed {seed}: error without file: {m}"
+                    );
                     false
                 }
             }

@@ -219,7 +219,7 @@ fn glb_and_external_and_data_uri_buffers() {
     let Some(dir) = common::shared_gltf() else {
         return;
     };
-    // data URIs (SimpleSkin), external .bin (BoxAnimated is data? check both paths), GLB.
+    // Data-URI buffers (SimpleSkin), an external .bin (AnimatedMorphCube), GLB (Fox).
     let skin = load(&dir, "SimpleSkin/SimpleSkin.gltf");
     assert_eq!(skin.meshes[0].primitives[0].positions.len(), 10);
     let cube = load(&dir, "AnimatedMorphCube/AnimatedMorphCube.gltf");

@@ -292,8 +292,8 @@ pub(super) fn sample(ch: &Channel, t: f32, out: &mut [f32]) {
                 let qb = Quat::from_slice(&ch.values[b..b + 4]);
                 out.copy_from_slice(&slerp(qa, qb, s).to_array());
             } else {
-                for c in 0..w {
-                    out[c] = ch.values[a + c] * (1.0 - s) + ch.values[b + c] * s;
+                for (c, o) in out.iter_mut().enumerate() {
+                    *o = ch.values[a + c] * (1.0 - s) + ch.values[b + c] * s;
                 }
             }
         }
@@ -309,8 +309,8 @@ pub(super) fn sample(ch: &Channel, t: f32, out: &mut [f32]) {
             let b0 = v0 + w;
             let v1 = value_at(k + 1);
             let a1 = v1 - w;
-            for c in 0..w {
-                out[c] = h00 * ch.values[v0 + c]
+            for (c, o) in out.iter_mut().enumerate() {
+                *o = h00 * ch.values[v0 + c]
                     + h10 * td * ch.values[b0 + c]
                     + h01 * ch.values[v1 + c]
                     + h11 * td * ch.values[a1 + c];

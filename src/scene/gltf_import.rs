@@ -961,7 +961,7 @@ impl Importer<'_> {
                 } => {
                     let q = Quat::from_array(rotation);
                     // The spec asks for a unit quaternion; tolerate rounding, refuse zero.
-                    if !(q.length() > 1e-3) {
+                    if q.length().is_nan() || q.length() <= 1e-3 {
                         return Err(SceneError::Node {
                             path: self.path.to_path_buf(),
                             node: n.index(),
