@@ -1,1 +1,520 @@
 //! Scene model, glTF import/export, animation sampling, static/dynamic split.
+//!
+//! The model is format-neutral: the glTF importer ([`Scene::load`]) and any other importer
+//! (AFF) produce the same [`Scene`], and call [`Scene::validate`] before handing it out.
+//! Past that border the rest of the crate relies on the invariants it checks (every index
+//! in range, every float finite, the node hierarchy a forest).
+//!
+//! Data flow: `Scene` → [`Scene::split`] → [`Scene::static_triangles`] (baked) and
+//! [`Scene::dynamic_triangles_at`] (per frame, inserted into the dynamic layer).
+
+mod animation;
+mod error;
+mod geometry;
+mod gltf_import;
+mod gltf_write;
+mod split;
+mod validate;
+
+use std::path::{Path, PathBuf};
+
+use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
+
+pub use animation::{ClipSelection, Pose};
+pub use error::SceneError;
+pub use geometry::TriangleSoup;
+pub use gltf_write::{
+    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, MaterialDesc, MeshDesc, NodeDesc,
+    PrimitiveDesc,
+};
+pub use split::{Instance, Split, SplitSummary};
+
+/// A non-fatal problem found while importing (a skipped primitive, an ignored feature).
+/// The library never prints: the CLI shows these.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Warning(pub String);
+
+impl std::fmt::Display for Warning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+/// A whole scene: geometry, materials, hierarchy, cameras, lights and animation clips.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// The file it came from (named in errors).
+    pub source: PathBuf,
+    pub meshes: Vec<Mesh>,
+    /// Every primitive's `material` indexes this; importers append a default material when
+    /// some primitive has none (see [`Material::default`]).
+    pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
+    pub images: Vec<Image>,
+    pub nodes: Vec<Node>,
+    /// Root nodes of the scene that is shown (glTF: the default scene).
+    pub roots: Vec<usize>,
+    pub cameras: Vec<CameraDef>,
+    pub lights: Vec<LightDef>,
+    pub skins: Vec<Skin>,
+    pub animations: Vec<Animation>,
+    /// Frames per second recorded by the scene (`scenes[i].extras.fps` in glTF).
+    pub fps: Option<f32>,
+    pub warnings: Vec<Warning>,
+}
+
+/// A mesh: primitives drawn together, and the default weights of its morph targets.
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    pub name: Option<String>,
+    pub primitives: Vec<Primitive>,
+    /// Default morph weights (glTF `mesh.weights`); empty means all zero.
+    pub weights: Vec<f32>,
+}
+
+/// Triangles sharing one material, in the mesh's local space.
+#[derive(Clone, Debug, Default)]
+pub struct Primitive {
+    pub positions: Vec<Vec3>,
+    /// Per-vertex normals; `None` means flat normals computed from the posed triangle
+    /// (what the glTF spec asks for when normals are absent).
+    pub normals: Option<Vec<Vec3>>,
+    /// `TEXCOORD_0`; `None` gives `(0, 0)`.
+    pub uvs: Option<Vec<Vec2>>,
+    /// Triangles as vertex indices (strips and fans already unrolled).
+    pub triangles: Vec<[u32; 3]>,
+    /// Index into [`Scene::materials`].
+    pub material: u32,
+    /// Skin influences: `joints.len() == weights.len() == positions.len() * sets`, vertex
+    /// `v` uses entries `v*sets .. (v+1)*sets` (one entry per `JOINTS_n`/`WEIGHTS_n` set).
+    /// Joint numbers index the skin's joint list. Empty when not skinned.
+    pub joints: Vec<[u16; 4]>,
+    pub weights: Vec<[f32; 4]>,
+    pub morph_targets: Vec<MorphTarget>,
+}
+
+impl Primitive {
+    /// Number of `JOINTS_n`/`WEIGHTS_n` sets (0 when the primitive carries no skin data).
+    pub fn influence_sets(&self) -> usize {
+        self.joints
+            .len()
+            .checked_div(self.positions.len())
+            .unwrap_or(0)
+    }
+}
+
+/// Per-vertex displacements of one morph target; an empty vector means "no displacement".
+#[derive(Clone, Debug, Default)]
+pub struct MorphTarget {
+    pub positions: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
+}
+
+/// Alpha handling of a material (glTF `alphaMode`).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub enum AlphaMode {
+    #[default]
+    Opaque,
+    Mask {
+        cutoff: f32,
+    },
+    Blend,
+}
+
+/// A texture slot of a material.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TextureRef {
+    /// Index into [`Scene::textures`].
+    pub texture: u32,
+    /// Which texture-coordinate set (only set 0 is imported; others warn).
+    pub tex_coord: u32,
+}
+
+/// A metallic-roughness material with the extensions we render (emissive strength,
+/// transmission, index of refraction). Colours are linear.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    pub name: Option<String>,
+    pub base_color: Vec4,
+    pub base_color_texture: Option<TextureRef>,
+    pub metallic: f32,
+    pub roughness: f32,
+    /// Blue channel metallic, green channel roughness (glTF convention).
+    pub metallic_roughness_texture: Option<TextureRef>,
+    pub emissive: Vec3,
+    /// `KHR_materials_emissive_strength`; 1 when absent. Emitted radiance is
+    /// `emissive * emissive_strength` (times the texture).
+    pub emissive_strength: f32,
+    pub emissive_texture: Option<TextureRef>,
+    /// `KHR_materials_transmission` factor; 0 when absent.
+    pub transmission: f32,
+    /// `KHR_materials_ior`; 1.5 when absent.
+    pub ior: f32,
+    pub double_sided: bool,
+    pub alpha_mode: AlphaMode,
+}
+
+impl Default for Material {
+    /// The glTF default material: every property at its spec default (white base
+    /// colour, metallic 1, roughness 1, no emission).
+    fn default() -> Self {
+        Material {
+            name: None,
+            base_color: Vec4::ONE,
+            base_color_texture: None,
+            metallic: 1.0,
+            roughness: 1.0,
+            metallic_roughness_texture: None,
+            emissive: Vec3::ZERO,
+            emissive_strength: 1.0,
+            emissive_texture: None,
+            transmission: 0.0,
+            ior: 1.5,
+            double_sided: false,
+            alpha_mode: AlphaMode::Opaque,
+        }
+    }
+}
+
+/// Texture wrapping mode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Wrap {
+    #[default]
+    Repeat,
+    MirroredRepeat,
+    ClampToEdge,
+}
+
+/// A texture: an image and how to sample it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Texture {
+    /// Index into [`Scene::images`].
+    pub image: u32,
+    pub wrap_s: Wrap,
+    pub wrap_t: Wrap,
+    /// Magnification filter is nearest (else linear).
+    pub nearest: bool,
+}
+
+/// A decoded image: RGBA, 8 bits per channel, rows top to bottom. Colour textures are
+/// sRGB-encoded (as stored); the renderer linearises.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    pub name: Option<String>,
+    pub width: u32,
+    pub height: u32,
+    pub rgba8: Vec<u8>,
+}
+
+/// Translation, rotation, scale: `T * R * S`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Trs {
+    pub translation: Vec3,
+    pub rotation: Quat,
+    pub scale: Vec3,
+}
+
+impl Default for Trs {
+    fn default() -> Self {
+        Trs {
+            translation: Vec3::ZERO,
+            rotation: Quat::IDENTITY,
+            scale: Vec3::ONE,
+        }
+    }
+}
+
+impl Trs {
+    pub fn matrix(&self) -> Mat4 {
+        Mat4::from_scale_rotation_translation(self.scale, self.rotation, self.translation)
+    }
+}
+
+/// A node's rest transform as the file gives it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum NodeTransform {
+    /// Kept exactly (a matrix may not be a pure TRS). An animated matrix node is animated
+    /// on the TRS decomposition of the matrix.
+    Matrix(Mat4),
+    Trs(Trs),
+}
+
+impl Default for NodeTransform {
+    fn default() -> Self {
+        NodeTransform::Trs(Trs::default())
+    }
+}
+
+impl NodeTransform {
+    pub fn matrix(&self) -> Mat4 {
+        match self {
+            NodeTransform::Matrix(m) => *m,
+            NodeTransform::Trs(t) => t.matrix(),
+        }
+    }
+
+    pub fn trs(&self) -> Trs {
+        match self {
+            NodeTransform::Matrix(m) => {
+                let (scale, rotation, translation) = m.to_scale_rotation_translation();
+                Trs {
+                    translation,
+                    rotation,
+                    scale,
+                }
+            }
+            NodeTransform::Trs(t) => *t,
+        }
+    }
+}
+
+/// A node of the hierarchy.
+#[derive(Clone, Debug, Default)]
+pub struct Node {
+    pub name: Option<String>,
+    pub parent: Option<usize>,
+    pub children: Vec<usize>,
+    pub transform: NodeTransform,
+    pub mesh: Option<usize>,
+    pub skin: Option<usize>,
+    pub camera: Option<usize>,
+    pub light: Option<usize>,
+    /// Morph weights overriding the mesh's defaults (glTF `node.weights`).
+    pub weights: Option<Vec<f32>>,
+}
+
+/// A skin: joints (node indices) and their inverse bind matrices (same length).
+#[derive(Clone, Debug, Default)]
+pub struct Skin {
+    pub name: Option<String>,
+    pub joints: Vec<usize>,
+    pub inverse_bind_matrices: Vec<Mat4>,
+}
+
+/// A camera's projection.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Projection {
+    Perspective {
+        /// Vertical field of view, radians.
+        yfov: f32,
+        /// Width over height; `None` means "the image's".
+        aspect: Option<f32>,
+        znear: f32,
+        zfar: Option<f32>,
+    },
+    /// Kept so the renderer can reject or approximate it; importing never fails on it.
+    Orthographic {
+        xmag: f32,
+        ymag: f32,
+        znear: f32,
+        zfar: f32,
+    },
+}
+
+/// A camera as defined in the file (placed by the nodes that reference it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CameraDef {
+    pub name: Option<String>,
+    pub projection: Projection,
+}
+
+/// A posed camera: looks down its local `-Z` with `+Y` up.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Camera {
+    pub name: Option<String>,
+    /// The node that places it.
+    pub node: usize,
+    /// Rigid world-from-camera transform (scale of the node removed).
+    pub world_from_camera: Mat4,
+    pub position: Vec3,
+    pub rotation: Quat,
+    pub projection: Projection,
+}
+
+impl Camera {
+    /// Vertical field of view in radians; `None` for an orthographic camera.
+    pub fn yfov(&self) -> Option<f32> {
+        match self.projection {
+            Projection::Perspective { yfov, .. } => Some(yfov),
+            Projection::Orthographic { .. } => None,
+        }
+    }
+
+    /// Aspect ratio recorded by the file (perspective), or `xmag / ymag` (orthographic).
+    pub fn aspect(&self) -> Option<f32> {
+        match self.projection {
+            Projection::Perspective { aspect, .. } => aspect,
+            Projection::Orthographic { xmag, ymag, .. } => Some(xmag / ymag),
+        }
+    }
+
+    pub fn is_orthographic(&self) -> bool {
+        matches!(self.projection, Projection::Orthographic { .. })
+    }
+}
+
+/// Kind of a punctual light (`KHR_lights_punctual`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightKind {
+    /// Intensity in candela (lm/sr).
+    Point,
+    /// Intensity in candela; cone angles in radians from the axis.
+    Spot {
+        inner_cone_angle: f32,
+        outer_cone_angle: f32,
+    },
+    /// Intensity in lux (lm/m²); shines along the node's `-Z`.
+    Directional,
+}
+
+/// A light as defined in the file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LightDef {
+    pub name: Option<String>,
+    pub kind: LightKind,
+    /// Linear RGB.
+    pub color: Vec3,
+    /// In the spec's units: candela for point and spot, lux for directional.
+    pub intensity: f32,
+    /// Distance where the light's influence ends; `None` is infinite.
+    pub range: Option<f32>,
+}
+
+/// A posed light, in world space.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Light {
+    pub name: Option<String>,
+    pub node: usize,
+    pub kind: LightKind,
+    pub color: Vec3,
+    pub intensity: f32,
+    pub range: Option<f32>,
+    pub position: Vec3,
+    /// Unit direction the light shines along (the node's world `-Z`).
+    pub direction: Vec3,
+}
+
+/// The property an animation channel drives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Property {
+    Translation,
+    Rotation,
+    Scale,
+    /// Morph target weights.
+    Weights,
+}
+
+/// Keyframe interpolation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Interpolation {
+    Step,
+    /// Slerp for rotations.
+    Linear,
+    /// Hermite spline; each keyframe stores in-tangent, value, out-tangent.
+    CubicSpline,
+}
+
+/// One animated property of one node.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Channel {
+    pub node: usize,
+    pub property: Property,
+    pub interpolation: Interpolation,
+    /// Keyframe times in seconds, non-decreasing.
+    pub times: Vec<f32>,
+    /// `width` floats per keyframe (3 translation/scale, 4 rotation `xyzw`, number of
+    /// morph targets for weights); `3 * width` for CUBICSPLINE (in-tangent, value,
+    /// out-tangent).
+    pub values: Vec<f32>,
+}
+
+impl Channel {
+    /// Floats per keyframe value.
+    pub fn width(&self) -> usize {
+        let per_key = match self.interpolation {
+            Interpolation::CubicSpline => 3,
+            _ => 1,
+        };
+        self.values
+            .len()
+            .checked_div(self.times.len() * per_key)
+            .unwrap_or(0)
+    }
+}
+
+/// An animation clip.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Animation {
+    pub name: Option<String>,
+    pub channels: Vec<Channel>,
+}
+
+impl Scene {
+    /// Imports a `.gltf` (external or data-URI buffers and images) or `.glb` file: the
+    /// default scene's hierarchy, triangle primitives (strips and fans unrolled; points
+    /// and lines skipped with one warning), normals, `TEXCOORD_0`, skins, morph targets,
+    /// materials (with emissive strength, transmission, ior), textures decoded to RGBA8,
+    /// cameras, `KHR_lights_punctual` lights, animation clips and `extras.fps`.
+    /// Every problem is a [`SceneError`] naming the file and the accessor, node or URI.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        gltf_import::load(path)
+    }
+
+    /// Imports glTF or GLB bytes; external URIs resolve against `folder`.
+    /// `path` is only used to name the input in errors.
+    pub fn from_gltf_slice(bytes: &[u8], path: &Path, folder: &Path) -> Result<Scene, SceneError> {
+        gltf_import::from_slice(bytes, path, folder)
+    }
+
+    /// Checks the model's invariants; importers call it before returning a scene.
+    pub fn validate(&self) -> Result<(), SceneError> {
+        validate::validate(self)
+    }
+
+    /// Index of the material that primitives without one use; appends it when missing.
+    pub fn default_material_index(&mut self) -> u32 {
+        if let Some(i) = self
+            .materials
+            .iter()
+            .position(|m| m.name.as_deref() == Some(DEFAULT_MATERIAL_NAME))
+        {
+            return i as u32;
+        }
+        self.materials.push(Material {
+            name: Some(DEFAULT_MATERIAL_NAME.to_string()),
+            ..Material::default()
+        });
+        (self.materials.len() - 1) as u32
+    }
+
+    /// Names of the clips, as `"INDEX: NAME"` (for messages and `--animation` help).
+    pub fn clip_names(&self) -> Vec<String> {
+        self.animations
+            .iter()
+            .enumerate()
+            .map(|(i, a)| match &a.name {
+                Some(n) => format!("{i}: {n}"),
+                None => format!("{i}: (unnamed)"),
+            })
+            .collect()
+    }
+
+    /// Nodes of the shown scene, parents before children (depth first from the roots).
+    pub fn scene_nodes(&self) -> Vec<usize> {
+        let mut out = Vec::with_capacity(self.nodes.len());
+        let mut stack: Vec<usize> = self.roots.iter().rev().copied().collect();
+        let mut seen = vec![false; self.nodes.len()];
+        while let Some(n) = stack.pop() {
+            // `validate` guarantees a forest; `seen` also keeps a root listed twice single.
+            if n >= self.nodes.len() || std::mem::replace(&mut seen[n], true) {
+                continue;
+            }
+            out.push(n);
+            stack.extend(self.nodes[n].children.iter().rev().copied());
+        }
+        out
+    }
+}
+
+/// Name given to the material appended for primitives that have none.
+pub const DEFAULT_MATERIAL_NAME: &str = "subfield:default";
