@@ -166,14 +166,17 @@ pub fn degenerates(rng: &mut Rng, n: usize, lo: Vec3, hi: Vec3) -> Vec<[Vec3; 3]
 /// pillars (closed cylinders) and spheres, about `target` triangles.
 pub fn room(rng: &mut Rng, target: usize) -> Vec<[Vec3; 3]> {
     let mut out = box_faces(Vec3::new(-10.0, 0.0, -10.0), Vec3::new(10.0, 6.0, 10.0));
-    // pillars
-    let pillar_tris = target / 3;
-    let per = 12 * 2 * 8;
-    let pillars = (pillar_tris / per).max(1);
-    for k in 0..pillars {
-        let a = k as f32 / pillars as f32 * std::f32::consts::TAU;
-        let c = Vec3::new(7.0 * a.cos(), 0.0, 7.0 * a.sin());
-        out.extend(cylinder(c, 0.4, 6.0, 12, 8));
+    // eight pillars on a ring, tessellated to carry a third of the triangles
+    let stacks = (target / 3 / (8 * 2 * 24)).max(1);
+    for k in 0..8 {
+        let a = k as f32 / 8.0 * std::f32::consts::TAU;
+        out.extend(cylinder(
+            Vec3::new(7.0 * a.cos(), 0.0, 7.0 * a.sin()),
+            0.4,
+            6.0,
+            24,
+            stacks,
+        ));
     }
     // spheres fill the rest
     while out.len() < target {
