@@ -98,7 +98,8 @@ impl Psf {
         let (ta, tb) = self.clip.clip_line(o.to_array(), d.to_array())?;
         let t0 = ta.max(ray.t_min as f64);
         let t1 = tb.min(ray.t_max as f64);
-        if !(t0 <= t1) {
+        // NaN bounds (a ray segment like [NaN, 1]) count as empty.
+        if t0.is_nan() || t1.is_nan() || t0 > t1 {
             return None;
         }
         let sf = &self.subfields[self.table.lookup(ray.dir)];
