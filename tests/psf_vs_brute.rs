@@ -76,7 +76,7 @@ fn build_scene(c: &Case) -> Vec<[Vec3; 3]> {
 
 /// Rays of every kind the issue names, in scene units (scaled with the scene).
 fn build_rays(c: &Case, tris: &[[Vec3; 3]], bounds: &Aabb) -> Vec<Ray> {
-    let mut rng = Rng::new(c.seed ^ 0x5eed_0f_4a75);
+    let mut rng = Rng::new(c.seed ^ 0x5e_ed0f_4a75);
     let dirs = subfield_directions(c.level);
     let ctr = bounds.center();
     let radius = (bounds.extent().length() * 0.5).max(1e-30);

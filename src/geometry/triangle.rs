@@ -168,9 +168,9 @@ mod tests {
                 "slipped through the centre"
             );
             // through points on each shared edge
-            for i in 0..n {
+            for (i, &r) in ring.iter().enumerate().take(n) {
                 for s in [0.1f32, 0.37, 0.5, 0.93] {
-                    let p = centre + (ring[i] - centre) * s;
+                    let p = centre + (r - centre) * s;
                     let o = p - d * 3.0;
                     assert!(
                         tris.iter().any(|t| hit(o, d, *t).is_some()),

@@ -98,6 +98,8 @@ impl Psf {
         let (ta, tb) = self.clip.clip_line(o.to_array(), d.to_array())?;
         let t0 = ta.max(ray.t_min as f64);
         let t1 = tb.min(ray.t_max as f64);
+        // Written so that NaN bounds also end the query.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
         if !(t0 <= t1) {
             return None;
         }
