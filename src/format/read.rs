@@ -358,7 +358,13 @@ fn load<T: Pod>(bytes: &SharedBytes, all: &[u8], e: &SectionEntry) -> Result<Buf
             // A buffer that is not aligned for T (not a mapping): copy.
             .unwrap_or_else(|| Buf::Owned(bytemuck::pod_collect_to_vec(stored)))),
         Codec::Zstd => {
-            let mut v: Vec<T> = vec![T::zeroed(); count];
+            // Zeroed by the allocator (fresh pages need no second pass), and an error
+            // rather than an abort when the memory is not there.
+            let mut v: Vec<T> = bytemuck::allocation::try_zeroed_vec(count).map_err(|_| {
+                FormatError::NotSupported {
+                    what: format!("allocating {} bytes for {}", e.raw_length, section()),
+                }
+            })?;
             let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut v);
             let n = zstd::bulk::decompress_to_buffer(stored, dst).map_err(|err| {
                 FormatError::invalid(section(), format!("zstd frame does not decode: {err}"))
