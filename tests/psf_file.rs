@@ -666,3 +666,70 @@ fn fuzz_mutated_files_never_panic() {
     // slab start can still be a valid file).
     assert!(outcomes[1][0] > 0 && outcomes[1][2] > 0, "{outcomes:?}");
 }
+
+// ---------------------------------------------------------------------------------------
+// inspect and the atomic write
+
+#[test]
+fn inspect_describes_the_file_and_serialises_to_json() {
+    let (tris, psf) = small_psf();
+    let dir = TempDir::new("inspect");
+    let path = dir.0.join("small.psf");
+    let report = write_psf(&path, &psf, &opts(Codec::Zstd)).unwrap();
+    let ins = format::inspect(&path).unwrap();
+    assert_eq!(ins.header.file_length, report.file_length);
+    assert_eq!(ins.header.scene_hash, scene_hash(&tris));
+    assert_eq!(ins.sections.len(), 2 + 3 * psf.subfields().len());
+    assert_eq!(ins.raw_bytes, report.raw_length);
+    assert!(ins.stored_bytes < report.file_length);
+    assert_eq!(ins.directions.len(), psf.subfields().len());
+    let stats = psf.stats();
+    assert_eq!(ins.occupancy.tiles, stats.tiles as u64);
+    assert_eq!(ins.occupancy.empty_tiles, stats.empty_tiles as u64);
+    let tiles: u64 = ins.directions.iter().map(|d| d.tiles).sum();
+    let empty: u64 = ins.directions.iter().map(|d| d.empty_tiles).sum();
+    assert_eq!(
+        (tiles, empty),
+        (ins.occupancy.tiles, ins.occupancy.empty_tiles)
+    );
+    let v: serde_json::Value = serde_json::from_str(&ins.to_json()).unwrap();
+    assert_eq!(v["header"]["triangle_count"], tris.len() as u64);
+    assert_eq!(v["header"]["scene_hash"], scene_hash(&tris).to_string());
+    assert_eq!(v["sections"][2]["name"], "tiles[0]");
+    assert_eq!(v["sections"][2]["codec"], "zstd");
+    assert_eq!(
+        v["header"]["table_checksum"].as_str().map(str::len),
+        Some(16)
+    );
+    let text = ins.to_string();
+    assert!(
+        text.contains("entries[0]") && text.contains("occupancy"),
+        "{text}"
+    );
+}
+
+#[test]
+fn write_replaces_atomically_and_reports_io_errors_with_the_path() {
+    let (_, psf) = small_psf();
+    let dir = TempDir::new("atomic");
+    let path = dir.0.join("scene.psf");
+    std::fs::write(&path, b"old contents").unwrap();
+    write_psf(&path, &psf, &opts(Codec::None)).unwrap();
+    write_psf(&path, &psf, &opts(Codec::Zstd)).unwrap();
+    assert!(open_psf(&path, &OpenOptions::default()).is_ok());
+    // nothing but the file is left in the folder
+    let names: Vec<_> = std::fs::read_dir(&dir.0)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(names, vec![std::ffi::OsString::from("scene.psf")]);
+    let missing = dir.0.join("no/such/folder/scene.psf");
+    match write_psf(&missing, &psf, &opts(Codec::None)) {
+        Err(FormatError::Io { path, .. }) => assert!(path.starts_with(dir.0.join("no"))),
+        other => panic!("{other:?}"),
+    }
+    match open_psf(&missing, &OpenOptions::default()) {
+        Err(FormatError::Io { path, .. }) => assert_eq!(path, missing),
+        other => panic!("{other:?}"),
+    }
+}

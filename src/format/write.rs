@@ -21,7 +21,10 @@ use crate::psf::Psf;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct WriteOptions {
     pub codec: Codec,
-    /// zstd level for [`Codec::Zstd`] (default 3).
+    /// zstd level for [`Codec::Zstd`]. The default, 3, by measurement on the 100k room
+    /// (`cargo bench --bench psf_file -- levels`, 2 cores): level 1 gives a 2.05x smaller
+    /// file in 0.13 s, 3 gives 2.23x in 0.18 s, 9 gives 2.28x in 0.70 s, 19 gives 2.59x in
+    /// 6.2 s and opens slower (59 ms against 31-39 ms).
     pub zstd_level: i32,
 }
 
