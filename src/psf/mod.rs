@@ -24,8 +24,6 @@ pub use directions::{subfield_directions, tetrahedron_directions, DirectionTable
 pub use grid::GridFrame;
 pub use stats::{Histogram, PsfStats, RayStats};
 pub use storage::{Buf, SharedBytes};
-#[allow(unused_imports)] // the dynamic layer walks tiles too
-pub(crate) use traverse::walk_tiles;
 
 use crate::geometry::Aabb;
 
