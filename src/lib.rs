@@ -10,4 +10,4 @@ pub mod scene;
 pub mod synth;
 
 pub use geometry::{Aabb, BruteForce, Hit, Intersector, Ray};
-pub use psf::{Psf, PsfError, PsfParams};
+pub use psf::{DynamicLayer, Psf, PsfError, PsfParams};

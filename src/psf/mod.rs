@@ -9,6 +9,7 @@
 
 pub mod bsp;
 pub mod directions;
+pub mod dynamic;
 pub mod grid;
 mod stats;
 mod storage;
@@ -21,6 +22,7 @@ use rayon::prelude::*;
 
 pub use bsp::{Entry, TileHeader};
 pub use directions::{subfield_directions, tetrahedron_directions, DirectionTable, MAX_LEVEL};
+pub use dynamic::{DynamicLayer, Layered};
 pub use grid::GridFrame;
 pub use stats::{Histogram, PsfStats, RayStats};
 pub use storage::{Buf, SharedBytes};

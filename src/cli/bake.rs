@@ -1,0 +1,88 @@
+//! `subfield bake SCENE -o FILE.psf [--levels L] [--tiles N] [--codec zstd|none]
+//! [--threads T]`: the static part of a scene (all clips playing), baked and written.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::Context;
+use subfield::format::{write_psf, Codec, WriteOptions};
+use subfield::scene::{ClipSelection, Scene};
+use subfield::{Psf, PsfParams};
+
+use super::progress::Progress;
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The scene: .gltf or .glb.
+    pub scene: PathBuf,
+    /// The baked file to write (atomically).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Direction level 0..=4 (4, 10, 34, 130, 514 directions; antipodes share a subfield).
+    #[arg(long, default_value_t = PsfParams::default().level)]
+    pub levels: u32,
+    /// Tiles along the longer side of each subfield's grid, 1..=4096.
+    #[arg(long, default_value_t = PsfParams::default().tiles)]
+    pub tiles: u32,
+    /// Section codec: zstd (smaller) or none (raw, opened in place).
+    #[arg(long, default_value_t = Codec::Zstd)]
+    pub codec: Codec,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// No progress or report.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    super::set_threads(a.threads)?;
+    let params = PsfParams {
+        level: a.levels,
+        tiles: a.tiles,
+    };
+    params.validate()?;
+    let scene = Scene::load(&a.scene)?;
+    let say = |s: String| {
+        if !a.quiet {
+            eprintln!("{s}");
+        }
+    };
+    for w in &scene.warnings {
+        say(format!("warning: {w}"));
+    }
+    let split = scene.split(ClipSelection::All);
+    say(format!("{}: {}", a.scene.display(), split.summary()));
+    let soup = scene.static_triangles(&split);
+
+    let start = Instant::now();
+    let dirs = subfield::psf::subfield_directions(params.level).len() as u64;
+    let bar = Progress::new("subfields", dirs, a.quiet);
+    let psf = Psf::build_with_progress(&soup.positions, &params, &|done, _| {
+        bar.set(done as u64, "")
+    })
+    .with_context(|| format!("cannot bake {}", a.scene.display()))?;
+    bar.finish();
+    let baked = start.elapsed();
+
+    let report = write_psf(
+        &a.output,
+        &psf,
+        &WriteOptions {
+            codec: a.codec,
+            ..WriteOptions::default()
+        },
+    )?;
+    say(format!(
+        "wrote {}: {} triangles, {} subfields, {} bytes ({} raw), baked in {:.2} s, scene hash {}",
+        a.output.display(),
+        psf.triangles().len(),
+        psf.subfields().len(),
+        report.file_length,
+        report.raw_length,
+        baked.as_secs_f64(),
+        report.scene_hash
+    ));
+    Ok(ExitCode::SUCCESS)
+}

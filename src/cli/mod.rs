@@ -1,0 +1,60 @@
+//! Command-line parsing (clap) and dispatch. The names and meanings of commands and
+//! flags are fixed by `../shared/DESIGN.md` §4.
+
+mod bake;
+mod inspect;
+mod progress;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "subfield",
+    version,
+    about = "Ray tracing of animated scenes with unstructured motion (parallel subfields)"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Bake a scene's static triangles into a .psf file.
+    Bake(bake::Args),
+    /// Show a .psf file's header, sections, directions and tile occupancy.
+    Inspect(inspect::Args),
+}
+
+/// Runs one command. Errors carry their context (file, section, accessor); `main`
+/// prints them as one line.
+pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    match cli.command {
+        Command::Bake(a) => bake::run(a),
+        Command::Inspect(a) => inspect::run(a),
+    }
+}
+
+/// Sets the size of rayon's global pool (`--threads`); 0 or absent keeps rayon's default
+/// (all cores).
+pub fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
+    if let Some(t) = threads.filter(|&t| t > 0) {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build_global()
+            .map_err(|e| anyhow::anyhow!("cannot start {t} threads: {e}"))?;
+    }
+    Ok(())
+}
+
+/// Writes `text` to stdout; a closed pipe (`| head`) is not an error.
+pub fn print_stdout(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|_| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        _ => Ok(()),
+    }
+}
