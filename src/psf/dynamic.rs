@@ -1,54 +1,324 @@
-//! The dynamic layer: triangles that move, re-inserted every frame, and the query that
-//! combines them with the static PSF.
+//! The dynamic layer: triangles that move, re-inserted every frame into per-direction
+//! tile grids, and the query that combines them with the static PSF.
 //!
-//! API (stable; the interior is being replaced by per-tile lists with generation stamps):
-//! `DynamicLayer::new(&psf)`, `update(&tris)` each frame, `psf.with_dynamic(&layer)`
-//! gives an [`Intersector`] whose hits number static triangles `0..S` and the layer's
-//! triangles `S..S+D` (in the order given to `update`).
+//! Every subfield of the layer keeps, per tile, a list of entries and a version `V`; the
+//! layer keeps a generation `GV`. A list is current only when its `V` equals `GV`, so
+//! advancing `GV` at the start of an update invalidates every list at once without
+//! visiting any. Insertion clears a stale list on first touch (keeping its memory) and
+//! stamps it; after the first frames an update allocates nothing, and it costs time in
+//! proportion to the tiles the moved triangles cover, not to the size of the grid.
+//!
+//! The grids cover this frame's bounds of the moving triangles, wherever they are: far
+//! outside the static scene is fine. Queries walk the static PSF first, then the dynamic
+//! grid of the same direction up to the static hit, scanning each tile's list.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
 
-use super::{Psf, PsfError, PsfParams};
-use crate::geometry::{Hit, Intersector, Ray};
+use super::stats::{Counter, NoCount, RayStats};
+use super::traverse::walk_tiles;
+use super::{margin_for, DirectionTable, Entry, GridFrame, Psf, PsfError, PsfParams};
+use crate::geometry::{intersect_triangle, Aabb, Hit, Intersector, Ray, RayPre};
 
-/// Moving triangles, rebuilt by [`DynamicLayer::update`] each frame.
+/// Moving triangles, re-inserted by [`DynamicLayer::update`] each frame.
 #[derive(Debug)]
 pub struct DynamicLayer {
     params: PsfParams,
-    inner: Psf,
+    table: DirectionTable,
+    /// `GV`: lists stamped with another value are stale. 0 before the first update.
+    generation: u32,
+    margin: f32,
+    /// This frame's bounds grown by the rounding allowance; rays are clipped to it.
+    clip: Aabb,
+    tris: Vec<[Vec3; 3]>,
+    subfields: Vec<DynSubfield>,
+}
+
+#[derive(Debug)]
+struct DynSubfield {
+    dir: Vec3,
+    frame: GridFrame,
+    /// Per tile of the largest grid the parameters allow (`tiles × tiles`): its version
+    /// `V` and, when current, its run of `entries`.
+    slots: Vec<Slot>,
+    /// This frame's entries, grouped by tile (in order of first touch).
+    entries: Vec<Entry>,
+    /// Scratch reused every update: entries in raster order, and the tiles touched.
+    raw: Vec<(u32, Entry)>,
+    touched: Vec<u32>,
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Slot {
+    version: u32,
+    start: u32,
+    count: u32,
+}
+
+/// Occupancy and memory of the layer after an update.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DynamicStats {
+    pub triangles: usize,
+    /// Entries in current lists, over all subfields.
+    pub entries: usize,
+    /// Tiles holding a current list, over all subfields.
+    pub tiles_used: usize,
+    /// The longest current list.
+    pub max_list: usize,
+    /// Bytes held by the layer (list capacity included): flat once the motion has been
+    /// seen, whatever the number of frames.
+    pub bytes: usize,
 }
 
 impl DynamicLayer {
     /// An empty layer with the static PSF's direction level and tile count.
     pub fn new(static_psf: &Psf) -> DynamicLayer {
-        Self::with_params(*static_psf.params())
+        Self::with_params(*static_psf.params()).expect("a built PSF has valid parameters")
     }
 
-    /// An empty layer with its own parameters.
-    pub fn with_params(params: PsfParams) -> DynamicLayer {
-        DynamicLayer {
+    /// An empty layer with its own direction level and tile count.
+    pub fn with_params(params: PsfParams) -> Result<DynamicLayer, PsfError> {
+        params.validate()?;
+        let dirs = super::subfield_directions(params.level);
+        let n = (params.tiles * params.tiles) as usize;
+        let subfields = dirs
+            .iter()
+            .map(|&dir| DynSubfield {
+                dir,
+                frame: GridFrame::new(dir, &Aabb::EMPTY, 1),
+                slots: vec![Slot::default(); n],
+                entries: Vec::new(),
+                raw: Vec::new(),
+                touched: Vec::new(),
+            })
+            .collect();
+        Ok(DynamicLayer {
             params,
-            inner: Psf::build(&[], &params).expect("an empty PSF always builds"),
-        }
+            table: DirectionTable::new(&dirs),
+            generation: 0,
+            margin: 0.0,
+            clip: Aabb::EMPTY,
+            tris: Vec::new(),
+            subfields,
+        })
     }
 
-    /// Replaces the layer's triangles with `tris` (this frame's positions).
+    pub fn params(&self) -> &PsfParams {
+        &self.params
+    }
+
+    /// Replaces the layer's triangles with `tris` (this frame's positions). On error
+    /// (a non-finite coordinate) the layer is left empty.
     pub fn update(&mut self, tris: &[[Vec3; 3]]) -> Result<(), PsfError> {
-        self.inner = Psf::build(tris, &self.params)?;
+        self.tris.clear();
+        self.next_generation();
+        if tris.len() > u32::MAX as usize {
+            return Err(PsfError::TooManyTriangles {
+                count: tris.len(),
+                max: u32::MAX as usize,
+            });
+        }
+        for (i, t) in tris.iter().enumerate() {
+            for (k, v) in t.iter().enumerate() {
+                if !v.is_finite() {
+                    return Err(PsfError::NonFinite {
+                        triangle: i,
+                        vertex: k,
+                        value: v.to_array(),
+                    });
+                }
+            }
+        }
+        self.tris.extend_from_slice(tris);
+        let bounds = Aabb::from_triangles(tris);
+        self.margin = margin_for(&bounds);
+        self.clip = bounds.padded(2.0 * self.margin);
+        if tris.is_empty() {
+            return Ok(());
+        }
+        let (gv, margin, clip, tiles) =
+            (self.generation, self.margin, self.clip, self.params.tiles);
+        self.subfields
+            .par_iter_mut()
+            .for_each(|s| s.insert(tris, gv, margin, &clip, tiles));
         Ok(())
+    }
+
+    /// Advances `GV`; on the (4-billion-frame) wrap every stamp is reset once.
+    fn next_generation(&mut self) {
+        self.generation = self.generation.wrapping_add(1);
+        if self.generation == 0 {
+            for s in &mut self.subfields {
+                s.slots.fill(Slot::default());
+            }
+            self.generation = 1;
+        }
     }
 
     /// The triangles of the last update.
     pub fn triangles(&self) -> &[[Vec3; 3]] {
-        self.inner.triangles()
+        &self.tris
     }
 
     pub fn len(&self) -> usize {
-        self.inner.triangles().len()
+        self.tris.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.len() == 0
+        self.tris.is_empty()
+    }
+
+    /// Occupancy and memory now (visits every tile: for reports, not per frame).
+    pub fn stats(&self) -> DynamicStats {
+        let mut st = DynamicStats {
+            triangles: self.tris.len(),
+            bytes: std::mem::size_of::<Self>() + self.tris.capacity() * 36,
+            ..DynamicStats::default()
+        };
+        for s in &self.subfields {
+            st.bytes += s.slots.capacity() * std::mem::size_of::<Slot>()
+                + s.entries.capacity() * std::mem::size_of::<Entry>()
+                + s.raw.capacity() * std::mem::size_of::<(u32, Entry)>()
+                + s.touched.capacity() * 4;
+            if self.tris.is_empty() {
+                continue;
+            }
+            for slot in s.slots.iter().filter(|x| x.version == self.generation) {
+                st.entries += slot.count as usize;
+                st.tiles_used += 1;
+                st.max_list = st.max_list.max(slot.count as usize);
+            }
+        }
+        st
+    }
+
+    fn trace<const ANY: bool, C: Counter>(&self, ray: &Ray, count: &mut C) -> Option<Hit> {
+        if self.tris.is_empty() || !ray.is_valid() {
+            return None;
+        }
+        let o = ray.origin.as_dvec3();
+        let d = ray.dir.as_dvec3();
+        let (ta, tb) = self.clip.clip_line(o.to_array(), d.to_array())?;
+        let t0 = ta.max(ray.t_min as f64);
+        let t1 = tb.min(ray.t_max as f64);
+        if t0.is_nan() || t1.is_nan() || t0 > t1 {
+            return None;
+        }
+        let sf = &self.subfields[self.table.lookup(ray.dir)];
+        let pre = RayPre::new(ray.origin, ray.dir);
+        let (margin, gv, tris) = (self.margin, self.generation, &self.tris);
+        let slack = (margin as f64 + 1e-6 * o.length()) / d.length();
+        let fd: DVec3 = sf.frame.d.as_dvec3();
+        let (oz, dz) = (o.dot(fd), d.dot(fd));
+        let mut best: Option<Hit> = None;
+        walk_tiles(&sf.frame, o, d, t0, t1, |tile, t_enter, t_exit| {
+            count.tile();
+            let slot = sf.slots[tile];
+            if slot.version != gv {
+                return true;
+            }
+            let list = &sf.entries[slot.start as usize..(slot.start + slot.count) as usize];
+            count.scanned(list.len());
+            // The ray's depth interval over this tile, cut at the best hit so far.
+            let t_far = best.map_or(t_exit, |b| t_exit.min(b.t as f64 + slack));
+            let (za, zb) = (oz + t_enter * dz, oz + t_far * dz);
+            let (lo, hi) = ((za.min(zb) as f32) - margin, (za.max(zb) as f32) + margin);
+            for e in list {
+                if e.zmax < lo || e.zmin > hi {
+                    continue;
+                }
+                count.candidate();
+                let t_max = best.map_or(ray.t_max, |b| b.t);
+                if let Some((t, u, v)) =
+                    intersect_triangle(&pre, &tris[e.tri as usize], ray.t_min, t_max)
+                {
+                    let hit = Hit {
+                        t,
+                        tri: e.tri,
+                        u,
+                        v,
+                    };
+                    if ANY {
+                        best = Some(hit);
+                        return false;
+                    }
+                    if best.is_none_or(|b| hit.is_closer_than(&b)) {
+                        best = Some(hit);
+                    }
+                }
+            }
+            !matches!(&best, Some(b) if b.t as f64 + slack <= t_exit)
+        });
+        best
+    }
+}
+
+impl DynSubfield {
+    /// Inserts this frame's triangles (generation `gv`): raster into `raw`, counting per
+    /// tile and stamping each tile on first touch, then place the entries by tile. Time
+    /// and memory follow the entries, never the grid; the buffers are reused.
+    fn insert(&mut self, tris: &[[Vec3; 3]], gv: u32, margin: f32, clip: &Aabb, tiles: u32) {
+        self.frame = GridFrame::new(self.dir, clip, tiles);
+        let (slots, raw, touched) = (&mut self.slots, &mut self.raw, &mut self.touched);
+        raw.clear();
+        touched.clear();
+        // Room for a quarter more entries than last frame: buffers grow to the motion's
+        // peak with headroom once, rather than doubling whenever a frame sets a record.
+        let headroom = |n: usize| n + n / 4;
+        let want = headroom(self.entries.len());
+        if raw.capacity() < want {
+            raw.reserve_exact(want);
+        }
+        for (i, t) in tris.iter().enumerate() {
+            self.frame.raster(t, margin, |tile, zmin, zmax| {
+                let slot = &mut slots[tile as usize];
+                if slot.version != gv {
+                    *slot = Slot {
+                        version: gv,
+                        start: 0,
+                        count: 0,
+                    };
+                    touched.push(tile);
+                }
+                slot.count += 1;
+                raw.push((
+                    tile,
+                    Entry {
+                        tri: i as u32,
+                        zmin,
+                        zmax,
+                    },
+                ));
+            });
+        }
+        let mut at = 0u32;
+        for &t in touched.iter() {
+            let slot = &mut slots[t as usize];
+            slot.start = at;
+            at += slot.count;
+            slot.count = 0;
+        }
+        self.entries.clear();
+        if self.entries.capacity() < raw.len() {
+            self.entries.reserve_exact(headroom(raw.len()));
+        }
+        self.entries.resize(raw.len(), Entry::default());
+        for (t, e) in raw.iter() {
+            let slot = &mut slots[*t as usize];
+            self.entries[(slot.start + slot.count) as usize] = *e;
+            slot.count += 1;
+        }
+    }
+}
+
+impl Intersector for DynamicLayer {
+    /// The closest hit among the layer's triangles alone (numbered from 0).
+    fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.trace::<false, _>(ray, &mut NoCount)
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        self.trace::<true, _>(ray, &mut NoCount).is_some()
     }
 }
 
@@ -67,15 +337,20 @@ impl Psf {
     }
 }
 
-impl Intersector for Layered<'_> {
-    fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        let s = self.psf.intersect(ray);
+impl Layered<'_> {
+    fn trace<const ANY: bool, C: Counter>(&self, ray: &Ray, count: &mut C) -> Option<Hit> {
+        let s = self.psf.trace::<ANY, C>(ray, count);
+        if ANY && s.is_some() {
+            return s;
+        }
+        // The dynamic walk stops at the static hit: a dynamic triangle at the same t
+        // loses the tie anyway (its number is larger).
         let mut r = *ray;
         if let Some(h) = &s {
             r.t_max = h.t;
         }
         let offset = self.psf.triangles().len() as u32;
-        let d = self.dynamic.inner.intersect(&r).map(|mut h| {
+        let d = self.dynamic.trace::<ANY, C>(&r, count).map(|mut h| {
             h.tri += offset;
             h
         });
@@ -85,7 +360,25 @@ impl Intersector for Layered<'_> {
         }
     }
 
+    /// The closest hit, also counting the work done (both layers) into `stats`.
+    pub fn intersect_counted(&self, ray: &Ray, stats: &mut RayStats) -> Option<Hit> {
+        stats.rays += 1;
+        self.trace::<false, _>(ray, stats)
+    }
+
+    /// Any hit, also counting the work done into `stats`.
+    pub fn occluded_counted(&self, ray: &Ray, stats: &mut RayStats) -> bool {
+        stats.rays += 1;
+        self.trace::<true, _>(ray, stats).is_some()
+    }
+}
+
+impl Intersector for Layered<'_> {
+    fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.trace::<false, _>(ray, &mut NoCount)
+    }
+
     fn occluded(&self, ray: &Ray) -> bool {
-        self.psf.occluded(ray) || self.dynamic.inner.occluded(ray)
+        self.trace::<true, _>(ray, &mut NoCount).is_some()
     }
 }

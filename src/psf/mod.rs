@@ -22,7 +22,7 @@ use rayon::prelude::*;
 
 pub use bsp::{Entry, TileHeader};
 pub use directions::{subfield_directions, tetrahedron_directions, DirectionTable, MAX_LEVEL};
-pub use dynamic::{DynamicLayer, Layered};
+pub use dynamic::{DynamicLayer, DynamicStats, Layered};
 pub use grid::GridFrame;
 pub use stats::{Histogram, PsfStats, RayStats};
 pub use storage::{Buf, SharedBytes};

@@ -89,7 +89,11 @@ impl Psf {
         self.trace::<true, _>(ray, stats).is_some()
     }
 
-    fn trace<const ANY: bool, C: Counter>(&self, ray: &Ray, count: &mut C) -> Option<Hit> {
+    pub(crate) fn trace<const ANY: bool, C: Counter>(
+        &self,
+        ray: &Ray,
+        count: &mut C,
+    ) -> Option<Hit> {
         if !ray.is_valid() || self.subfields.is_empty() {
             return None;
         }

@@ -1,0 +1,320 @@
+//! The dynamic layer over sequences of frames: after every update, the static PSF and
+//! the layer queried together must agree with brute force over the static triangles
+//! plus the current moving ones — the same closest hit (triangle, t, barycentrics) and
+//! the same any-hit answer. Frames make the triangles jump anywhere, leave the bounds
+//! and come back, pile into one tile, shrink to zero area, and change in number, so a
+//! stale list from an earlier frame or a missed insertion shows up as a wrong hit.
+//!
+//! proptest prints the failing `Case` (seed included) and shrinks it.
+
+use glam::Vec3;
+use proptest::prelude::*;
+use subfield::geometry::{BruteForce, Intersector, Ray};
+use subfield::synth::{self, Rng};
+use subfield::{DynamicLayer, Psf, PsfParams};
+
+#[derive(Clone, Debug)]
+struct Case {
+    seed: u64,
+    static_params: PsfParams,
+    /// The dynamic layer's own level and tile count (`None`: those of the static PSF).
+    dynamic_params: Option<PsfParams>,
+    moving: usize,
+    frames: usize,
+    rays: usize,
+}
+
+const LO: Vec3 = Vec3::splat(0.0);
+const HI: Vec3 = Vec3::splat(8.0);
+
+fn static_scene(rng: &mut Rng) -> Vec<[Vec3; 3]> {
+    let mut tris = synth::box_faces(LO, HI);
+    let n = rng.below(150);
+    let size = rng.range(0.1, 3.0);
+    tris.extend(synth::soup(rng, n, LO, HI, size));
+    if rng.below(2) == 0 {
+        tris.extend(synth::sphere(Vec3::splat(4.0), 1.5, 6, 9));
+    }
+    tris
+}
+
+/// One triangle of size about `s` around `c`.
+fn tri_at(rng: &mut Rng, c: Vec3, s: f32) -> [Vec3; 3] {
+    [c + rng.unit() * s, c + rng.unit() * s, c + rng.unit() * s]
+}
+
+/// This frame's moving triangles. The count changes from frame to frame too.
+fn frame_tris(rng: &mut Rng, n: usize) -> (Vec<[Vec3; 3]>, &'static str) {
+    let n = if rng.below(3) == 0 {
+        rng.below(2 * n + 1)
+    } else {
+        n
+    };
+    let far = |rng: &mut Rng| {
+        let mut c = rng.in_box(LO, HI);
+        c[rng.below(3)] += if rng.below(2) == 0 { 1.0 } else { -1.0 } * rng.range(20.0, 5000.0);
+        c
+    };
+    let mode = rng.below(6);
+    let mut out = Vec::with_capacity(n);
+    let pile = rng.in_box(LO, HI);
+    for _ in 0..n {
+        let k = if mode == 5 { rng.below(5) } else { mode };
+        let t = match k {
+            // jump anywhere inside the static bounds
+            0 => {
+                let c = rng.in_box(LO - 1.0, HI + 1.0);
+                let s = rng.range(0.01, 2.0);
+                tri_at(rng, c, s)
+            }
+            // leave the bounds, far away
+            1 => {
+                let c = far(rng);
+                let s = rng.range(0.1, 20.0);
+                tri_at(rng, c, s)
+            }
+            // pile into one tile
+            2 => {
+                let c = pile + rng.unit() * 1e-3;
+                tri_at(rng, c, 1e-3)
+            }
+            // vanish to zero area: a point, or a segment
+            3 => {
+                let a = rng.in_box(LO, HI);
+                if rng.below(2) == 0 {
+                    [a, a, a]
+                } else {
+                    let b = rng.in_box(LO, HI);
+                    [a, b, a.lerp(b, rng.f32())]
+                }
+            }
+            // straddle the bounds: one vertex far, two inside
+            _ => {
+                let a = rng.in_box(LO, HI);
+                let b = rng.in_box(LO, HI);
+                [a, b, far(rng)]
+            }
+        };
+        out.push(t);
+    }
+    let name = ["jump", "leave", "pile", "vanish", "straddle", "mixed"][mode];
+    (out, name)
+}
+
+fn rays(rng: &mut Rng, n: usize, moving: &[[Vec3; 3]], before: &[[Vec3; 3]]) -> Vec<Ray> {
+    let mut out = Vec::with_capacity(n);
+    // A point on a triangle (or its centroid region).
+    let on = |rng: &mut Rng, t: &[Vec3; 3]| {
+        let (a, b) = (rng.f32(), rng.f32());
+        let (a, b) = if a + b > 1.0 {
+            (1.0 - a, 1.0 - b)
+        } else {
+            (a, b)
+        };
+        t[0] + (t[1] - t[0]) * a + (t[2] - t[0]) * b
+    };
+    while out.len() < n {
+        let inside = rng.in_box(LO, HI);
+        let ray = match rng.below(7) {
+            // through a vertex or along an edge of a moving triangle: hits on the
+            // boundaries between triangles, and in the corners of tiles
+            5 if !moving.is_empty() => {
+                let t = moving[rng.below(moving.len())];
+                let a = rng.below(3);
+                let p = if rng.below(2) == 0 {
+                    t[a]
+                } else {
+                    t[a].lerp(t[(a + 1) % 3], rng.f32())
+                };
+                Ray::new(inside, p - inside)
+            }
+            0 => Ray::new(inside, rng.unit()),
+            // at a moving triangle, from near or far
+            1 | 2 if !moving.is_empty() => {
+                let k = rng.below(moving.len());
+                let p = on(rng, &moving[k]);
+                let o = if rng.below(2) == 0 {
+                    inside
+                } else {
+                    p + rng.unit() * rng.range(0.01, 100.0)
+                };
+                Ray::new(o, p - o)
+            }
+            // at where a triangle was last frame: a stale entry would answer
+            3 if !before.is_empty() => {
+                let k = rng.below(before.len());
+                let p = on(rng, &before[k]);
+                Ray::new(inside, p - inside)
+            }
+            // a shadow-ray segment
+            4 => {
+                let p = rng.in_box(LO, HI);
+                Ray::segment(inside, p - inside, 0.0, 1.0)
+            }
+            // from far outside everything, inwards
+            _ => {
+                let o = Vec3::splat(4.0) + rng.unit() * rng.range(20.0, 10_000.0);
+                Ray::new(o, inside - o)
+            }
+        };
+        out.push(ray);
+    }
+    out
+}
+
+fn check(c: &Case) -> Result<(), TestCaseError> {
+    let mut rng = Rng::new(c.seed);
+    let stat = static_scene(&mut rng);
+    let psf = Psf::build(&stat, &c.static_params).expect("bake");
+    let mut layer = match c.dynamic_params {
+        Some(p) => DynamicLayer::with_params(p).expect("params"),
+        None => DynamicLayer::new(&psf),
+    };
+    let mut before: Vec<[Vec3; 3]> = Vec::new();
+    for frame in 0..c.frames {
+        let (moving, mode) = frame_tris(&mut rng, c.moving);
+        layer.update(&moving).expect("update");
+        let all: Vec<[Vec3; 3]> = stat.iter().chain(&moving).copied().collect();
+        let brute = BruteForce::new(&all);
+        let both = psf.with_dynamic(&layer);
+        let rs = rays(&mut rng, c.rays, &moving, &before);
+        let (mut got, mut want) = (vec![None; rs.len()], vec![None; rs.len()]);
+        both.intersect_batch(&rs, &mut got);
+        brute.intersect_batch(&rs, &mut want);
+        let (mut og, mut ow) = (vec![false; rs.len()], vec![false; rs.len()]);
+        both.occluded_batch(&rs, &mut og);
+        brute.occluded_batch(&rs, &mut ow);
+        for i in 0..rs.len() {
+            prop_assert_eq!(
+                got[i],
+                want[i],
+                "closest hit differs: frame {} ({}), ray {} {:?}, seed {}",
+                frame,
+                mode,
+                i,
+                rs[i],
+                c.seed
+            );
+            prop_assert_eq!(
+                og[i],
+                ow[i],
+                "any hit differs: frame {} ({}), ray {} {:?}, seed {}",
+                frame,
+                mode,
+                i,
+                rs[i],
+                c.seed
+            );
+        }
+        before = moving;
+    }
+    Ok(())
+}
+
+fn params() -> impl Strategy<Value = PsfParams> {
+    (
+        prop_oneof![Just(0u32), Just(1), Just(2)],
+        prop_oneof![Just(1u32), Just(4), Just(16), Just(64)],
+    )
+        .prop_map(|(level, tiles)| PsfParams { level, tiles })
+}
+
+fn case() -> impl Strategy<Value = Case> {
+    (
+        any::<u64>(),
+        params(),
+        prop_oneof![Just(None), params().prop_map(Some)],
+        prop_oneof![Just(1usize), 2usize..50, 50usize..400],
+    )
+        .prop_map(|(seed, static_params, dynamic_params, moving)| Case {
+            seed,
+            static_params,
+            dynamic_params,
+            moving,
+            frames: 6,
+            rays: 400,
+        })
+}
+
+proptest! {
+    // 48 cases x 6 frames x 400 rays = 115,200 rays a run, closest and any hit.
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+    #[test]
+    fn layered_agrees_with_brute_force_over_frames(c in case()) {
+        check(&c)?;
+    }
+}
+
+/// A fully dynamic scene (no static triangles at all) works, and an empty update
+/// leaves nothing to hit.
+#[test]
+fn only_moving_triangles_and_empty_frames() {
+    let psf = Psf::build(&[], &PsfParams::default()).unwrap();
+    let mut layer = DynamicLayer::new(&psf);
+    let tri = [
+        Vec3::new(-1.0, -1.0, 5.0),
+        Vec3::new(1.0, -1.0, 5.0),
+        Vec3::new(0.0, 1.0, 5.0),
+    ];
+    let ray = Ray::new(Vec3::ZERO, Vec3::Z);
+    assert_eq!(psf.with_dynamic(&layer).intersect(&ray), None);
+    layer.update(&[tri]).unwrap();
+    let hit = psf.with_dynamic(&layer).intersect(&ray).expect("hit");
+    assert_eq!((hit.tri, hit.t), (0, 5.0));
+    layer.update(&[]).unwrap();
+    assert_eq!(psf.with_dynamic(&layer).intersect(&ray), None);
+    assert!(!psf.with_dynamic(&layer).occluded(&ray));
+}
+
+/// Non-finite moving vertices are refused with the triangle named, and leave the layer
+/// empty rather than half-updated.
+#[test]
+fn non_finite_update_is_refused() {
+    let psf = Psf::build(&synth::box_faces(LO, HI), &PsfParams::default()).unwrap();
+    let mut layer = DynamicLayer::new(&psf);
+    let good = [
+        Vec3::ONE,
+        Vec3::new(2.0, 1.0, 1.0),
+        Vec3::new(1.0, 2.0, 1.0),
+    ];
+    layer.update(&[good]).unwrap();
+    let mut bad = good;
+    bad[1].y = f32::NAN;
+    let err = layer.update(&[good, bad]).unwrap_err().to_string();
+    assert!(err.contains("triangle 1"), "{err}");
+    assert!(layer.is_empty());
+}
+
+/// After the motion has been seen, updates allocate nothing more: the layer's memory is
+/// the same after 200 further frames of the same kind of motion.
+#[test]
+fn memory_is_flat_over_frames() {
+    let psf = Psf::build(&synth::box_faces(LO, HI), &PsfParams::default()).unwrap();
+    let mut layer = DynamicLayer::new(&psf);
+    let mut rng = Rng::new(7);
+    let frame = |rng: &mut Rng, layer: &mut DynamicLayer| {
+        let tris: Vec<[Vec3; 3]> = (0..2000)
+            .map(|_| {
+                let c = rng.in_box(LO, HI);
+                tri_at(rng, c, 0.2)
+            })
+            .collect();
+        layer.update(&tris).unwrap();
+    };
+    for _ in 0..50 {
+        frame(&mut rng, &mut layer);
+    }
+    let warm = layer.stats().bytes;
+    for _ in 0..200 {
+        frame(&mut rng, &mut layer);
+    }
+    let st = layer.stats();
+    assert_eq!(st.triangles, 2000);
+    assert!(st.entries >= 2000 * 7, "{st:?}");
+    // Lists may still find a rare new maximum; allow 2% growth, not growth per frame.
+    assert!(
+        st.bytes as f64 <= warm as f64 * 1.02,
+        "memory grew from {warm} to {} bytes",
+        st.bytes
+    );
+}
