@@ -50,6 +50,11 @@ pub struct Obvhs {
 
 impl Obvhs {
     pub fn build(tris: &[[Vec3; 3]]) -> Obvhs {
+        Self::build_with(tris, obvhs::BvhBuildParams::medium_build())
+    }
+
+    /// With other build parameters (`fastest_build()` for per-frame rebuilds).
+    pub fn build_with(tris: &[[Vec3; 3]], params: obvhs::BvhBuildParams) -> Obvhs {
         let tris: Vec<obvhs::triangle::Triangle> = tris
             .iter()
             .map(|t| obvhs::triangle::Triangle {
@@ -60,7 +65,7 @@ impl Obvhs {
             .collect();
         let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
             &tris,
-            obvhs::BvhBuildParams::medium_build(),
+            params,
             &mut std::time::Duration::default(),
         );
         Obvhs { tris, bvh }
@@ -76,5 +81,36 @@ impl Obvhs {
         } else {
             None
         }
+    }
+
+    /// Whether anything is hit in `[t_min, t_max]`; stops at the first hit found.
+    pub fn occluded(&self, r: &Ray) -> bool {
+        let ray = obvhs::ray::Ray::new(r.origin.into(), r.dir.into(), r.t_min, r.t_max);
+        !self.bvh.ray_traverse_miss(ray, |ray, id| {
+            self.tris[self.bvh.primitive_indices[id] as usize].intersect(ray)
+        })
+    }
+}
+
+/// `n` triangles in unstructured motion inside the room: each on its own path (a
+/// Lissajous curve with its own phases and rates), tumbling, about 0.15 units across.
+pub fn moving(n: usize, t: f32, out: &mut Vec<[Vec3; 3]>) {
+    out.clear();
+    let mut rng = Rng::new(0xa11_7a27);
+    for _ in 0..n {
+        let c = rng.in_box(Vec3::new(-8.0, 0.5, -6.0), Vec3::new(8.0, 5.0, 8.0));
+        let amp = rng.in_box(Vec3::splat(0.5), Vec3::new(6.0, 2.0, 6.0));
+        let w = rng.in_box(Vec3::splat(0.2), Vec3::splat(1.5));
+        let ph = rng.in_box(Vec3::ZERO, Vec3::splat(6.283));
+        let (a, b, spin) = (rng.unit() * 0.15, rng.unit() * 0.15, rng.range(0.5, 3.0));
+        let p = c + amp
+            * Vec3::new(
+                (w.x * t + ph.x).sin(),
+                (w.y * t + ph.y).sin(),
+                (w.z * t + ph.z).sin(),
+            )
+            * 0.5;
+        let q = glam::Quat::from_axis_angle(a.cross(b).normalize_or(Vec3::Y), spin * t);
+        out.push([p, p + q * a, p + q * b]);
     }
 }

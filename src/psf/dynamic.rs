@@ -20,6 +20,12 @@ use super::traverse::walk_tiles;
 use super::{margin_for, DirectionTable, Entry, GridFrame, Psf, PsfError, PsfParams};
 use crate::geometry::{intersect_triangle, Aabb, Hit, Intersector, Ray, RayPre};
 
+/// Triangles spanning at most this many tiles are listed in each with their whole depth
+/// range, unclipped. `cargo bench --bench dynamic -- update` (16,384 moving triangles,
+/// level 1, 128 tiles, 2 cores): 21.5 ms per update with exact clipping everywhere, 8.5
+/// ms with this.
+const COARSE: u32 = 4;
+
 /// Moving triangles, re-inserted by [`DynamicLayer::update`] each frame.
 #[derive(Debug)]
 pub struct DynamicLayer {
@@ -270,26 +276,27 @@ impl DynSubfield {
             raw.reserve_exact(want);
         }
         for (i, t) in tris.iter().enumerate() {
-            self.frame.raster(t, margin, |tile, zmin, zmax| {
-                let slot = &mut slots[tile as usize];
-                if slot.version != gv {
-                    *slot = Slot {
-                        version: gv,
-                        start: 0,
-                        count: 0,
-                    };
-                    touched.push(tile);
-                }
-                slot.count += 1;
-                raw.push((
-                    tile,
-                    Entry {
-                        tri: i as u32,
-                        zmin,
-                        zmax,
-                    },
-                ));
-            });
+            self.frame
+                .raster_with(t, margin, COARSE, |tile, zmin, zmax| {
+                    let slot = &mut slots[tile as usize];
+                    if slot.version != gv {
+                        *slot = Slot {
+                            version: gv,
+                            start: 0,
+                            count: 0,
+                        };
+                        touched.push(tile);
+                    }
+                    slot.count += 1;
+                    raw.push((
+                        tile,
+                        Entry {
+                            tri: i as u32,
+                            zmin,
+                            zmax,
+                        },
+                    ));
+                });
         }
         let mut at = 0u32;
         for &t in touched.iter() {

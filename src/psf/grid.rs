@@ -89,7 +89,21 @@ impl GridFrame {
     /// rectangles are grown by `margin` (world units) on every side, and depths by
     /// `margin` plus a relative allowance for the rounding of the clip, so a triangle
     /// that touches a tile, even at a corner, is listed in it whatever the rounding.
-    pub fn raster(&self, tri: &[Vec3; 3], margin: f32, mut emit: impl FnMut(u32, f32, f32)) {
+    pub fn raster(&self, tri: &[Vec3; 3], margin: f32, emit: impl FnMut(u32, f32, f32)) {
+        self.raster_with(tri, margin, 1, emit)
+    }
+
+    /// As [`raster`](Self::raster), but a triangle whose grown bounding rectangle spans at
+    /// most `coarse` tiles is listed in all of them with its whole depth range, without
+    /// clipping: looser lists, much faster insertion (the dynamic layer, every frame).
+    #[inline]
+    pub fn raster_with(
+        &self,
+        tri: &[Vec3; 3],
+        margin: f32,
+        coarse: u32,
+        mut emit: impl FnMut(u32, f32, f32),
+    ) {
         let p = [
             self.project(tri[0]),
             self.project(tri[1]),
@@ -106,8 +120,12 @@ impl GridFrame {
         let cell = |x: f32, n: u32| (x.floor() as i64).clamp(0, n as i64 - 1) as u32;
         let (i0, i1) = (cell(lo_u, self.nu), cell(hi_u, self.nu));
         let (j0, j1) = (cell(lo_v, self.nv), cell(hi_v, self.nv));
-        if i0 == i1 && j0 == j1 {
-            emit(j0 * self.nu + i0, zmin - dz, zmax + dz);
+        if (i1 - i0 + 1) * (j1 - j0 + 1) <= coarse {
+            for j in j0..=j1 {
+                for i in i0..=i1 {
+                    emit(j * self.nu + i, zmin - dz, zmax + dz);
+                }
+            }
             return;
         }
         for j in j0..=j1 {
