@@ -101,7 +101,7 @@ pub fn moving(n: usize, t: f32, out: &mut Vec<[Vec3; 3]>) {
         let c = rng.in_box(Vec3::new(-8.0, 0.5, -6.0), Vec3::new(8.0, 5.0, 8.0));
         let amp = rng.in_box(Vec3::splat(0.5), Vec3::new(6.0, 2.0, 6.0));
         let w = rng.in_box(Vec3::splat(0.2), Vec3::splat(1.5));
-        let ph = rng.in_box(Vec3::ZERO, Vec3::splat(6.283));
+        let ph = rng.in_box(Vec3::ZERO, Vec3::splat(std::f32::consts::TAU));
         let (a, b, spin) = (rng.unit() * 0.15, rng.unit() * 0.15, rng.range(0.5, 3.0));
         let p = c + amp
             * Vec3::new(

@@ -318,3 +318,25 @@ fn memory_is_flat_over_frames() {
         st.bytes
     );
 }
+
+/// A ray aimed exactly at a point of a triangle collapsed onto a segment (the "vanish"
+/// frames): the edge functions are rounding noise and could give any `t`, so neither
+/// brute force nor the layers report it (this case once made them disagree).
+#[test]
+fn collinear_triangle_is_never_hit() {
+    let (a, b) = (
+        Vec3::new(0.675_544_7, 1.502_061_8, 3.599_168_8),
+        Vec3::new(7.292_999, 7.956_143, 3.074_461),
+    );
+    let t = [a, b, a.lerp(b, 0.191_837)];
+    let o = Vec3::new(3.583_107, 6.536_582, 3.939_263_8);
+    let psf = Psf::build(&synth::box_faces(LO, HI), &PsfParams::default()).unwrap();
+    let mut layer = DynamicLayer::new(&psf);
+    layer.update(&[t]).unwrap();
+    for k in 0..=10 {
+        let p = t[0].lerp(t[2], k as f32 / 10.0);
+        let r = Ray::new(o, p - o);
+        assert_eq!(BruteForce::new(&[t]).intersect(&r), None);
+        assert_eq!(layer.intersect(&r), None);
+    }
+}

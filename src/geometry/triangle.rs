@@ -99,7 +99,22 @@ pub fn intersect_triangle(
     if !(t >= t_min && t <= t_max) {
         return None;
     }
+    if is_degenerate(tri) {
+        return None;
+    }
     Some((t, v * inv, w * inv))
+}
+
+/// A triangle without area up to float rounding: the sine of its angle at `a` below
+/// 2^-17. A ray through such a triangle gets edge functions that are rounding noise, and
+/// the `t` they give need not lie on the triangle at all; no query could find such a hit
+/// by where it is, so no query reports it. Checked after a hit only, where it is cheap.
+#[inline]
+pub fn is_degenerate(tri: &[Vec3; 3]) -> bool {
+    let (e1, e2) = (tri[1] - tri[0], tri[2] - tri[0]);
+    let n2 = e1.cross(e2).length_squared();
+    // sin² < 2^-34, without dividing (zero-length edges count as degenerate).
+    !(n2 > e1.length_squared() * e2.length_squared() * (1.0 / 17_179_869_184.0))
 }
 
 #[cfg(test)]
