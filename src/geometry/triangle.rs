@@ -114,7 +114,9 @@ pub fn is_degenerate(tri: &[Vec3; 3]) -> bool {
     let (e1, e2) = (tri[1] - tri[0], tri[2] - tri[0]);
     let n2 = e1.cross(e2).length_squared();
     // sin² < 2^-34, without dividing (zero-length edges count as degenerate).
-    !(n2 > e1.length_squared() * e2.length_squared() * (1.0 / 17_179_869_184.0))
+    let bound = e1.length_squared() * e2.length_squared() * (1.0 / 17_179_869_184.0);
+    // Written so that NaN counts as degenerate.
+    n2.partial_cmp(&bound) != Some(std::cmp::Ordering::Greater)
 }
 
 #[cfg(test)]
