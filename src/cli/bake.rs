@@ -22,9 +22,10 @@ pub struct Args {
     /// Direction level 0..=4 (4, 10, 34, 130, 514 directions; antipodes share a subfield).
     #[arg(long, default_value_t = PsfParams::default().level)]
     pub levels: u32,
-    /// Tiles along the longer side of each subfield's grid, 1..=4096.
-    #[arg(long, default_value_t = PsfParams::default().tiles)]
-    pub tiles: u32,
+    /// Tiles along the longer side of each subfield's grid, 1..=4096 (default: from the
+    /// triangle count, 0.5·√n rounded to a power of two within 4..=256).
+    #[arg(long)]
+    pub tiles: Option<u32>,
     /// Section codec: zstd (smaller) or none (raw, opened in place).
     #[arg(long, default_value_t = Codec::Zstd)]
     pub codec: Codec,
@@ -38,11 +39,12 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     super::set_threads(a.threads)?;
-    let params = PsfParams {
+    // Check the flags before reading the scene; the tile count may wait for it.
+    PsfParams {
         level: a.levels,
-        tiles: a.tiles,
-    };
-    params.validate()?;
+        tiles: a.tiles.unwrap_or(1),
+    }
+    .validate()?;
     let scene = Scene::load(&a.scene)?;
     let say = |s: String| {
         if !a.quiet {
@@ -55,6 +57,12 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let split = scene.split(ClipSelection::All);
     say(format!("{}: {}", a.scene.display(), split.summary()));
     let soup = scene.static_triangles(&split);
+    let params = PsfParams {
+        level: a.levels,
+        tiles: a
+            .tiles
+            .unwrap_or_else(|| PsfParams::for_triangles(soup.len()).tiles),
+    };
 
     let start = Instant::now();
     let dirs = subfield::psf::subfield_directions(params.level).len() as u64;
