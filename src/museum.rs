@@ -661,13 +661,18 @@ fn build_static(b: &mut GltfBuilder, m: &Materials, plan: &Plan) {
     }
     let room = b.add_mesh(MeshDesc {
         name: Some("room".into()),
-        primitives: vec![
-            light.primitive(m.floor_light),
-            dark.primitive(m.floor_dark),
-            ceiling.primitive(m.ceiling),
-            walls.primitive(m.wall),
-            board.primitive(m.baseboard),
-        ],
+        // A 1 × 1 floor has no dark tile: empty parts are left out.
+        primitives: [
+            (light, m.floor_light),
+            (dark, m.floor_dark),
+            (ceiling, m.ceiling),
+            (walls, m.wall),
+            (board, m.baseboard),
+        ]
+        .into_iter()
+        .filter(|(part, _)| !part.indices.is_empty())
+        .map(|(part, material)| part.primitive(material))
+        .collect(),
         weights: Vec::new(),
     });
     add_root(b, node("room", room, Vec3::ZERO, Quat::IDENTITY));
