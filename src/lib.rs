@@ -5,6 +5,7 @@
 
 pub mod format;
 pub mod geometry;
+pub mod museum;
 pub mod psf;
 pub mod scene;
 pub mod synth;

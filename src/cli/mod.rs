@@ -2,6 +2,7 @@
 //! flags are fixed by `../shared/DESIGN.md` §4.
 
 mod bake;
+mod generate;
 mod inspect;
 mod progress;
 
@@ -26,6 +27,8 @@ pub enum Command {
     Bake(bake::Args),
     /// Show a .psf file's header, sections, directions and tile occupancy.
     Inspect(inspect::Args),
+    /// Write a built-in scene to a file.
+    Generate(generate::Args),
 }
 
 /// Runs one command. Errors carry their context (file, section, accessor); `main`
@@ -34,6 +37,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Bake(a) => bake::run(a),
         Command::Inspect(a) => inspect::run(a),
+        Command::Generate(a) => generate::run(a),
     }
 }
 
