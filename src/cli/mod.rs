@@ -2,6 +2,8 @@
 //! flags are fixed by `../shared/DESIGN.md` §4.
 
 mod bake;
+mod convert;
+mod generate;
 mod inspect;
 mod progress;
 
@@ -26,6 +28,10 @@ pub enum Command {
     Bake(bake::Args),
     /// Show a .psf file's header, sections, directions and tile occupancy.
     Inspect(inspect::Args),
+    /// Convert a BART .aff / .nff scene to glTF 2.0 (.glb or .gltf), keyframes included.
+    Convert(convert::Args),
+    /// Generate test scenes.
+    Generate(generate::Args),
 }
 
 /// Runs one command. Errors carry their context (file, section, accessor); `main`
@@ -34,6 +40,8 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Bake(a) => bake::run(a),
         Command::Inspect(a) => inspect::run(a),
+        Command::Convert(a) => convert::run(a),
+        Command::Generate(a) => generate::run(a),
     }
 }
 
