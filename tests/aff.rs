@@ -375,10 +375,8 @@ fn cones_are_round_open_tubes_facing_out() {
                 "cone triangle faces inwards"
             );
         }
-        let rim = |a: u32, b: u32| {
-            let same_rim = (a % 2) == (b % 2);
-            same_rim
-        };
+        // Base vertices are even, apex vertices odd: a rim edge joins two of a kind.
+        let rim = |a: u32, b: u32| a % 2 == b % 2;
         for (&(a, b), &n) in &edges {
             assert_eq!(n, if rim(a, b) { 1 } else { 2 }, "edge {a}-{b}");
         }
