@@ -3,6 +3,7 @@
 //! The data flows one way (see README): `scene` → `psf` (bake, dynamic, traverse) →
 //! `format` (write, open) → `render`. A module does not reach back up.
 
+pub mod aff;
 pub mod format;
 pub mod geometry;
 pub mod museum;

@@ -283,6 +283,7 @@ fn sample_builder() -> GltfBuilder {
             indices: Some(vec![0, 1, 2, 2, 1, 3]),
             material: Some(mat),
             morph_targets: vec![vec![Vec3::Z; 4]],
+            ..Default::default()
         }],
         weights: vec![0.0],
     });

@@ -26,6 +26,7 @@ fn builder() -> GltfBuilder {
         transmission: 1.0,
         ior: 1.45,
         double_sided: true,
+        ..Default::default()
     });
     let lamp = b.add_material(MaterialDesc {
         name: Some("lamp".into()),
@@ -42,6 +43,7 @@ fn builder() -> GltfBuilder {
                 indices: Some(vec![0, 1, 2, 2, 1, 3]),
                 material: Some(glass),
                 morph_targets: vec![vec![Vec3::Z; 4], vec![Vec3::X * 0.5; 4]],
+                ..Default::default()
             },
             PrimitiveDesc {
                 positions: vec![Vec3::ZERO, Vec3::Z, Vec3::Y],

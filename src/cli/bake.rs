@@ -14,7 +14,7 @@ use super::progress::Progress;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The scene: .gltf or .glb.
+    /// The scene: .gltf, .glb, or a BART .aff / .nff file.
     pub scene: PathBuf,
     /// The baked file to write (atomically).
     #[arg(short, long)]

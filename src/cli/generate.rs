@@ -1,10 +1,12 @@
 //! `subfield generate museum -o FILE.glb [--static-tris N] [--dynamic-tris M] [--frames F]
-//! [--fps R] [--seed S]`: built-in scenes written to files (one subcommand per scene).
+//! [--fps R] [--seed S]` and `subfield generate animart --triangles N -o FILE.aff`: built-in
+//! scenes written to files (one subcommand per scene).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
+use subfield::aff::{generate_animart, AnimartParams};
 use subfield::museum::{write_museum, MuseumParams, MUSEUM_KEYS};
 
 #[derive(clap::Args, Debug)]
@@ -19,6 +21,9 @@ pub enum Generator {
     /// The demo scene as glTF: a museum room (static) and triangles flying between
     /// formations (morph targets).
     Museum(MuseumArgs),
+    /// BART-style animart: N triangles in unstructured motion, as an AFF file of `tpa`
+    /// entries sized to pair with the BART museum's static part.
+    Animart(AnimartArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -49,6 +54,7 @@ pub struct MuseumArgs {
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     match a.scene {
         Generator::Museum(m) => museum(m),
+        Generator::Animart(a) => animart(a),
     }
 }
 
@@ -78,4 +84,76 @@ fn museum(a: MuseumArgs) -> anyhow::Result<ExitCode> {
         ))?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+#[derive(clap::Args, Debug)]
+pub struct AnimartArgs {
+    /// Number of animated triangles.
+    #[arg(long, default_value_t = AnimartParams::default().triangles)]
+    pub triangles: usize,
+    /// The AFF file to write (atomically).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Seed of the random motion (same seed, same file).
+    #[arg(long, default_value_t = AnimartParams::default().seed)]
+    pub seed: u64,
+    /// Frames of the file's `a -1 5 F` line.
+    #[arg(long, default_value_t = AnimartParams::default().frames)]
+    pub frames: u32,
+    /// No report.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+fn animart(a: AnimartArgs) -> anyhow::Result<ExitCode> {
+    if a.triangles == 0 {
+        anyhow::bail!("--triangles must be at least 1");
+    }
+    if a.frames < 2 {
+        anyhow::bail!("--frames must be at least 2");
+    }
+    let text = generate_animart(&AnimartParams {
+        triangles: a.triangles,
+        seed: a.seed,
+        frames: a.frames,
+    });
+    write_atomically(&a.output, text.as_bytes())
+        .with_context(|| format!("cannot write {}", a.output.display()))?;
+    if !a.quiet {
+        eprintln!(
+            "wrote {}: {} animated triangles (seed {}, {} frames)",
+            a.output.display(),
+            a.triangles,
+            a.seed,
+            a.frames
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Temporary file in the same folder, fsync, rename.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let name = path
+        .file_name()
+        .ok_or_else(|| std::io::Error::other("no file name"))?;
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(name);
+    tmp_name.push(format!(".tmp-{}", std::process::id()));
+    let tmp = folder.join(tmp_name);
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
 }

@@ -2,6 +2,7 @@
 //! flags are fixed by `../shared/DESIGN.md` §4.
 
 mod bake;
+mod convert;
 mod generate;
 mod inspect;
 mod progress;
@@ -27,7 +28,9 @@ pub enum Command {
     Bake(bake::Args),
     /// Show a .psf file's header, sections, directions and tile occupancy.
     Inspect(inspect::Args),
-    /// Write a built-in scene to a file.
+    /// Convert a BART .aff / .nff scene to glTF 2.0 (.glb or .gltf), keyframes included.
+    Convert(convert::Args),
+    /// Write a built-in scene to a file (museum as glTF, animart as AFF).
     Generate(generate::Args),
 }
 
@@ -37,6 +40,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Bake(a) => bake::run(a),
         Command::Inspect(a) => inspect::run(a),
+        Command::Convert(a) => convert::run(a),
         Command::Generate(a) => generate::run(a),
     }
 }

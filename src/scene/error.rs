@@ -133,6 +133,11 @@ pub enum SceneError {
     #[error("glTF writer: {reason}")]
     Write { reason: String },
 
+    /// A BART AFF / NFF file could not be parsed or converted (boxed: the AFF error can
+    /// itself carry a scene error from the glTF writer).
+    #[error(transparent)]
+    Aff(Box<crate::aff::AffError>),
+
     /// The glTF writer could not write its output.
     #[error("{path}: cannot write: {source}")]
     WriteIo {
@@ -154,5 +159,11 @@ fn available_list(available: &[String]) -> String {
         "none (the scene has no animations)".to_string()
     } else {
         available.join(", ")
+    }
+}
+
+impl From<crate::aff::AffError> for SceneError {
+    fn from(e: crate::aff::AffError) -> Self {
+        SceneError::Aff(Box::new(e))
     }
 }

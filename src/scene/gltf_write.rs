@@ -15,11 +15,13 @@ use serde_json::{json, Map, Value};
 
 use super::{Interpolation, LightDef, LightKind, Property, SceneError};
 
-/// A metallic-roughness material (factors only; the writer does not embed textures).
+/// A metallic-roughness material: factors, and optionally a base colour texture.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MaterialDesc {
     pub name: Option<String>,
     pub base_color: Vec4,
+    /// Index into [`GltfBuilder::textures`], read with `TEXCOORD_0`.
+    pub base_color_texture: Option<u32>,
     pub metallic: f32,
     pub roughness: f32,
     /// Linear emitted colour; components above 1 are carried by
@@ -28,6 +30,8 @@ pub struct MaterialDesc {
     pub transmission: f32,
     pub ior: f32,
     pub double_sided: bool,
+    /// Written as the material's `extras` (an object) when present.
+    pub extras: Option<Value>,
 }
 
 impl Default for MaterialDesc {
@@ -35,14 +39,32 @@ impl Default for MaterialDesc {
         MaterialDesc {
             name: None,
             base_color: Vec4::ONE,
+            base_color_texture: None,
             metallic: 0.0,
             roughness: 1.0,
             emissive: Vec3::ZERO,
             transmission: 0.0,
             ior: 1.5,
             double_sided: false,
+            extras: None,
         }
     }
+}
+
+/// An encoded image embedded in the buffer (PNG or JPEG bytes, as glTF allows).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImageDesc {
+    pub name: Option<String>,
+    /// `"image/png"` or `"image/jpeg"`.
+    pub mime_type: String,
+    pub bytes: Vec<u8>,
+}
+
+/// A texture: an image sampled with the default sampler (linear, repeat).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextureDesc {
+    /// Index into [`GltfBuilder::images`].
+    pub image: u32,
 }
 
 /// Triangles (mode TRIANGLES) with optional attributes.
@@ -56,6 +78,8 @@ pub struct PrimitiveDesc {
     pub material: Option<u32>,
     /// Morph targets as POSITION displacements, one per vertex each.
     pub morph_targets: Vec<Vec<Vec3>>,
+    /// NORMAL displacements of the morph targets: empty, or one list per target.
+    pub morph_normals: Vec<Vec<Vec3>>,
 }
 
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -132,8 +156,12 @@ pub struct GltfBuilder {
     pub nodes: Vec<NodeDesc>,
     pub roots: Vec<u32>,
     pub animations: Vec<AnimationDesc>,
+    pub images: Vec<ImageDesc>,
+    pub textures: Vec<TextureDesc>,
     /// Written as `scenes[0].extras.fps`.
     pub fps: Option<f32>,
+    /// Further members of `scenes[0].extras` (`fps` is set from [`GltfBuilder::fps`]).
+    pub scene_extras: Map<String, Value>,
 }
 
 fn push<T>(v: &mut Vec<T>, x: T) -> u32 {
@@ -166,6 +194,12 @@ impl GltfBuilder {
     }
     pub fn add_animation(&mut self, a: AnimationDesc) -> u32 {
         push(&mut self.animations, a)
+    }
+    pub fn add_image(&mut self, i: ImageDesc) -> u32 {
+        push(&mut self.images, i)
+    }
+    pub fn add_texture(&mut self, t: TextureDesc) -> u32 {
+        push(&mut self.textures, t)
     }
 
     /// Writes `path` atomically: JSON with an embedded data-URI buffer when the
@@ -249,6 +283,7 @@ impl GltfBuilder {
                 if p.normals.as_ref().is_some_and(|n| n.len() != nv)
                     || p.uvs.as_ref().is_some_and(|n| n.len() != nv)
                     || p.morph_targets.iter().any(|t| t.len() != nv)
+                    || p.morph_normals.iter().any(|t| t.len() != nv)
                 {
                     return bad(format!("{at}: attribute count differs from positions"));
                 }
@@ -264,6 +299,9 @@ impl GltfBuilder {
                 if !in_range(p.material, self.materials.len()) {
                     return bad(format!("{at}: material missing"));
                 }
+                if !p.morph_normals.is_empty() && p.morph_normals.len() != p.morph_targets.len() {
+                    return bad(format!("{at}: morph normals for some targets only"));
+                }
                 if p.morph_targets.len() != m.primitives[0].morph_targets.len() {
                     return bad(format!(
                         "mesh {mi}: primitives differ in morph target count"
@@ -276,6 +314,24 @@ impl GltfBuilder {
                     "mesh {mi}: {} weights for {targets} targets",
                     m.weights.len()
                 ));
+            }
+        }
+        for (mi, m) in self.materials.iter().enumerate() {
+            if !in_range(m.base_color_texture, self.textures.len()) {
+                return bad(format!("material {mi}: texture missing"));
+            }
+            if m.extras.as_ref().is_some_and(|e| !e.is_object()) {
+                return bad(format!("material {mi}: extras must be an object"));
+            }
+        }
+        for (ti, t) in self.textures.iter().enumerate() {
+            if t.image as usize >= self.images.len() {
+                return bad(format!("texture {ti}: image {} missing", t.image));
+            }
+        }
+        for (ii, i) in self.images.iter().enumerate() {
+            if i.bytes.is_empty() || !matches!(i.mime_type.as_str(), "image/png" | "image/jpeg") {
+                return bad(format!("image {ii}: empty, or not image/png or image/jpeg"));
             }
         }
         let mut parent = vec![None; self.nodes.len()];
@@ -367,14 +423,18 @@ impl GltfBuilder {
                 if let Some(n) = &m.name {
                     o.insert("name".into(), json!(n));
                 }
-                o.insert(
-                    "pbrMetallicRoughness".into(),
-                    json!({
-                        "baseColorFactor": m.base_color.to_array(),
-                        "metallicFactor": m.metallic,
-                        "roughnessFactor": m.roughness,
-                    }),
-                );
+                let mut pbr = json!({
+                    "baseColorFactor": m.base_color.to_array(),
+                    "metallicFactor": m.metallic,
+                    "roughnessFactor": m.roughness,
+                });
+                if let Some(t) = m.base_color_texture {
+                    pbr["baseColorTexture"] = json!({ "index": t });
+                }
+                o.insert("pbrMetallicRoughness".into(), pbr);
+                if let Some(e) = &m.extras {
+                    o.insert("extras".into(), e.clone());
+                }
                 let peak = m.emissive.max_element();
                 let mut ext = Map::new();
                 if peak > 0.0 {
@@ -438,7 +498,14 @@ impl GltfBuilder {
                     let t: Vec<Value> = p
                         .morph_targets
                         .iter()
-                        .map(|d| json!({ "POSITION": w.vec3s(d, true) }))
+                        .enumerate()
+                        .map(|(k, d)| {
+                            let mut t = json!({ "POSITION": w.vec3s(d, true) });
+                            if let Some(n) = p.morph_normals.get(k) {
+                                t["NORMAL"] = json!(w.vec3s(n, false));
+                            }
+                            t
+                        })
                         .collect();
                     o.insert("targets".into(), json!(t));
                 }
@@ -592,10 +659,33 @@ impl GltfBuilder {
             animations.push(Value::Object(o));
         }
 
+        let images: Vec<Value> = self
+            .images
+            .iter()
+            .map(|i| {
+                let mut o = Map::new();
+                o.insert("bufferView".into(), json!(w.view(&i.bytes)));
+                o.insert("mimeType".into(), json!(i.mime_type));
+                if let Some(n) = &i.name {
+                    o.insert("name".into(), json!(n));
+                }
+                Value::Object(o)
+            })
+            .collect();
+        let textures: Vec<Value> = self
+            .textures
+            .iter()
+            .map(|t| json!({ "source": t.image }))
+            .collect();
+
         let mut scene = Map::new();
         scene.insert("nodes".into(), json!(self.roots));
+        let mut extras = self.scene_extras.clone();
         if let Some(fps) = self.fps {
-            scene.insert("extras".into(), json!({ "fps": fps }));
+            extras.insert("fps".into(), json!(fps));
+        }
+        if !extras.is_empty() {
+            scene.insert("extras".into(), Value::Object(extras));
         }
 
         let mut root = Map::new();
@@ -615,6 +705,8 @@ impl GltfBuilder {
         put("materials", materials);
         put("cameras", cameras);
         put("animations", animations);
+        put("images", images);
+        put("textures", textures);
         put("accessors", std::mem::take(&mut w.accessors));
         put("bufferViews", std::mem::take(&mut w.views));
         if !lights.is_empty() {

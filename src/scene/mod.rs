@@ -24,8 +24,8 @@ pub use animation::{ClipSelection, Pose};
 pub use error::SceneError;
 pub use geometry::TriangleSoup;
 pub use gltf_write::{
-    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, MaterialDesc, MeshDesc, NodeDesc,
-    PrimitiveDesc,
+    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, ImageDesc, MaterialDesc, MeshDesc,
+    NodeDesc, PrimitiveDesc, TextureDesc,
 };
 pub use split::{Instance, Split, SplitSummary};
 
@@ -456,7 +456,18 @@ impl Scene {
     /// materials (with emissive strength, transmission, ior), textures decoded to RGBA8,
     /// cameras, `KHR_lights_punctual` lights, animation clips and `extras.fps`.
     /// Every problem is a [`SceneError`] naming the file and the accessor, node or URI.
+    ///
+    /// A BART `.aff` or `.nff` file (by extension, any case) is parsed and converted to
+    /// glTF in memory first ([`crate::aff::load_scene`]), so it imports exactly as the file
+    /// `subfield convert` writes would.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let is_aff = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("aff") || e.eq_ignore_ascii_case("nff"));
+        if is_aff {
+            return crate::aff::load_scene(path);
+        }
         gltf_import::load(path)
     }
 

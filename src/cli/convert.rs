@@ -1,0 +1,72 @@
+//! `subfield convert INPUT.aff -o OUTPUT.glb|.gltf`: a BART AFF / NFF scene to glTF 2.0,
+//! keyframes included (see `subfield::aff` for the mapping), written atomically.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use subfield::aff::AffScene;
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The scene: a BART .aff or .nff file (includes and textures beside it).
+    pub input: PathBuf,
+    /// The glTF file to write: .glb (binary) or .gltf (JSON with an embedded buffer).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// No report.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    let ext = a
+        .input
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if !matches!(ext.as_deref(), Some("aff") | Some("nff")) {
+        anyhow::bail!(
+            "{}: convert reads BART .aff / .nff files (glTF is already glTF)",
+            a.input.display()
+        );
+    }
+    let out_ext = a
+        .output
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if !matches!(out_ext.as_deref(), Some("glb") | Some("gltf")) {
+        anyhow::bail!(
+            "{}: the output must end in .glb or .gltf",
+            a.output.display()
+        );
+    }
+    let scene = AffScene::load(&a.input)?;
+    if !a.quiet {
+        for w in &scene.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
+    let gltf = scene
+        .to_gltf()
+        .with_context(|| format!("cannot convert {}", a.input.display()))?;
+    gltf.write(&a.output)?;
+    if !a.quiet {
+        let frames = scene.frame_times().len();
+        let fps = gltf
+            .fps
+            .map_or("no animation".to_string(), |f| format!("{f} fps"));
+        eprintln!(
+            "wrote {}: {} triangles ({} animated), {} materials, {} textures, {} lights, {} frames ({fps})",
+            a.output.display(),
+            scene.triangle_count(),
+            scene.animated_triangle_count(),
+            gltf.materials.len(),
+            gltf.textures.len(),
+            scene.lights.len(),
+            frames,
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,288 @@
+//! The BART scenes (museum5, kitchen, robots) through `subfield convert`: the written
+//! `.glb` passes the Khronos glTF validator with zero errors, and loaded back with
+//! `Scene::load` gives the same triangles and camera, at several frames, as the AFF file
+//! loaded directly and as the AFF model evaluated on its own (splines, `tpa` keys).
+//! Also `subfield generate animart` end to end.
+//!
+//! Scenes are read from `../shared/scenes/bart` (skipped with a message when absent). The
+//! validator is `.ci/node_modules/gltf-validator` (installed by `.ci/run`); when it is
+//! missing these tests FAIL with the command to install it: a conversion that is never
+//! validated must not pass silently.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use glam::Vec3;
+use subfield::aff::AffScene;
+use subfield::scene::{ClipSelection, Scene, TriangleSoup};
+
+fn bart() -> Option<PathBuf> {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/bart");
+    if d.is_dir() {
+        Some(d)
+    } else {
+        eprintln!("skipped: ../shared/scenes/bart absent");
+        None
+    }
+}
+
+fn out_dir(name: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("aff-bart-{name}"));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn subfield(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_subfield"))
+        .args(args)
+        .output()
+        .expect("run subfield")
+}
+
+/// Validates `file`; returns (errors, warnings, the report line).
+fn validate(file: &Path) -> (u64, u64, String) {
+    let ci = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci");
+    assert!(
+        ci.join("node_modules/gltf-validator").is_dir(),
+        "the Khronos glTF validator is not installed: run `npm install --prefix .ci` \
+         (or .ci/run, which does it)"
+    );
+    let out = Command::new("node")
+        .arg(ci.join("gltf-validate.js"))
+        .arg(file)
+        .output()
+        .expect("node must be installed to run the glTF validator");
+    let line = String::from_utf8_lossy(&out.stdout).trim().to_string();
+    let v: serde_json::Value = serde_json::from_str(&line).unwrap_or_else(|e| {
+        panic!(
+            "validator output {line:?} ({e}); stderr {}",
+            String::from_utf8_lossy(&out.stderr)
+        )
+    });
+    (
+        v["errors"].as_u64().unwrap(),
+        v["warnings"].as_u64().unwrap(),
+        line,
+    )
+}
+
+fn soup(scene: &Scene, t: f32) -> Vec<[Vec3; 3]> {
+    let mut s = TriangleSoup::new();
+    scene.triangles_into(&scene.instances(), ClipSelection::All, t, &mut s);
+    s.positions
+}
+
+/// Converts `rel` (under the BART folder), validates it, and compares the .glb with the
+/// AFF at several frames. Returns the triangle count.
+fn check_scene(rel: &str, expect_triangles: usize, expect_animated: usize) -> Option<()> {
+    let src = bart()?.join(rel);
+    let dir = out_dir(rel.replace('/', "-").as_str());
+    let glb = dir.join("scene.glb");
+    let out = subfield(&[
+        "convert",
+        src.to_str().unwrap(),
+        "-o",
+        glb.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "convert failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    eprintln!("{}", String::from_utf8_lossy(&out.stderr).trim());
+
+    let (errors, warnings, report) = validate(&glb);
+    eprintln!("validator: {report}");
+    assert_eq!(errors, 0, "glTF validator errors: {report}");
+    assert_eq!(warnings, 0, "glTF validator warnings: {report}");
+
+    let aff = AffScene::load(&src).unwrap();
+    assert_eq!(aff.triangle_count(), expect_triangles);
+    assert_eq!(aff.animated_triangle_count(), expect_animated);
+    let from_glb = Scene::load(&glb).unwrap();
+    let from_aff = Scene::load(&src).unwrap();
+    let times = aff.frame_times();
+    let n = times.len();
+    let fps = from_glb.fps.unwrap();
+    assert_eq!(from_aff.fps, from_glb.fps);
+    assert!((f64::from(fps) - aff.time.unwrap().fps().unwrap()).abs() < 1e-4);
+
+    // Tolerance: 1e-5 of the scene's extent.
+    let (lo, hi) = soup(&from_glb, 0.0)
+        .iter()
+        .flatten()
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(*p), hi.max(*p))
+        });
+    let tol = 1e-5 * (hi - lo).length().max(1.0);
+    for i in [0, n / 7, n / 3, n / 2, 2 * n / 3, n - 1] {
+        let t = i as f32 / fps;
+        let g = soup(&from_glb, t);
+        let a = soup(&from_aff, t);
+        let direct = aff.triangles_at(times[i]);
+        assert_eq!(g.len(), expect_triangles, "frame {i}");
+        assert_eq!(g, a, "frame {i}: the .glb and the .aff import differ");
+        let mut worst = 0.0f32;
+        for (x, y) in g.iter().flatten().zip(direct.iter().flatten()) {
+            worst = worst.max((*x - *y).abs().max_element());
+        }
+        assert!(
+            worst <= tol,
+            "{rel} frame {i}: glTF vs AFF evaluation differ by {worst} (tolerance {tol})"
+        );
+
+        let cam = from_glb.camera_at(ClipSelection::All, t, None).unwrap();
+        let want = aff.camera_at(times[i]).unwrap();
+        let dp = (cam.position - want.position.as_vec3()).length();
+        assert!(dp <= tol, "{rel} frame {i}: camera moved by {dp}");
+        let fwd = cam.rotation * Vec3::NEG_Z;
+        let want_fwd = want.rotation.as_quat() * Vec3::NEG_Z;
+        assert!(
+            fwd.dot(want_fwd) > 1.0 - 1e-5,
+            "{rel} frame {i}: camera turned"
+        );
+        assert!((cam.yfov().unwrap() - want.yfov).abs() < 1e-6);
+    }
+    Some(())
+}
+
+#[test]
+fn museum5_converts_validates_and_matches() {
+    // 10,143 polygons fanned plus 8 cones, and 1,024 animated triangles.
+    check_scene("museum/museum5.aff", 12_076, 1_024);
+}
+
+#[test]
+fn kitchen_converts_validates_and_matches() {
+    // The BART paper's count: 110,561 triangles.
+    check_scene("kitchen/kitchen.aff", 110_561, 0);
+}
+
+#[test]
+fn robots_converts_validates_and_matches() {
+    // The BART paper's count: 71,708 triangles.
+    check_scene("robots/Robot.aff", 71_708, 0);
+}
+
+#[test]
+fn museum_with_generated_animart_pairs_with_the_static_part() {
+    // A museum7-like file: museum5's static part and camera with 16,384 generated
+    // animated triangles (the public copy lacks animart7.aff).
+    let Some(b) = bart() else { return };
+    let dir = out_dir("museum-animart");
+    let art = dir.join("animart.aff");
+    let out = subfield(&[
+        "generate",
+        "animart",
+        "--triangles",
+        "16384",
+        "--seed",
+        "3",
+        "-o",
+        art.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let museum = b.join("museum");
+    let top = std::fs::read_to_string(museum.join("museum5.aff"))
+        .unwrap()
+        .replace("i 0 animart5.aff", &format!("i 0 {}", art.display()))
+        .replace("i 0 ", &format!("i 0 {}/", museum.display()))
+        .replace(&format!("{}//", museum.display()), "/");
+    // Texture names resolve against the top file's folder: copy the textures.
+    for e in std::fs::read_dir(&museum).unwrap().flatten() {
+        if e.path().extension().is_some_and(|x| x == "ppm") {
+            std::fs::copy(e.path(), dir.join(e.file_name())).unwrap();
+        }
+    }
+    let path = dir.join("museum7like.aff");
+    std::fs::write(&path, top).unwrap();
+    let aff = AffScene::load(&path).unwrap();
+    assert_eq!(aff.animated_triangle_count(), 16_384);
+    assert_eq!(aff.triangle_count(), 12_076 - 1_024 + 16_384);
+    let glb = dir.join("museum7like.glb");
+    let out = subfield(&[
+        "convert",
+        path.to_str().unwrap(),
+        "-o",
+        glb.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (errors, warnings, report) = validate(&glb);
+    assert_eq!((errors, warnings), (0, 0), "{report}");
+    let scene = Scene::load(&glb).unwrap();
+    let split = scene.split(ClipSelection::All).summary();
+    assert_eq!(split.dynamic_triangles, 16_384, "{split}");
+}
+
+#[test]
+fn cli_generate_is_deterministic_and_convert_refuses_bad_input() {
+    let dir = out_dir("cli");
+    let a = dir.join("a.aff");
+    let b = dir.join("b.aff");
+    for f in [&a, &b] {
+        let out = subfield(&[
+            "generate",
+            "animart",
+            "--triangles",
+            "64",
+            "--seed",
+            "9",
+            "-o",
+            f.to_str().unwrap(),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    assert_eq!(AffScene::load(&a).unwrap().animated_triangle_count(), 64);
+
+    // Converted as .gltf too, and valid.
+    let gltf = dir.join("a.gltf");
+    let out = subfield(&["convert", a.to_str().unwrap(), "-o", gltf.to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (errors, warnings, report) = validate(&gltf);
+    assert_eq!((errors, warnings), (0, 0), "{report}");
+
+    // A malformed file: one clear line naming file and line, non-zero exit, no output.
+    let bad = dir.join("bad.aff");
+    std::fs::write(&bad, "p 3\n0 0 0\n1 0 0\nwhat\n").unwrap();
+    let target = dir.join("bad.glb");
+    let out = subfield(&[
+        "convert",
+        bad.to_str().unwrap(),
+        "-o",
+        target.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad.aff:4:") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+    assert!(!target.exists());
+    let out = subfield(&[
+        "generate",
+        "animart",
+        "--triangles",
+        "0",
+        "-o",
+        target.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+}
