@@ -4,6 +4,7 @@
 mod bake;
 mod inspect;
 mod progress;
+mod render;
 
 use std::process::ExitCode;
 
@@ -26,6 +27,8 @@ pub enum Command {
     Bake(bake::Args),
     /// Show a .psf file's header, sections, directions and tile occupancy.
     Inspect(inspect::Args),
+    /// Render a scene's animation to an EXR sequence (Whitted shading).
+    Render(Box<render::Args>),
 }
 
 /// Runs one command. Errors carry their context (file, section, accessor); `main`
@@ -34,6 +37,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Bake(a) => bake::run(a),
         Command::Inspect(a) => inspect::run(a),
+        Command::Render(a) => render::run(*a),
     }
 }
 
