@@ -53,17 +53,16 @@ fn all_triangles(scene: &Scene, t: f32) -> Vec<[Vec3; 3]> {
     tris
 }
 
-/// The primary ray of pixel (x, y) straight from DESIGN.md §4.
+/// The primary ray of pixel (x, y) of a `size` image straight from DESIGN.md §4.
 fn contract_ray(
     rot: Mat3,
     origin: Vec3,
     tan_half: f32,
     aspect: f32,
-    w: usize,
-    h: usize,
-    x: usize,
-    y: usize,
+    size: (usize, usize),
+    (x, y): (usize, usize),
 ) -> Ray {
+    let (w, h) = size;
     let cx = (2.0 * (x as f32 + 0.5) / w as f32 - 1.0) * aspect * tan_half;
     let cy = (1.0 - 2.0 * (y as f32 + 0.5) / h as f32) * tan_half;
     Ray::new(origin, rot * Vec3::new(cx, cy, -1.0))
@@ -136,7 +135,7 @@ fn depth_matches_brute_force_at_every_pixel() {
         let aspect = w as f32 / h as f32;
         let tris = all_triangles(&scene, t);
         let hits = check_depth(channel(&chans, "Z"), w, h, &tris, |x, y| {
-            contract_ray(rot, cam.position, tan_half, aspect, w, h, x, y)
+            contract_ray(rot, cam.position, tan_half, aspect, (w, h), (x, y))
         });
         assert!(
             hits > w * h / 2 && hits < w * h,
@@ -174,10 +173,8 @@ fn depth_matches_brute_force_at_every_pixel() {
                 look.from,
                 (25f32).to_radians().tan(),
                 w as f32 / h as f32,
-                w,
-                h,
-                x,
-                y,
+                (w, h),
+                (x, y),
             )
         },
     );
@@ -205,10 +202,8 @@ fn depth_matches_brute_force_at_every_pixel() {
                 cam.position,
                 0.5f32.tan(),
                 1.0,
-                w,
-                h,
-                x,
-                y,
+                (w, h),
+                (x, y),
             )
         },
     );

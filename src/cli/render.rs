@@ -142,51 +142,47 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     super::set_threads(a.threads)?;
     let scene = Scene::load(&a.scene)?;
     let mut bar: Option<Progress> = None;
-    let say = |bar: &Option<Progress>, s: &str| match bar {
-        Some(b) => b.println(s),
-        None if !a.quiet => eprintln!("{s}"),
-        None => {}
-    };
-    for w in &scene.warnings {
-        say(&bar, &format!("warning: {w}"));
-    }
+    // Messages wait until every check has passed, so that an error is the only line.
+    let mut pending: Vec<String> = scene
+        .warnings
+        .iter()
+        .map(|w| format!("warning: {w}"))
+        .collect();
     let mut done = 0u64;
     let summary = render::render_sequence(&scene, &opts, &mut |e| match e {
         RenderEvent::Planned(p) => {
-            say(
-                &bar,
-                &format!(
-                    "{}: {}; frames {}..{} at {} fps, {} to render, {}x{} at {} spp",
-                    a.scene.display(),
-                    p.split,
-                    p.range.start,
-                    p.range.end,
-                    p.fps,
-                    p.frames.len(),
-                    opts.width,
-                    opts.height,
-                    opts.spp
-                ),
-            );
+            pending.push(format!(
+                "{}: {}; frames {}..{} at {} fps, {} to render, {}x{} at {} spp",
+                a.scene.display(),
+                p.split,
+                p.range.start,
+                p.range.end,
+                p.fps,
+                p.frames.len(),
+                opts.width,
+                opts.height,
+                opts.spp
+            ));
         }
         RenderEvent::StaticReady {
             triangles,
             baked_file,
             seconds,
         } => {
-            say(
-                &bar,
-                &format!(
-                    "static part: {triangles} triangles, {} in {:.2} s",
-                    if baked_file {
-                        "opened from the baked file"
-                    } else {
-                        "baked in memory"
-                    },
-                    seconds
-                ),
-            );
-            bar = None;
+            pending.push(format!(
+                "static part: {triangles} triangles, {} in {:.2} s",
+                if baked_file {
+                    "opened from the baked file"
+                } else {
+                    "baked in memory"
+                },
+                seconds
+            ));
+            if !a.quiet {
+                for line in pending.drain(..) {
+                    eprintln!("{line}");
+                }
+            }
         }
         RenderEvent::Frame(f) => {
             let b = bar.get_or_insert_with(|| Progress::new("frames", f.total as u64, a.quiet));
@@ -207,13 +203,10 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         }
     })
     .with_context(|| format!("cannot render {}", a.scene.display()))?;
-    if let Some(b) = &bar {
-        b.finish();
-    }
     if !a.quiet {
         let n = summary.rendered.max(1) as f64;
         let per = |f: fn(&render::FrameStats) -> f64| summary.frames.iter().map(f).sum::<f64>() / n;
-        eprintln!(
+        let line = format!(
             "rendered {} frames ({} skipped as complete) to {} in {:.2} s; per frame: update {:.1} ms, trace {:.1} ms, shade {:.1} ms, write {:.1} ms",
             summary.rendered,
             summary.skipped,
@@ -224,6 +217,13 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             per(|s| s.shade_ms),
             per(|s| s.write_ms),
         );
+        match &bar {
+            Some(b) => {
+                b.finish();
+                b.println(&line);
+            }
+            None => eprintln!("{line}"),
+        }
     }
     Ok(ExitCode::SUCCESS)
 }
