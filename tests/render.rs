@@ -155,6 +155,8 @@ fn depth_matches_brute_force_at_every_pixel() {
         frames: Some(FrameRange { start: 7, end: 8 }),
         look_at: Some(look),
         shard: None,
+        // One sample: the AOVs come from the shaded primary rays themselves.
+        spp: 1,
         ..opts.clone()
     };
     render::render_sequence(&scene, &opts2, &mut quiet).unwrap();
