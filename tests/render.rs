@@ -494,18 +494,23 @@ fn shading_follows_the_model() {
         o.max_depth = 0
     });
     assert!(rgb(&c, 4).x < 1e-3, "no reflection at depth 0");
-    // Nearly straight down (6°, off the sun's glint) through the glass slab onto the
-    // floor in its shadow: the floor's ambient radiance times the transmittance of two
-    // interfaces near normal incidence ((1 - 0.04)^2), plus light bounced inside the
-    // slab (under 0.2 %); nothing at depth 0 (clear glass has no diffuse part).
+    // At 45° (off the sun's glint) through the glass slab onto the floor in its
+    // shadow: the floor's ambient radiance times the Fresnel transmittance of the two
+    // interfaces (the same angles in and out), plus light bounced inside the slab
+    // (about 0.3 %); nothing at depth 0 (clear glass has no diffuse part).
     let tilted = render::LookAt {
-        from: Vec3::new(8.3, 3.0, 0.0),
+        from: Vec3::new(11.0, 3.0, 0.0),
         at: Vec3::new(8.0, 0.0, 0.0),
         up: Vec3::Z,
-        yfov_deg: 10.0,
+        yfov_deg: 2.0,
     };
+    let (ci, n) = (std::f32::consts::FRAC_1_SQRT_2, 1.5f32);
+    let ct = (1.0 - (ci / n).powi(2)).sqrt();
+    let rs = ((ci - n * ct) / (ci + n * ct)).powi(2);
+    let rp = ((n * ci - ct) / (n * ci + ct)).powi(2);
+    let t = 1.0 - 0.5 * (rs + rp);
+    let want = t * t * 0.5 * ambient;
     let (_, c) = render_pixels(&scene, &dir, "glass", tilted, (3, 3), |_| {});
-    let want = 0.96f32 * 0.96 * 0.5 * ambient;
     let got = rgb(&c, 4);
     assert!(
         got.abs_diff_eq(Vec3::splat(want), want * 0.01),

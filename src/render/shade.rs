@@ -17,7 +17,7 @@
 //! mirror ray); diffuse colour `base·((1 − metallic)(1 − transmission)(1 − F·g) +
 //! metallic·(1 − g))` (a rough metal's glossy lobe stands in as diffuse, since Whitted
 //! has no glossy rays), lit by every light through a shadow ray as `kd/π·E·cos`, plus a
-//! normalised Blinn–Phong highlight for the lights, an ambient term `kd·ambient` and the
+//! normalised Blinn–Phong highlight for the lights (exponent `2/r⁴ − 2`, at most 256), an ambient term `kd·ambient` and the
 //! emission `emissive·strength·texture`. Irradiance: directional `E = intensity`
 //! (lux), point and spot `E = intensity/d²` (candela) with the spec's range window and
 //! spot cone falloff.
@@ -99,6 +99,8 @@ pub struct ShadeContext<'a> {
 const MAX_PASSES: u16 = 16;
 /// Contributions below this (max component of the weight) are dropped.
 const MIN_WEIGHT: f32 = 1e-4;
+/// Largest Blinn–Phong exponent (roughness below about 0.3 gets this).
+const MAX_SHININESS: f32 = 256.0;
 /// Rays shaded by one task.
 const BLOCK: usize = 1024;
 /// Samples traced together (bounds the wavefront's memory).
@@ -366,7 +368,10 @@ impl<'a> ShadeContext<'a> {
         // Direct light through shadow rays.
         let origin = s.point + s.ng * eps;
         let shininess = if roughness < 0.9 {
-            (2.0 / roughness.powi(4).max(1e-4) - 2.0).min(1e4)
+            // Capped: a point light is a delta, and the glint of one on a polished
+            // surface would otherwise be a tiny spot of enormous radiance (one that
+            // mirrors then multiply around the scene).
+            (2.0 / roughness.powi(4).max(1e-4) - 2.0).min(MAX_SHININESS)
         } else {
             0.0
         };
