@@ -118,10 +118,24 @@ fn depth_matches_brute_force_at_every_pixel() {
             albedo: false,
         },
         spp: 2,
+        preview: Some(render::PreviewOptions {
+            frame: Some(12),
+            path: dir.join("prev/preview.png"),
+        }),
         ..Default::default()
     };
     let summary = render::render_sequence(&scene, &opts, &mut quiet).unwrap();
     assert_eq!(summary.rendered, 3);
+    // The preview is frame 12, tone-mapped: the same image as the EXR, in sRGB bytes.
+    assert_eq!(summary.preview, Some(dir.join("prev/preview.png")));
+    let png = image::open(dir.join("prev/preview.png")).unwrap().to_rgb8();
+    assert_eq!(png.dimensions(), (w as u32, h as u32));
+    let (_, _, c12) = read_exr(&dir.join("out/f.012.exr"));
+    for (i, px) in png.pixels().enumerate() {
+        // The EXR holds half floats; the PNG was made from the float frame.
+        let r = render::linear_to_srgb8(channel(&c12, "R")[i]);
+        assert!(px.0[0].abs_diff(r) <= 1, "pixel {i}: {} vs {r}", px.0[0]);
+    }
     assert!(
         summary.plan.split.dynamic_triangles == 12 && summary.plan.split.static_triangles == 18
     );
