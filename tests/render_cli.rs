@@ -110,7 +110,7 @@ fn resume_completes_an_interrupted_run_and_redoes_broken_frames() {
     assert_eq!(want.len(), 6);
 
     // "Killed" after three frames: only 0..3 exist; frame 1 is truncated, frame 2 is
-    // garbage, and a stray temporary from the kill lies around.
+    // garbage.
     let part = dir.join("part/f.####.exr");
     ok(&[
         "render",
