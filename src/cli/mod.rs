@@ -6,6 +6,7 @@ mod convert;
 mod generate;
 mod inspect;
 mod progress;
+mod render;
 
 use std::process::ExitCode;
 
@@ -28,6 +29,8 @@ pub enum Command {
     Bake(bake::Args),
     /// Show a .psf file's header, sections, directions and tile occupancy.
     Inspect(inspect::Args),
+    /// Render a scene's animation to an EXR sequence (Whitted shading).
+    Render(Box<render::Args>),
     /// Convert a BART .aff / .nff scene to glTF 2.0 (.glb or .gltf), keyframes included.
     Convert(convert::Args),
     /// Write a built-in scene to a file (museum as glTF, animart as AFF).
@@ -42,6 +45,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Inspect(a) => inspect::run(a),
         Command::Convert(a) => convert::run(a),
         Command::Generate(a) => generate::run(a),
+        Command::Render(a) => render::run(*a),
     }
 }
 

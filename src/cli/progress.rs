@@ -73,7 +73,6 @@ impl Progress {
     }
 
     /// A message line that does not tear the bar.
-    #[allow(dead_code)] // used by render
     pub fn println(&self, msg: &str) {
         match &self.inner {
             Inner::Quiet => {}

@@ -1,0 +1,229 @@
+//! `subfield render SCENE [--baked FILE.psf] -o PATTERN [...]`: a thin shell over
+//! `subfield::render::render_sequence` (flags as DESIGN.md §4 fixes them).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{bail, Context};
+use subfield::render::{self, LookAt, PixelType, RenderEvent, RenderOptions};
+use subfield::scene::Scene;
+
+use super::progress::Progress;
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The scene: .gltf or .glb.
+    pub scene: PathBuf,
+    /// Output pattern; one run of '#' becomes the zero-padded frame number
+    /// (out/frame.####.exr). Parent folders are created.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// A baked file of the scene's static part (from `subfield bake`); without it the
+    /// static part is baked in memory.
+    #[arg(long)]
+    pub baked: Option<PathBuf>,
+    /// Frames A..B (inclusive A, exclusive B); default: the whole animation.
+    #[arg(long, value_name = "A..B")]
+    pub frames: Option<String>,
+    /// Frames per second; frame i shows time i/F (default: the scene's extras.fps, else 24).
+    #[arg(long)]
+    pub fps: Option<f32>,
+    /// Play one animation clip (name or index); default: all together.
+    #[arg(long, value_name = "NAME|INDEX")]
+    pub animation: Option<String>,
+    /// Image size.
+    #[arg(long, value_name = "WxH", default_value = "640x480")]
+    pub size: String,
+    /// Samples per pixel (stratified; 1 = the pixel centre).
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+    /// Reflection/refraction depth.
+    #[arg(long, default_value_t = 4)]
+    pub max_depth: u32,
+    /// A scene camera by name (default: the first; else one framing the scene).
+    #[arg(long)]
+    pub camera: Option<String>,
+    /// Camera position (world), overriding the scene's camera; needs --look-at.
+    #[arg(long, value_name = "X,Y,Z")]
+    pub look_from: Option<String>,
+    /// Point the camera looks at (world).
+    #[arg(long, value_name = "X,Y,Z")]
+    pub look_at: Option<String>,
+    /// Camera up vector (default 0,1,0).
+    #[arg(long, value_name = "X,Y,Z")]
+    pub up: Option<String>,
+    /// Vertical field of view in degrees for --look-from (default 45).
+    #[arg(long, value_name = "DEG")]
+    pub yfov: Option<f32>,
+    /// Extra EXR channels: depth (Z), normal (N.X/Y/Z), albedo (albedo.R/G/B).
+    #[arg(long, value_name = "depth,normal,albedo")]
+    pub aov: Option<String>,
+    /// RGBA as 16-bit half floats (the default).
+    #[arg(long, conflicts_with = "float")]
+    pub half: bool,
+    /// RGBA as 32-bit floats.
+    #[arg(long)]
+    pub float: bool,
+    /// Skip frames whose output file exists and reads back complete.
+    #[arg(long)]
+    pub resume: bool,
+    /// Render only the frames k with k % N == I.
+    #[arg(long, value_name = "I/N")]
+    pub shard: Option<String>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// No progress or report.
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// Per-frame times (update, trace, shade, write) and ray counts as CSV.
+    #[arg(long, value_name = "FILE.csv")]
+    pub stats: Option<PathBuf>,
+    /// Per-frame times as a stacked bar chart.
+    #[arg(long, value_name = "FILE.svg|png")]
+    pub plot: Option<PathBuf>,
+}
+
+/// The library's options from the flags (every value checked, one error line each).
+pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
+    let (width, height) = render::parse_size(&a.size)?;
+    let look_at = match (&a.look_from, &a.look_at) {
+        (Some(f), Some(t)) => Some(LookAt {
+            from: render::parse_vec3("--look-from", f)?,
+            at: render::parse_vec3("--look-at", t)?,
+            up: match &a.up {
+                Some(u) => render::parse_vec3("--up", u)?,
+                None => glam::Vec3::Y,
+            },
+            yfov_deg: a.yfov.unwrap_or(45.0),
+        }),
+        (None, None) => {
+            if a.up.is_some() || a.yfov.is_some() {
+                bail!("--up and --yfov describe a camera given with --look-from and --look-at");
+            }
+            None
+        }
+        _ => bail!("--look-from and --look-at go together"),
+    };
+    Ok(RenderOptions {
+        output: a.output.clone(),
+        baked: a.baked.clone(),
+        frames: a.frames.as_deref().map(render::parse_frames).transpose()?,
+        fps: a.fps,
+        animation: a.animation.clone(),
+        width,
+        height,
+        spp: a.spp,
+        max_depth: a.max_depth,
+        camera: a.camera.clone(),
+        look_at,
+        aovs: a
+            .aov
+            .as_deref()
+            .map(render::parse_aovs)
+            .transpose()?
+            .unwrap_or_default(),
+        pixel_type: if a.float {
+            PixelType::Float
+        } else {
+            PixelType::Half
+        },
+        resume: a.resume,
+        shard: a.shard.as_deref().map(render::parse_shard).transpose()?,
+        stats: a.stats.clone(),
+        plot: a.plot.clone(),
+        preview: None,
+        shading: Default::default(),
+    })
+}
+
+pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    let opts = options(&a)?;
+    super::set_threads(a.threads)?;
+    let scene = Scene::load(&a.scene)?;
+    let mut bar: Option<Progress> = None;
+    // Messages wait until every check has passed, so that an error is the only line.
+    let mut pending: Vec<String> = scene
+        .warnings
+        .iter()
+        .map(|w| format!("warning: {w}"))
+        .collect();
+    let mut done = 0u64;
+    let summary = render::render_sequence(&scene, &opts, &mut |e| match e {
+        RenderEvent::Planned(p) => {
+            pending.push(format!(
+                "{}: {}; frames {}..{} at {} fps, {} to render, {}x{} at {} spp",
+                a.scene.display(),
+                p.split,
+                p.range.start,
+                p.range.end,
+                p.fps,
+                p.frames.len(),
+                opts.width,
+                opts.height,
+                opts.spp
+            ));
+        }
+        RenderEvent::StaticReady {
+            triangles,
+            baked_file,
+            seconds,
+        } => {
+            pending.push(format!(
+                "static part: {triangles} triangles, {} in {:.2} s",
+                if baked_file {
+                    "opened from the baked file"
+                } else {
+                    "baked in memory"
+                },
+                seconds
+            ));
+            if !a.quiet {
+                for line in pending.drain(..) {
+                    eprintln!("{line}");
+                }
+            }
+        }
+        RenderEvent::Frame(f) => {
+            let b = bar.get_or_insert_with(|| Progress::new("frames", f.total as u64, a.quiet));
+            done += 1;
+            let extra = match &f.stats {
+                Some(s) => {
+                    let secs = (s.trace_ms + s.shade_ms) / 1e3;
+                    format!(
+                        "frame {} {:.0} ms, {:.2} Mrays/s",
+                        f.frame,
+                        s.update_ms + s.trace_ms + s.shade_ms,
+                        s.rays.total() as f64 / secs.max(1e-9) / 1e6
+                    )
+                }
+                None => format!("frame {} complete, skipped", f.frame),
+            };
+            b.set(done, &extra);
+        }
+    })
+    .with_context(|| format!("cannot render {}", a.scene.display()))?;
+    if !a.quiet {
+        let n = summary.rendered.max(1) as f64;
+        let per = |f: fn(&render::FrameStats) -> f64| summary.frames.iter().map(f).sum::<f64>() / n;
+        let line = format!(
+            "rendered {} frames ({} skipped as complete) to {} in {:.2} s; per frame: update {:.1} ms, trace {:.1} ms, shade {:.1} ms, write {:.1} ms",
+            summary.rendered,
+            summary.skipped,
+            a.output.display(),
+            summary.wall.as_secs_f64(),
+            per(|s| s.update_ms),
+            per(|s| s.trace_ms),
+            per(|s| s.shade_ms),
+            per(|s| s.write_ms),
+        );
+        match &bar {
+            Some(b) => {
+                b.finish();
+                b.println(&line);
+            }
+            None => eprintln!("{line}"),
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,837 @@
+//! Whitted shading, traced as a wavefront: every ray of a depth level is traced as one
+//! batch through the [`Intersector`] (closest hits), then shaded in parallel, which
+//! yields shadow rays (one per light that faces the point, any-hit batch) and the
+//! next level's rays (mirror reflection, refraction, and the continuation through
+//! alpha-cut or blended surfaces). Tracing and shading are timed apart.
+//!
+//! Determinism: rays sit in arrays in a fixed order; each block of rays is shaded by one
+//! task into its own lists, blocks are merged in order, and contributions are added to
+//! their sample one after the other in array order. Jitter comes from a hash of (frame,
+//! pixel, sample). Nothing depends on the thread count.
+//!
+//! Model (linear RGB; `KHR_lights_punctual` units): base colour = factor × texture
+//! (sRGB texels linearised before bilinear filtering); `F0 = mix(0.04, base, metallic)`;
+//! gloss `g = (1 − roughness)²`; mirror weight `F·g` (Schlick; exact dielectric Fresnel
+//! with the material's IOR for transmissive surfaces); refraction weight
+//! `(1 − F)·transmission·(1 − metallic)·base` (total internal reflection goes to the
+//! mirror ray); diffuse colour `base·((1 − metallic)(1 − transmission)(1 − F·g) +
+//! metallic·(1 − g))` (a rough metal's glossy lobe stands in as diffuse, since Whitted
+//! has no glossy rays), lit by every light through a shadow ray as `kd/π·E·cos`, plus a
+//! normalised Blinn–Phong highlight for the lights (exponent `2/r⁴ − 2`, at most 256), an ambient term `kd·ambient` and the
+//! emission `emissive·strength·texture`. Irradiance: directional `E = intensity`
+//! (lux), point and spot `E = intensity/d²` (candela) with the spec's range window and
+//! spot cone falloff.
+
+use std::time::{Duration, Instant};
+
+use glam::{Vec2, Vec3, Vec4};
+use rayon::prelude::*;
+
+use super::camera::CameraModel;
+use super::options::{Aovs, ShadingOptions};
+use crate::geometry::{Hit, Intersector, Ray};
+use crate::scene::{AlphaMode, Light, LightKind, Material, Scene, TextureRef, TriangleSoup, Wrap};
+
+/// Linear radiance and AOVs of one frame, rows top to bottom.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameBuffers {
+    pub width: u32,
+    pub height: u32,
+    /// Linear RGB and coverage (alpha).
+    pub rgba: Vec<[f32; 4]>,
+    pub depth: Option<Vec<f32>>,
+    pub normal: Option<Vec<[f32; 3]>>,
+    pub albedo: Option<Vec<[f32; 3]>>,
+}
+
+/// Rays traced for one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayCounts {
+    /// Camera rays (every sample, plus the pixel-centre AOV rays when `spp > 1`).
+    pub primary: u64,
+    /// Any-hit rays towards lights.
+    pub shadow: u64,
+    /// Reflection, refraction and pass-through rays.
+    pub secondary: u64,
+}
+
+impl RayCounts {
+    pub fn total(&self) -> u64 {
+        self.primary + self.shadow + self.secondary
+    }
+}
+
+/// Where one frame's time went.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameWork {
+    /// Wall time inside batch intersection calls.
+    pub trace: Duration,
+    /// Wall time making rays and shading (everything else of the frame's pixels).
+    pub shade: Duration,
+    pub rays: RayCounts,
+}
+
+/// A light ready for shading.
+#[derive(Clone, Copy, Debug)]
+struct PreLight {
+    kind: LightKind,
+    /// Colour × intensity.
+    power: Vec3,
+    position: Vec3,
+    /// Unit direction the light shines along.
+    direction: Vec3,
+    range: Option<f32>,
+}
+
+/// Everything shading reads during one frame.
+pub struct ShadeContext<'a> {
+    pub scene: &'a Scene,
+    pub static_soup: &'a TriangleSoup,
+    pub dynamic_soup: &'a TriangleSoup,
+    pub options: ShadingOptions,
+    /// Size of the scene (bounding box diagonal), for ray offsets.
+    pub extent: f32,
+    lights: Vec<PreLight>,
+    lut: [f32; 256],
+}
+
+/// Passes through alpha-cut surfaces a ray may make.
+const MAX_PASSES: u16 = 16;
+/// Contributions below this (max component of the weight) are dropped.
+const MIN_WEIGHT: f32 = 1e-4;
+/// Largest Blinn–Phong exponent (roughness below about 0.3 gets this).
+const MAX_SHININESS: f32 = 256.0;
+/// Rays shaded by one task.
+const BLOCK: usize = 1024;
+/// Samples traced together (bounds the wavefront's memory).
+const CHUNK_SAMPLES: usize = 1 << 18;
+
+fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+impl<'a> ShadeContext<'a> {
+    /// `lights` posed for this frame; an empty list gets the default light when the
+    /// options ask for it (placed relative to `camera`).
+    pub fn new(
+        scene: &'a Scene,
+        static_soup: &'a TriangleSoup,
+        dynamic_soup: &'a TriangleSoup,
+        lights: &[Light],
+        camera: &CameraModel,
+        options: ShadingOptions,
+        extent: f32,
+    ) -> ShadeContext<'a> {
+        let mut pre: Vec<PreLight> = lights
+            .iter()
+            .filter(|l| l.intensity.is_finite() && l.intensity > 0.0)
+            .map(|l| PreLight {
+                kind: l.kind,
+                power: l.color * l.intensity,
+                position: l.position,
+                direction: l.direction,
+                range: l.range.filter(|r| *r > 0.0),
+            })
+            .collect();
+        if lights.is_empty() && options.default_light {
+            let towards = (camera.rotation * Vec3::new(-0.4, 0.6, 0.7)).normalize_or_zero();
+            pre.push(PreLight {
+                kind: LightKind::Directional,
+                power: Vec3::splat(std::f32::consts::PI),
+                position: camera.origin,
+                direction: -towards,
+                range: None,
+            });
+        }
+        let mut lut = [0.0; 256];
+        for (i, v) in lut.iter_mut().enumerate() {
+            *v = srgb_to_linear(i as f32 / 255.0);
+        }
+        ShadeContext {
+            scene,
+            static_soup,
+            dynamic_soup,
+            options,
+            extent: if extent.is_finite() && extent > 0.0 {
+                extent
+            } else {
+                1.0
+            },
+            lights: pre,
+            lut,
+        }
+    }
+
+    fn material(&self, i: u32) -> Option<&Material> {
+        self.scene.materials.get(i as usize)
+    }
+
+    /// Samples a texture (RGBA, linearised RGB when `srgb`), or `None` without one.
+    fn texture(&self, slot: Option<TextureRef>, uv: Vec2, srgb: bool) -> Option<Vec4> {
+        let tex = self.scene.textures.get(slot?.texture as usize)?;
+        let img = self.scene.images.get(tex.image as usize)?;
+        let (w, h) = (img.width as i64, img.height as i64);
+        if w == 0 || h == 0 || img.rgba8.len() as i64 != w * h * 4 {
+            return None;
+        }
+        let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
+        let fetch = |x: i64, y: i64| -> Vec4 {
+            let x = wrap(x, w, tex.wrap_s);
+            let y = wrap(y, h, tex.wrap_t);
+            let at = ((y * w + x) * 4) as usize;
+            match img.rgba8.get(at..at + 4) {
+                Some(p) => {
+                    let c = |b: u8| {
+                        if srgb {
+                            self.lut[b as usize]
+                        } else {
+                            b as f32 / 255.0
+                        }
+                    };
+                    Vec4::new(c(p[0]), c(p[1]), c(p[2]), p[3] as f32 / 255.0)
+                }
+                None => Vec4::ONE,
+            }
+        };
+        let x = uv.x as f64 * w as f64;
+        let y = uv.y as f64 * h as f64;
+        if tex.nearest {
+            return Some(fetch(x.floor() as i64, y.floor() as i64));
+        }
+        let (x, y) = (x - 0.5, y - 0.5);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let top = fetch(x0, y0).lerp(fetch(x0 + 1, y0), fx);
+        let bottom = fetch(x0, y0 + 1).lerp(fetch(x0 + 1, y0 + 1), fx);
+        Some(top.lerp(bottom, fy))
+    }
+
+    /// Geometry at a hit, `None` for a triangle index out of range.
+    fn surface(&self, ray: &Ray, hit: &Hit) -> Option<Surface> {
+        let s = self.static_soup.len();
+        let (soup, i) = match (hit.tri as usize).checked_sub(s) {
+            None => (self.static_soup, hit.tri as usize),
+            Some(d) => (self.dynamic_soup, d),
+        };
+        let p = soup.positions.get(i)?;
+        let nrm = soup.normals.get(i);
+        let uvs = soup.uvs.get(i);
+        let material = soup.material.get(i).copied().unwrap_or(u32::MAX);
+        let (u, v) = (hit.u, hit.v);
+        let w = 1.0 - u - v;
+        let point = p[0] * w + p[1] * u + p[2] * v;
+        let mut ng = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+        let dir = ray.dir.normalize_or_zero();
+        if ng == Vec3::ZERO {
+            ng = -dir;
+        }
+        // `entering`: the ray meets the side the winding makes the front.
+        let entering = ng.dot(dir) < 0.0;
+        if !entering {
+            ng = -ng;
+        }
+        let mut ns = nrm
+            .map(|n| (n[0] * w + n[1] * u + n[2] * v).normalize_or_zero())
+            .unwrap_or(Vec3::ZERO);
+        if ns == Vec3::ZERO || !ns.is_finite() {
+            ns = ng;
+        } else if ns.dot(ng) < 0.0 {
+            ns = -ns;
+        }
+        let uv = uvs.map_or(Vec2::ZERO, |t| t[0] * w + t[1] * u + t[2] * v);
+        Some(Surface {
+            point,
+            ng,
+            ns,
+            dir,
+            entering,
+            uv,
+            material,
+        })
+    }
+
+    /// Base colour (factor × texture) at a surface.
+    fn base_color(&self, m: &Material, uv: Vec2) -> Vec4 {
+        match self.texture(m.base_color_texture, uv, true) {
+            Some(t) => m.base_color * t,
+            None => m.base_color,
+        }
+    }
+
+    /// Offset for secondary ray origins at `p`: relative to the position's magnitude
+    /// (float spacing) and to the scene's size.
+    fn eps(&self, p: Vec3) -> f32 {
+        1e-4 * p.abs().max_element().max(1e-3 * self.extent)
+    }
+
+    /// The AOV values at a primary hit: (normal, albedo).
+    fn aov(&self, ray: &Ray, hit: &Hit) -> ([f32; 3], [f32; 3]) {
+        let Some(s) = self.surface(ray, hit) else {
+            return ([0.0; 3], [0.0; 3]);
+        };
+        let albedo = self
+            .material(s.material)
+            .map_or(Vec3::ONE, |m| self.base_color(m, s.uv).truncate());
+        (s.ns.to_array(), albedo.to_array())
+    }
+
+    fn shade(&self, ray: &Ray, item: &Item, hit: Option<Hit>, max_depth: u32, out: &mut BlockOut) {
+        let Some(hit) = hit else {
+            out.add(item.sample, item.weight * self.options.background);
+            return;
+        };
+        let Some(s) = self.surface(ray, &hit) else {
+            return;
+        };
+        let default = Material::default();
+        let m = self.material(s.material).unwrap_or(&default);
+        let base = self.base_color(m, s.uv);
+        let alpha = match m.alpha_mode {
+            AlphaMode::Opaque => 1.0,
+            AlphaMode::Mask { cutoff } => {
+                if base.w >= cutoff {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            AlphaMode::Blend => base.w.clamp(0.0, 1.0),
+        };
+        let eps = self.eps(s.point);
+        if alpha < 1.0 && item.passes < MAX_PASSES {
+            // On through the surface, same direction, same depth.
+            let w = item.weight * (1.0 - alpha);
+            if w.max_element() > MIN_WEIGHT || item.coverage > 0.0 {
+                out.next(
+                    Ray::new(s.point - s.ng * eps, s.dir),
+                    Item {
+                        sample: item.sample,
+                        weight: w,
+                        coverage: item.coverage * (1.0 - alpha),
+                        depth: item.depth,
+                        passes: item.passes + 1,
+                    },
+                );
+            }
+        }
+        if alpha <= 0.0 {
+            return;
+        }
+        out.cover(item.sample, item.coverage * alpha);
+        let weight = item.weight * alpha;
+        let albedo = base.truncate();
+
+        let (mut metallic, mut roughness) = (m.metallic, m.roughness);
+        if let Some(t) = self.texture(m.metallic_roughness_texture, s.uv, false) {
+            metallic *= t.z;
+            roughness *= t.y;
+        }
+        let metallic = metallic.clamp(0.0, 1.0);
+        let roughness = roughness.clamp(0.0, 1.0);
+        let transmission = (m.transmission.clamp(0.0, 1.0)) * (1.0 - metallic);
+        let gloss = (1.0 - roughness) * (1.0 - roughness);
+        let v = -s.dir;
+        let cos_o = s.ns.dot(v).clamp(0.0, 1.0);
+        let f0 = Vec3::splat(0.04).lerp(albedo, metallic);
+        let ior = if m.ior.is_finite() && m.ior >= 1.0 {
+            m.ior
+        } else {
+            1.5
+        };
+        let eta = if s.entering { 1.0 / ior } else { ior };
+        // Fresnel: exact dielectric for transmissive surfaces, Schlick otherwise.
+        let fresnel = if transmission > 0.0 {
+            Vec3::splat(fresnel_dielectric(cos_o, eta))
+        } else {
+            f0 + (Vec3::ONE - f0) * (1.0 - cos_o).powi(5)
+        };
+        let mut kr = fresnel * gloss;
+        let kt = (Vec3::ONE - fresnel) * transmission * albedo;
+        let kd = albedo
+            * ((1.0 - metallic) * (1.0 - transmission) * (1.0 - fresnel.max_element() * gloss)
+                + metallic * (1.0 - gloss));
+
+        // Emission and ambient.
+        let mut emitted = m.emissive * m.emissive_strength;
+        if emitted != Vec3::ZERO {
+            if let Some(t) = self.texture(m.emissive_texture, s.uv, true) {
+                emitted *= t.truncate();
+            }
+        }
+        out.add(item.sample, weight * (emitted + kd * self.options.ambient));
+
+        // Direct light through shadow rays.
+        let origin = s.point + s.ng * eps;
+        let shininess = if roughness < 0.9 {
+            // Capped: a point light is a delta, and the glint of one on a polished
+            // surface would otherwise be a tiny spot of enormous radiance (one that
+            // mirrors then multiply around the scene).
+            (2.0 / roughness.powi(4).max(1e-4) - 2.0).min(MAX_SHININESS)
+        } else {
+            0.0
+        };
+        for l in &self.lights {
+            let (to_light, dist, irradiance) = match l.kind {
+                LightKind::Directional => (-l.direction, f32::INFINITY, l.power),
+                LightKind::Point | LightKind::Spot { .. } => {
+                    let d = l.position - origin;
+                    let d2 = d.length_squared();
+                    if d2 <= 0.0 || !d2.is_finite() {
+                        continue;
+                    }
+                    let dist = d2.sqrt();
+                    let mut att = 1.0 / d2;
+                    if let Some(r) = l.range {
+                        att *= (1.0 - (dist / r).powi(4)).clamp(0.0, 1.0).powi(2);
+                    }
+                    let to = d / dist;
+                    if let LightKind::Spot {
+                        inner_cone_angle,
+                        outer_cone_angle,
+                    } = l.kind
+                    {
+                        let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
+                        let scale = 1.0 / (ci - co).max(1e-3);
+                        let cd = l.direction.dot(-to);
+                        att *= ((cd - co) * scale).clamp(0.0, 1.0).powi(2);
+                    }
+                    (to, dist, l.power * att)
+                }
+            };
+            let cos_i = s.ns.dot(to_light);
+            if cos_i <= 0.0 || s.ng.dot(to_light) <= 0.0 {
+                continue;
+            }
+            let mut brdf = kd * std::f32::consts::FRAC_1_PI;
+            if shininess > 0.0 {
+                let h = (to_light + v).normalize_or_zero();
+                let nh = s.ns.dot(h).max(0.0);
+                let norm = (shininess + 8.0) / (8.0 * std::f32::consts::PI);
+                brdf += f0 * (1.0 - gloss * 0.5) * (norm * nh.powf(shininess)).min(1e3);
+            }
+            let c = weight * brdf * irradiance * cos_i;
+            if c.max_element() <= MIN_WEIGHT * 1e-2 || !c.is_finite() {
+                continue;
+            }
+            let shadow = if dist.is_finite() {
+                Ray::segment(origin, to_light, 0.0, dist * (1.0 - 1e-4))
+            } else {
+                Ray::new(origin, to_light)
+            };
+            out.shadow(shadow, item.sample, c);
+        }
+
+        if item.depth >= max_depth {
+            return;
+        }
+        let next = |w: Vec3| Item {
+            sample: item.sample,
+            weight: w,
+            coverage: 0.0,
+            depth: item.depth + 1,
+            passes: item.passes,
+        };
+        // Refraction (or total internal reflection, which adds to the mirror ray).
+        let kt_w = weight * kt;
+        if kt_w.max_element() > MIN_WEIGHT {
+            match refract(s.dir, s.ns, eta).or_else(|| refract(s.dir, s.ng, eta)) {
+                Some(t) if t.dot(s.ng) < 0.0 => {
+                    out.next(Ray::new(s.point - s.ng * eps, t), next(kt_w));
+                }
+                _ => kr += kt,
+            }
+        }
+        let kr_w = weight * kr;
+        if kr_w.max_element() > MIN_WEIGHT {
+            let mut r = reflect(s.dir, s.ns);
+            if r.dot(s.ng) <= 0.0 {
+                r = reflect(s.dir, s.ng);
+            }
+            out.next(Ray::new(origin, r), next(kr_w));
+        }
+    }
+}
+
+fn wrap(i: i64, n: i64, mode: Wrap) -> i64 {
+    match mode {
+        Wrap::Repeat => i.rem_euclid(n),
+        Wrap::ClampToEdge => i.clamp(0, n - 1),
+        Wrap::MirroredRepeat => {
+            let m = i.rem_euclid(2 * n);
+            if m >= n {
+                2 * n - 1 - m
+            } else {
+                m
+            }
+        }
+    }
+}
+
+fn reflect(d: Vec3, n: Vec3) -> Vec3 {
+    d - 2.0 * d.dot(n) * n
+}
+
+/// Refraction of unit `d` through unit `n` (facing against `d`), `eta = n1 / n2`;
+/// `None` on total internal reflection.
+fn refract(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
+    let cos_i = -d.dot(n);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    if k < 0.0 {
+        return None;
+    }
+    Some((eta * d + (eta * cos_i - k.sqrt()) * n).normalize_or_zero())
+}
+
+/// Unpolarised Fresnel reflectance of a dielectric; `eta = n1 / n2`; 1 on total
+/// internal reflection.
+fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
+    let sin_t2 = eta * eta * (1.0 - cos_i * cos_i);
+    if sin_t2 >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin_t2).sqrt();
+    let rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    (0.5 * (rs * rs + rp * rp)).clamp(0.0, 1.0)
+}
+
+struct Surface {
+    point: Vec3,
+    /// Geometric normal, facing the incoming ray.
+    ng: Vec3,
+    /// Shading normal, on the side of `ng`.
+    ns: Vec3,
+    /// Unit ray direction.
+    dir: Vec3,
+    entering: bool,
+    uv: Vec2,
+    material: u32,
+}
+
+/// A ray's bookkeeping: which sample it adds to, with what weight.
+#[derive(Clone, Copy, Debug)]
+struct Item {
+    sample: u32,
+    weight: Vec3,
+    /// Share of the sample's coverage (alpha) this ray decides (primary rays and their
+    /// pass-through continuations; 0 for secondary rays).
+    coverage: f32,
+    depth: u32,
+    passes: u16,
+}
+
+#[derive(Default)]
+struct BlockOut {
+    add: Vec<(u32, Vec3)>,
+    cover: Vec<(u32, f32)>,
+    shadow_rays: Vec<Ray>,
+    shadow_add: Vec<(u32, Vec3)>,
+    next_rays: Vec<Ray>,
+    next_items: Vec<Item>,
+}
+
+impl BlockOut {
+    fn add(&mut self, sample: u32, c: Vec3) {
+        if c != Vec3::ZERO && c.is_finite() {
+            self.add.push((sample, c));
+        }
+    }
+    fn cover(&mut self, sample: u32, c: f32) {
+        if c > 0.0 {
+            self.cover.push((sample, c));
+        }
+    }
+    fn shadow(&mut self, ray: Ray, sample: u32, c: Vec3) {
+        self.shadow_rays.push(ray);
+        self.shadow_add.push((sample, c));
+    }
+    fn next(&mut self, ray: Ray, item: Item) {
+        self.next_rays.push(ray);
+        self.next_items.push(item);
+    }
+}
+
+/// A 64-bit mix of the inputs (SplitMix64 finaliser over a running combination).
+fn hash(values: [u32; 4]) -> u64 {
+    let mut h = 0x9E37_79B9_7F4A_7C15u64;
+    for v in values {
+        h ^= u64::from(v);
+        h = h.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        h = (h ^ (h >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        h = (h ^ (h >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        h ^= h >> 31;
+    }
+    h
+}
+
+/// Position of sample `k` of `spp` inside pixel `(x, y)` of `frame`, in `[0, 1)²`:
+/// the centre for one sample, else a jittered point in cell `k` of a
+/// `ceil(√spp) × ceil(spp / ceil(√spp))` grid.
+pub fn sample_offset(frame: u32, x: u32, y: u32, k: u32, spp: u32) -> (f32, f32) {
+    if spp <= 1 {
+        return (0.5, 0.5);
+    }
+    let sx = (spp as f64).sqrt().ceil() as u32;
+    let sy = spp.div_ceil(sx);
+    let h = hash([frame, x, y, k]);
+    let rx = (h >> 40) as f32 / (1u64 << 24) as f32;
+    let ry = ((h >> 16) & 0xFF_FFFF) as f32 / (1u64 << 24) as f32;
+    (
+        (((k % sx) as f32 + rx) / sx as f32).min(0.999_999_9),
+        (((k / sx) as f32 + ry) / sy as f32).min(0.999_999_9),
+    )
+}
+
+/// Traces and shades one frame.
+pub fn render_frame<T: Intersector>(
+    ctx: &ShadeContext<'_>,
+    tracer: &T,
+    camera: &CameraModel,
+    frame: u32,
+    spp: u32,
+    max_depth: u32,
+    aovs: Aovs,
+) -> (FrameBuffers, FrameWork) {
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let spp = spp.max(1) as usize;
+    let mut work = FrameWork::default();
+    let mut fb = FrameBuffers {
+        width: camera.width,
+        height: camera.height,
+        rgba: vec![[0.0; 4]; w * h],
+        depth: aovs.depth.then(|| vec![f32::INFINITY; w * h]),
+        normal: aovs.normal.then(|| vec![[0.0; 3]; w * h]),
+        albedo: aovs.albedo.then(|| vec![[0.0; 3]; w * h]),
+    };
+    let any_aov = aovs.depth || aovs.normal || aovs.albedo;
+    let rows_per_chunk = (CHUNK_SAMPLES / (w * spp)).max(1);
+    let mut y0 = 0;
+    while y0 < h {
+        let y1 = (y0 + rows_per_chunk).min(h);
+        let px0 = y0 * w;
+        let npix = (y1 - y0) * w;
+        let nsamples = npix * spp;
+
+        // Primary rays.
+        let clock = Instant::now();
+        let mut rays: Vec<Ray> = (0..nsamples)
+            .into_par_iter()
+            .with_min_len(BLOCK)
+            .map(|s| {
+                let p = px0 + s / spp;
+                let (x, y) = ((p % w) as u32, (p / w) as u32);
+                let (ox, oy) = sample_offset(frame, x, y, (s % spp) as u32, spp as u32);
+                camera.ray(x as f32 + ox, y as f32 + oy)
+            })
+            .collect();
+        let mut items: Vec<Item> = (0..nsamples)
+            .map(|s| Item {
+                sample: s as u32,
+                weight: Vec3::ONE,
+                coverage: 1.0,
+                depth: 0,
+                passes: 0,
+            })
+            .collect();
+        work.rays.primary += nsamples as u64;
+        let mut radiance = vec![Vec3::ZERO; nsamples];
+        let mut coverage = vec![0.0f32; nsamples];
+        work.shade += clock.elapsed();
+
+        let mut first = true;
+        let mut hits: Vec<Option<Hit>> = Vec::new();
+        while !rays.is_empty() {
+            let clock = Instant::now();
+            hits.clear();
+            hits.resize(rays.len(), None);
+            tracer.intersect_batch(&rays, &mut hits);
+            work.trace += clock.elapsed();
+
+            let clock = Instant::now();
+            if first && any_aov {
+                // The centre rays: the primary rays themselves with one sample, else
+                // their own batch (traced below).
+                if spp == 1 {
+                    write_aovs(ctx, &mut fb, px0, &rays, &hits);
+                }
+            }
+            first = false;
+            let outs: Vec<BlockOut> = rays
+                .par_chunks(BLOCK)
+                .zip(items.par_chunks(BLOCK))
+                .zip(hits.par_chunks(BLOCK))
+                .map(|((r, it), hs)| {
+                    let mut out = BlockOut::default();
+                    for ((ray, item), hit) in r.iter().zip(it).zip(hs) {
+                        ctx.shade(ray, item, *hit, max_depth, &mut out);
+                    }
+                    out
+                })
+                .collect();
+            let mut shadow_rays = Vec::new();
+            let mut shadow_add = Vec::new();
+            rays.clear();
+            items.clear();
+            for o in outs {
+                for (s, c) in o.add {
+                    radiance[s as usize] += c;
+                }
+                for (s, c) in o.cover {
+                    coverage[s as usize] += c;
+                }
+                shadow_rays.extend(o.shadow_rays);
+                shadow_add.extend(o.shadow_add);
+                rays.extend(o.next_rays);
+                items.extend(o.next_items);
+            }
+            work.rays.secondary += rays.len() as u64;
+            work.rays.shadow += shadow_rays.len() as u64;
+            work.shade += clock.elapsed();
+
+            let clock = Instant::now();
+            let mut blocked = vec![false; shadow_rays.len()];
+            tracer.occluded_batch(&shadow_rays, &mut blocked);
+            work.trace += clock.elapsed();
+
+            let clock = Instant::now();
+            for ((s, c), b) in shadow_add.into_iter().zip(blocked) {
+                if !b {
+                    radiance[s as usize] += c;
+                }
+            }
+            work.shade += clock.elapsed();
+        }
+
+        if any_aov && spp > 1 {
+            let clock = Instant::now();
+            let centre: Vec<Ray> = (0..npix)
+                .into_par_iter()
+                .with_min_len(BLOCK)
+                .map(|i| {
+                    let p = px0 + i;
+                    camera.ray((p % w) as f32 + 0.5, (p / w) as f32 + 0.5)
+                })
+                .collect();
+            work.rays.primary += npix as u64;
+            work.shade += clock.elapsed();
+            let clock = Instant::now();
+            let mut chits = vec![None; npix];
+            tracer.intersect_batch(&centre, &mut chits);
+            work.trace += clock.elapsed();
+            let clock = Instant::now();
+            write_aovs(ctx, &mut fb, px0, &centre, &chits);
+            work.shade += clock.elapsed();
+        }
+
+        let clock = Instant::now();
+        let inv = 1.0 / spp as f32;
+        fb.rgba[px0..px0 + npix]
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(BLOCK)
+            .for_each(|(i, px)| {
+                let mut c = Vec3::ZERO;
+                let mut a = 0.0;
+                for s in i * spp..(i + 1) * spp {
+                    c += radiance[s];
+                    a += coverage[s];
+                }
+                let c = c * inv;
+                *px = [c.x, c.y, c.z, (a * inv).min(1.0)];
+            });
+        work.shade += clock.elapsed();
+        y0 = y1;
+    }
+    (fb, work)
+}
+
+/// AOVs of the pixels `px0..px0 + rays.len()` from their centre rays.
+fn write_aovs(
+    ctx: &ShadeContext<'_>,
+    fb: &mut FrameBuffers,
+    px0: usize,
+    rays: &[Ray],
+    hits: &[Option<Hit>],
+) {
+    let n = rays.len();
+    if let Some(depth) = &mut fb.depth {
+        depth[px0..px0 + n]
+            .par_iter_mut()
+            .zip(rays.par_iter().zip(hits))
+            .for_each(|(z, (r, h))| {
+                *z = h.map_or(f32::INFINITY, |h| h.t * r.dir.length());
+            });
+    }
+    if fb.normal.is_none() && fb.albedo.is_none() {
+        return;
+    }
+    let vals: Vec<([f32; 3], [f32; 3])> = rays
+        .par_iter()
+        .zip(hits)
+        .with_min_len(BLOCK)
+        .map(|(r, h)| h.map_or(([0.0; 3], [0.0; 3]), |h| ctx.aov(r, &h)))
+        .collect();
+    if let Some(normal) = &mut fb.normal {
+        for (d, v) in normal[px0..px0 + n].iter_mut().zip(&vals) {
+            *d = v.0;
+        }
+    }
+    if let Some(albedo) = &mut fb.albedo {
+        for (d, v) in albedo[px0..px0 + n].iter_mut().zip(&vals) {
+            *d = v.1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refraction_and_fresnel() {
+        let n = Vec3::Y;
+        let d = Vec3::new(1.0, -1.0, 0.0).normalize();
+        // Into glass: bends towards the normal (Snell).
+        let t = refract(d, n, 1.0 / 1.5).unwrap();
+        let sin_t = t.x;
+        assert!((sin_t - d.x / 1.5).abs() < 1e-6);
+        // Out of glass at 45°: total internal reflection (critical angle 41.8°).
+        assert!(refract(d, n, 1.5).is_none());
+        assert_eq!(fresnel_dielectric(d.dot(-n).abs(), 1.5), 1.0);
+        // Normal incidence: ((n1-n2)/(n1+n2))^2 = 0.04.
+        assert!((fresnel_dielectric(1.0, 1.0 / 1.5) - 0.04).abs() < 1e-6);
+        assert!(reflect(d, n).abs_diff_eq(Vec3::new(d.x, -d.y, 0.0), 1e-6));
+    }
+
+    #[test]
+    fn wrap_modes() {
+        assert_eq!(wrap(-1, 4, Wrap::Repeat), 3);
+        assert_eq!(wrap(5, 4, Wrap::Repeat), 1);
+        assert_eq!(wrap(-1, 4, Wrap::ClampToEdge), 0);
+        assert_eq!(wrap(9, 4, Wrap::ClampToEdge), 3);
+        assert_eq!(wrap(4, 4, Wrap::MirroredRepeat), 3);
+        assert_eq!(wrap(-1, 4, Wrap::MirroredRepeat), 0);
+        assert_eq!(wrap(8, 4, Wrap::MirroredRepeat), 0);
+    }
+
+    #[test]
+    fn samples_are_stratified_and_centred_for_one() {
+        assert_eq!(sample_offset(3, 1, 2, 0, 1), (0.5, 0.5));
+        let mut cells = [false; 4];
+        for k in 0..4 {
+            let (x, y) = sample_offset(7, 10, 20, k, 4);
+            assert!((0.0..1.0).contains(&x) && (0.0..1.0).contains(&y));
+            cells[(x * 2.0) as usize + 2 * (y * 2.0) as usize] = true;
+        }
+        assert!(cells.iter().all(|&c| c), "one sample in each quarter");
+        assert_ne!(
+            sample_offset(7, 10, 20, 0, 4),
+            sample_offset(8, 10, 20, 0, 4)
+        );
+    }
+}

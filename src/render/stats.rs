@@ -1,0 +1,419 @@
+//! Per-frame statistics: the CSV of `--stats` and the stacked bar chart of `--plot`
+//! (SVG written by hand; PNG drawn into an `image` buffer with a tiny built-in font).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use super::shade::RayCounts;
+use super::RenderError;
+
+/// Times (milliseconds, wall clock) and ray counts of one rendered frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameStats {
+    pub frame: u32,
+    /// Animation time shown, seconds.
+    pub time: f64,
+    /// Posing the scene and updating the dynamic layer.
+    pub update_ms: f64,
+    /// Inside intersection batches.
+    pub trace_ms: f64,
+    /// Making rays and shading.
+    pub shade_ms: f64,
+    /// Encoding and writing the EXR (on the writer thread, overlapping the next frame).
+    pub write_ms: f64,
+    pub rays: RayCounts,
+}
+
+/// The CSV text: a header, then one row per frame.
+pub fn stats_csv(frames: &[FrameStats]) -> String {
+    let mut s = String::from(
+        "frame,time,update_ms,trace_ms,shade_ms,write_ms,primary_rays,shadow_rays,secondary_rays\n",
+    );
+    for f in frames {
+        let _ = writeln!(
+            s,
+            "{},{:.6},{:.3},{:.3},{:.3},{:.3},{},{},{}",
+            f.frame,
+            f.time,
+            f.update_ms,
+            f.trace_ms,
+            f.shade_ms,
+            f.write_ms,
+            f.rays.primary,
+            f.rays.shadow,
+            f.rays.secondary
+        );
+    }
+    s
+}
+
+const SERIES: [(&str, [u8; 3]); 4] = [
+    ("update", [0x4e, 0x79, 0xa7]),
+    ("trace", [0xf2, 0x8e, 0x2b]),
+    ("shade", [0x59, 0xa1, 0x4f]),
+    ("write", [0xb0, 0x7a, 0xa1]),
+];
+
+fn values(f: &FrameStats) -> [f64; 4] {
+    [f.update_ms, f.trace_ms, f.shade_ms, f.write_ms].map(|v| {
+        if v.is_finite() {
+            v.max(0.0)
+        } else {
+            0.0
+        }
+    })
+}
+
+/// A "nice" axis maximum (1, 2 or 5 × 10^k) at or above `v`, and its tick step.
+fn nice_axis(v: f64) -> (f64, f64) {
+    let v = if v > 0.0 { v } else { 1.0 };
+    let mag = 10f64.powf(v.log10().floor());
+    for m in [1.0, 2.0, 5.0, 10.0] {
+        if m * mag >= v {
+            let top = m * mag;
+            return (top, top / 5.0);
+        }
+    }
+    (10.0 * mag, 2.0 * mag)
+}
+
+struct Layout {
+    w: f64,
+    h: f64,
+    left: f64,
+    right: f64,
+    top: f64,
+    bottom: f64,
+    ymax: f64,
+    ystep: f64,
+}
+
+impl Layout {
+    fn new(frames: &[FrameStats]) -> Layout {
+        let peak = frames
+            .iter()
+            .map(|f| values(f).iter().sum::<f64>())
+            .fold(0.0, f64::max);
+        let (ymax, ystep) = nice_axis(peak);
+        Layout {
+            w: 800.0,
+            h: 400.0,
+            left: 70.0,
+            right: 130.0,
+            top: 30.0,
+            bottom: 50.0,
+            ymax,
+            ystep,
+        }
+    }
+    fn plot_w(&self) -> f64 {
+        self.w - self.left - self.right
+    }
+    fn plot_h(&self) -> f64 {
+        self.h - self.top - self.bottom
+    }
+    fn y(&self, v: f64) -> f64 {
+        self.top + self.plot_h() * (1.0 - v / self.ymax)
+    }
+    /// Left edge and width of bar `i` of `n`.
+    fn bar(&self, i: usize, n: usize) -> (f64, f64) {
+        let slot = self.plot_w() / n.max(1) as f64;
+        let gap = if slot > 4.0 { slot * 0.15 } else { 0.0 };
+        (self.left + slot * i as f64 + gap / 2.0, slot - gap)
+    }
+    /// Frame labels along x: at most about 10.
+    fn x_label_every(n: usize) -> usize {
+        n.div_ceil(10).max(1)
+    }
+}
+
+/// The SVG text of the stacked bar chart.
+pub fn plot_svg(frames: &[FrameStats]) -> String {
+    let l = Layout::new(frames);
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" font-family="sans-serif" font-size="12">"#,
+        w = l.w,
+        h = l.h
+    );
+    let _ = writeln!(s, r#"<rect width="100%" height="100%" fill="white"/>"#);
+    let _ = writeln!(
+        s,
+        r#"<text x="{}" y="18" text-anchor="middle" font-size="14">time per frame (ms), stacked</text>"#,
+        l.left + l.plot_w() / 2.0
+    );
+    // Y grid and labels.
+    let mut v = 0.0;
+    while v <= l.ymax * 1.000_001 {
+        let y = l.y(v);
+        let _ = writeln!(
+            s,
+            r##"<line x1="{}" y1="{y:.1}" x2="{}" y2="{y:.1}" stroke="#ddd"/><text x="{}" y="{:.1}" text-anchor="end">{}</text>"##,
+            l.left,
+            l.left + l.plot_w(),
+            l.left - 6.0,
+            y + 4.0,
+            fmt_num(v)
+        );
+        v += l.ystep;
+    }
+    // Bars.
+    let n = frames.len();
+    for (i, f) in frames.iter().enumerate() {
+        let (x, bw) = l.bar(i, n);
+        let mut acc = 0.0;
+        for ((name, [r, g, b]), val) in SERIES.iter().zip(values(f)) {
+            if val <= 0.0 {
+                continue;
+            }
+            let (y0, y1) = (l.y(acc), l.y(acc + val));
+            acc += val;
+            let _ = writeln!(
+                s,
+                r##"<rect x="{x:.2}" y="{y1:.2}" width="{bw:.2}" height="{:.2}" fill="#{r:02x}{g:02x}{b:02x}"><title>frame {} {name}: {val:.2} ms</title></rect>"##,
+                (y0 - y1).max(0.0),
+                f.frame
+            );
+        }
+        if i % Layout::x_label_every(n) == 0 {
+            let _ = writeln!(
+                s,
+                r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{}</text>"#,
+                x + bw / 2.0,
+                l.top + l.plot_h() + 16.0,
+                f.frame
+            );
+        }
+    }
+    // Axes and titles.
+    let (x0, y0) = (l.left, l.top + l.plot_h());
+    let _ = writeln!(
+        s,
+        r#"<line x1="{x0}" y1="{}" x2="{x0}" y2="{y0}" stroke="black"/><line x1="{x0}" y1="{y0}" x2="{}" y2="{y0}" stroke="black"/>"#,
+        l.top,
+        l.left + l.plot_w()
+    );
+    let _ = writeln!(
+        s,
+        r#"<text x="{}" y="{}" text-anchor="middle">frame</text>"#,
+        l.left + l.plot_w() / 2.0,
+        l.h - 10.0
+    );
+    let _ = writeln!(
+        s,
+        r#"<text x="16" y="{}" text-anchor="middle" transform="rotate(-90 16 {})">ms</text>"#,
+        l.top + l.plot_h() / 2.0,
+        l.top + l.plot_h() / 2.0
+    );
+    // Legend, top to bottom in stacking order reversed (as the bars read).
+    for (k, (name, [r, g, b])) in SERIES.iter().rev().enumerate() {
+        let y = l.top + 10.0 + 22.0 * k as f64;
+        let x = l.w - l.right + 20.0;
+        let _ = writeln!(
+            s,
+            r##"<rect x="{x}" y="{y}" width="14" height="14" fill="#{r:02x}{g:02x}{b:02x}"/><text x="{}" y="{}">{name}</text>"##,
+            x + 20.0,
+            y + 11.0
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+fn fmt_num(v: f64) -> String {
+    if v == v.trunc() {
+        format!("{v:.0}")
+    } else if v >= 1.0 {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.3}").trim_end_matches('0').to_string()
+    }
+}
+
+/// 3×5 bitmap glyphs for the PNG's labels (digits, a few letters); rows top to bottom,
+/// bit 2 is the left column.
+fn glyph(c: char) -> Option<[u8; 5]> {
+    Some(match c {
+        '0' => [7, 5, 5, 5, 7],
+        '1' => [2, 6, 2, 2, 7],
+        '2' => [7, 1, 7, 4, 7],
+        '3' => [7, 1, 7, 1, 7],
+        '4' => [5, 5, 7, 1, 1],
+        '5' => [7, 4, 7, 1, 7],
+        '6' => [7, 4, 7, 5, 7],
+        '7' => [7, 1, 1, 1, 1],
+        '8' => [7, 5, 7, 5, 7],
+        '9' => [7, 5, 7, 1, 7],
+        '.' => [0, 0, 0, 0, 2],
+        'a' => [0, 7, 1, 7, 7],
+        'd' => [1, 1, 7, 5, 7],
+        'e' => [7, 5, 7, 4, 7],
+        'f' => [3, 4, 6, 4, 4],
+        'h' => [4, 4, 7, 5, 5],
+        'i' => [2, 0, 2, 2, 2],
+        'm' => [0, 7, 7, 5, 5],
+        'p' => [0, 7, 5, 7, 4],
+        'r' => [0, 7, 4, 4, 4],
+        's' => [0, 7, 6, 3, 7],
+        't' => [4, 7, 4, 4, 3],
+        'u' => [0, 5, 5, 5, 7],
+        'w' => [0, 5, 5, 7, 7],
+        ' ' => [0; 5],
+        _ => return None,
+    })
+}
+
+/// The PNG bytes of the same chart (labels in a 3×5 pixel font scaled ×2).
+pub fn plot_png(frames: &[FrameStats]) -> Result<Vec<u8>, image::ImageError> {
+    let l = Layout::new(frames);
+    let (w, h) = (l.w as u32, l.h as u32);
+    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
+    let mut rect = |x0: f64, y0: f64, x1: f64, y1: f64, c: [u8; 3]| {
+        let (x0, x1) = (x0.round().max(0.0) as u32, (x1.round() as u32).min(w));
+        let (y0, y1) = (y0.round().max(0.0) as u32, (y1.round() as u32).min(h));
+        for y in y0..y1 {
+            for x in x0..x1 {
+                img.put_pixel(x, y, image::Rgb(c));
+            }
+        }
+    };
+    let mut labels: Vec<(f64, f64, String, bool)> = Vec::new(); // x, y, text, right-aligned
+    let mut v = 0.0;
+    while v <= l.ymax * 1.000_001 {
+        let y = l.y(v);
+        rect(l.left, y, l.left + l.plot_w(), y + 1.0, [0xdd; 3]);
+        labels.push((l.left - 6.0, y - 5.0, fmt_num(v), true));
+        v += l.ystep;
+    }
+    let n = frames.len();
+    for (i, f) in frames.iter().enumerate() {
+        let (x, bw) = l.bar(i, n);
+        let mut acc = 0.0;
+        for ((_, c), val) in SERIES.iter().zip(values(f)) {
+            rect(x, l.y(acc + val), x + bw.max(1.0), l.y(acc), *c);
+            acc += val;
+        }
+        if i % Layout::x_label_every(n) == 0 {
+            let t = f.frame.to_string();
+            labels.push((
+                x + bw / 2.0 - t.len() as f64 * 4.0,
+                l.top + l.plot_h() + 8.0,
+                t,
+                false,
+            ));
+        }
+    }
+    let (x0, y0) = (l.left, l.top + l.plot_h());
+    rect(x0 - 1.0, l.top, x0, y0, [0; 3]);
+    rect(x0 - 1.0, y0, l.left + l.plot_w(), y0 + 1.0, [0; 3]);
+    labels.push((
+        l.left + l.plot_w() / 2.0 - 20.0,
+        l.h - 22.0,
+        "frame".into(),
+        false,
+    ));
+    labels.push((8.0, l.top + l.plot_h() / 2.0, "ms".into(), false));
+    labels.push((l.left, 8.0, "time per frame ms".into(), false));
+    for (k, (name, c)) in SERIES.iter().rev().enumerate() {
+        let y = l.top + 10.0 + 22.0 * k as f64;
+        let x = l.w - l.right + 20.0;
+        rect(x, y, x + 14.0, y + 14.0, *c);
+        labels.push((x + 20.0, y + 2.0, (*name).to_string(), false));
+    }
+    for (x, y, text, right) in labels {
+        let width = text.chars().count() as f64 * 8.0;
+        let x = if right { x - width } else { x };
+        for (k, ch) in text.chars().enumerate() {
+            let Some(g) = glyph(ch) else { continue };
+            for (row, bits) in g.iter().enumerate() {
+                for col in 0..3 {
+                    if bits & (4 >> col) != 0 {
+                        let px = x + k as f64 * 8.0 + col as f64 * 2.0;
+                        let py = y + row as f64 * 2.0;
+                        rect(px, py, px + 2.0, py + 2.0, [0; 3]);
+                    }
+                }
+            }
+        }
+    }
+    let mut out = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)?;
+    Ok(out)
+}
+
+/// Plot format from the file's extension.
+pub fn plot_bytes(path: &Path, frames: &[FrameStats]) -> Result<Vec<u8>, RenderError> {
+    match plot_kind(path)? {
+        PlotKind::Svg => Ok(plot_svg(frames).into_bytes()),
+        PlotKind::Png => plot_png(frames).map_err(|source| RenderError::Png {
+            path: path.to_path_buf(),
+            source,
+        }),
+    }
+}
+
+pub(crate) enum PlotKind {
+    Svg,
+    Png,
+}
+
+pub(crate) fn plot_kind(path: &Path) -> Result<PlotKind, RenderError> {
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        Some("svg") => Ok(PlotKind::Svg),
+        Some("png") => Ok(PlotKind::Png),
+        _ => Err(RenderError::Option(format!(
+            "--plot {}: the file must end in .svg or .png",
+            path.display()
+        ))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frames() -> Vec<FrameStats> {
+        (0..3)
+            .map(|i| FrameStats {
+                frame: i,
+                time: i as f64 / 24.0,
+                update_ms: 1.0,
+                trace_ms: 10.0 + i as f64,
+                shade_ms: 5.0,
+                write_ms: 2.5,
+                rays: RayCounts {
+                    primary: 100,
+                    shadow: 50,
+                    secondary: 7,
+                },
+            })
+            .collect()
+    }
+
+    #[test]
+    fn csv_rows() {
+        let csv = stats_csv(&frames());
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(lines.len(), 4);
+        assert_eq!(lines[2], "1,0.041667,1.000,11.000,5.000,2.500,100,50,7");
+    }
+
+    #[test]
+    fn svg_has_bars_axes_and_legend() {
+        let svg = plot_svg(&frames());
+        assert_eq!(svg.matches("<rect x=").count(), 3 * 4 + 4);
+        for name in ["update", "trace", "shade", "write", "frame"] {
+            assert!(svg.contains(&format!(">{name}<")), "{name}");
+        }
+        assert_eq!(nice_axis(20.5), (50.0, 10.0));
+        assert_eq!(nice_axis(0.7), (1.0, 0.2));
+        let png = plot_png(&frames()).unwrap();
+        assert_eq!(&png[1..4], b"PNG");
+    }
+}

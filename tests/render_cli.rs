@@ -1,0 +1,352 @@
+//! `subfield render` as a program: byte-identical frames whatever the thread count,
+//! resume after an interrupted run, shards, stats and plot, and one clear error line
+//! with nothing written for every bad input.
+
+mod render_scene;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use render_scene::{files_under, temp_dir, write_scene};
+
+fn subfield(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_subfield"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok(args: &[&str]) -> Output {
+    let o = subfield(args);
+    assert!(
+        o.status.success(),
+        "subfield {args:?} failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Every file under `dir` with its bytes.
+fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    files_under(dir)
+        .into_iter()
+        .map(|p| {
+            let b = std::fs::read(dir.join(&p)).unwrap();
+            (p, b)
+        })
+        .collect()
+}
+
+const SIZE: &str = "48x36";
+
+#[test]
+fn frames_do_not_depend_on_the_thread_count() {
+    let dir = temp_dir("threads");
+    let scene = write_scene(&dir);
+    for t in ["1", "2"] {
+        let out = dir.join(format!("t{t}/f.##.exr"));
+        ok(&[
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--frames",
+            "3..6",
+            "--size",
+            SIZE,
+            "--spp",
+            "4",
+            "--aov",
+            "depth,normal,albedo",
+            "--threads",
+            t,
+            "--quiet",
+        ]);
+    }
+    let a = snapshot(&dir.join("t1"));
+    let b = snapshot(&dir.join("t2"));
+    assert_eq!(a.len(), 3);
+    assert_eq!(a, b, "--threads 1 and --threads 2 wrote different bytes");
+    // And a rerun is byte-identical too (nothing varying such as a time stamp).
+    ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&dir.join("t1/f.##.exr")),
+        "--frames",
+        "3..6",
+        "--size",
+        SIZE,
+        "--spp",
+        "4",
+        "--aov",
+        "depth,normal,albedo",
+        "--quiet",
+    ]);
+    assert_eq!(snapshot(&dir.join("t1")), a);
+}
+
+#[test]
+fn resume_completes_an_interrupted_run_and_redoes_broken_frames() {
+    let dir = temp_dir("resume");
+    let scene = write_scene(&dir);
+    let full = dir.join("full/f.####.exr");
+    ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&full),
+        "--frames",
+        "0..6",
+        "--size",
+        SIZE,
+        "--quiet",
+    ]);
+    let want = snapshot(&dir.join("full"));
+    assert_eq!(want.len(), 6);
+
+    // "Killed" after three frames: only 0..3 exist; frame 1 is truncated, frame 2 is
+    // garbage.
+    let part = dir.join("part/f.####.exr");
+    ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&part),
+        "--frames",
+        "0..3",
+        "--size",
+        SIZE,
+        "--quiet",
+    ]);
+    let f1 = dir.join("part/f.0001.exr");
+    let bytes = std::fs::read(&f1).unwrap();
+    std::fs::write(&f1, &bytes[..bytes.len() / 2]).unwrap();
+    std::fs::write(dir.join("part/f.0002.exr"), b"not an exr").unwrap();
+    let f0_before = std::fs::metadata(dir.join("part/f.0000.exr"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    let o = ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&part),
+        "--frames",
+        "0..6",
+        "--size",
+        SIZE,
+        "--resume",
+    ]);
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("(1 skipped as complete)"), "{log}");
+    assert_eq!(snapshot(&dir.join("part")), want);
+    let f0_after = std::fs::metadata(dir.join("part/f.0000.exr"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert_eq!(f0_before, f0_after, "the complete frame was not rewritten");
+
+    // A frame of another size is not "complete" for this run.
+    let o = ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&part),
+        "--frames",
+        "0..6",
+        "--size",
+        "20x10",
+        "--resume",
+    ]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("(0 skipped as complete)"));
+}
+
+#[test]
+fn shards_together_give_the_full_set() {
+    let dir = temp_dir("shards");
+    let scene = write_scene(&dir);
+    ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&dir.join("full/f.#.exr")),
+        "--frames",
+        "2..7",
+        "--size",
+        SIZE,
+        "--quiet",
+    ]);
+    for shard in ["0/2", "1/2"] {
+        ok(&[
+            "render",
+            s(&scene),
+            "-o",
+            s(&dir.join("sharded/f.#.exr")),
+            "--frames",
+            "2..7",
+            "--size",
+            SIZE,
+            "--shard",
+            shard,
+            "--quiet",
+        ]);
+        if shard == "0/2" {
+            let names: Vec<PathBuf> = files_under(&dir.join("sharded"));
+            assert_eq!(names, ["f.2.exr", "f.4.exr", "f.6.exr"].map(PathBuf::from));
+        }
+    }
+    assert_eq!(snapshot(&dir.join("sharded")), snapshot(&dir.join("full")));
+}
+
+#[test]
+fn stats_plot_and_the_default_range() {
+    let dir = temp_dir("stats");
+    let scene = write_scene(&dir);
+    let psf = dir.join("scene.psf");
+    ok(&["bake", s(&scene), "-o", s(&psf), "--quiet"]);
+    ok(&[
+        "render",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&dir.join("out/f.###.exr")),
+        "--size",
+        "16x12",
+        "--fps",
+        "6",
+        "--stats",
+        s(&dir.join("st/stats.csv")),
+        "--plot",
+        s(&dir.join("st/plot.svg")),
+        "--quiet",
+    ]);
+    // 1 s of animation at 6 fps: frames 0..=6.
+    assert_eq!(files_under(&dir.join("out")).len(), 7);
+    let csv = std::fs::read_to_string(dir.join("st/stats.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(
+        lines[0],
+        "frame,time,update_ms,trace_ms,shade_ms,write_ms,primary_rays,shadow_rays,secondary_rays"
+    );
+    assert_eq!(lines.len(), 8);
+    for (i, l) in lines[1..].iter().enumerate() {
+        let f: Vec<&str> = l.split(',').collect();
+        assert_eq!(f[0], i.to_string());
+        assert!((f[1].parse::<f64>().unwrap() - i as f64 / 6.0).abs() < 1e-6);
+        assert_eq!(f[6], "192", "one primary ray a pixel");
+        assert!(f[7].parse::<u64>().unwrap() > 0 && f[8].parse::<u64>().unwrap() > 0);
+        for v in &f[2..6] {
+            assert!(v.parse::<f64>().unwrap() >= 0.0);
+        }
+    }
+    let svg = std::fs::read_to_string(dir.join("st/plot.svg")).unwrap();
+    assert!(svg.starts_with("<svg") && svg.contains(">trace<") && svg.contains(">frame<"));
+    ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&dir.join("one.exr")),
+        "--size",
+        "16x12",
+        "--frames",
+        "2..3",
+        "--plot",
+        s(&dir.join("plot.png")),
+        "--quiet",
+    ]);
+    assert!(std::fs::read(dir.join("plot.png"))
+        .unwrap()
+        .starts_with(b"\x89PNG"));
+
+    // A file baked from another static scene is refused.
+    let mut other = render_scene::builder();
+    other.nodes[0].translation = glam::Vec3::new(0.0, 0.1, 0.0);
+    let other_path = dir.join("other.glb");
+    other.write(&other_path).unwrap();
+    let o = subfield(&[
+        "render",
+        s(&other_path),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&dir.join("x/f.#.exr")),
+        "--size",
+        "8x8",
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("re-bake"));
+    assert!(!dir.join("x").exists());
+}
+
+#[test]
+fn bad_input_gives_one_line_and_writes_nothing() {
+    let dir = temp_dir("bad");
+    let scene = write_scene(&dir);
+    let a_file = dir.join("a_file");
+    std::fs::write(&a_file, b"x").unwrap();
+    let out = dir.join("out");
+    let pat = dir.join("out/f.####.exr");
+    let (sc, p) = (s(&scene).to_string(), s(&pat).to_string());
+    let missing = s(&dir.join("missing.glb")).to_string();
+    let under_file = s(&a_file.join("f.#.exr")).to_string();
+    let no_hash = s(&dir.join("out/still.exr")).to_string();
+    let two_runs = s(&dir.join("out/f.#.#.exr")).to_string();
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec![&missing, "-o", &p], "missing.glb"),
+        (vec![&sc, "-o", &under_file], "a_file"),
+        (vec![&sc, "-o", &p, "--frames", "5..2"], "--frames"),
+        (vec![&sc, "-o", &p, "--frames", "x..2"], "--frames"),
+        (vec![&sc, "-o", &no_hash, "--frames", "0..3"], "'#'"),
+        (vec![&sc, "-o", &no_hash], "'#'"),
+        (
+            vec![&sc, "-o", &two_runs, "--frames", "0..3"],
+            "runs of '#'",
+        ),
+        (vec![&sc, "-o", &p, "--camera", "nope"], "main, side"),
+        (vec![&sc, "-o", &p, "--size", "640"], "--size"),
+        (vec![&sc, "-o", &p, "--size", "0x10"], "--size"),
+        (vec![&sc, "-o", &p, "--shard", "2/2"], "--shard"),
+        (vec![&sc, "-o", &p, "--shard", "1/0"], "--shard"),
+        (vec![&sc, "-o", &p, "--animation", "dance"], "dance"),
+        (vec![&sc, "-o", &p, "--look-from", "0,0,1"], "--look-at"),
+        (
+            vec![&sc, "-o", &p, "--look-from", "0,0,1", "--look-at", "0,0,1"],
+            "same point",
+        ),
+        (vec![&sc, "-o", &p, "--aov", "depth,motion"], "motion"),
+        (vec![&sc, "-o", &p, "--fps", "0"], "--fps"),
+        (vec![&sc, "-o", &p, "--plot", "x.pdf"], "--plot"),
+        (
+            vec![&sc, "-o", &p, "--baked", s(&a_file)],
+            "baked subfield file",
+        ),
+    ];
+    for (args, needle) in cases {
+        let mut full = vec!["render"];
+        full.extend(args.iter().copied());
+        if !args.contains(&"--size") {
+            full.extend(["--size", "8x8"]);
+        }
+        let o = subfield(&full);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert_eq!(err.lines().count(), 1, "{args:?}: not one line: {err}");
+        assert!(
+            err.starts_with("error: ") && err.contains(needle),
+            "{args:?}: {err}"
+        );
+        assert!(!out.exists(), "{args:?} wrote {:?}", files_under(&out));
+        assert_eq!(
+            files_under(&dir).len(),
+            2,
+            "{args:?} left files: {:?}",
+            files_under(&dir)
+        );
+    }
+}

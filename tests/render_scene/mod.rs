@@ -1,0 +1,277 @@
+//! A small scene built in code for the renderer's tests: a floor, a mirror, a glass
+//! cube (static), a cube that moves and turns (dynamic), an animated camera, a point
+//! light and a directional light. Written as .glb with `GltfBuilder`.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+use glam::{Quat, Vec3, Vec4};
+use subfield::scene::{
+    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, Interpolation, LightDef, LightKind,
+    MaterialDesc, MeshDesc, NodeDesc, PrimitiveDesc, Property,
+};
+
+/// A fresh, empty folder under the system temp dir for one test.
+pub fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir()
+        .join(format!("subfield-render-{}", std::process::id()))
+        .join(name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// An axis-aligned box of half size `h` around the origin: 24 vertices with face
+/// normals, 36 indices.
+pub fn cube(h: Vec3, material: u32) -> PrimitiveDesc {
+    let mut positions = Vec::new();
+    let mut normals = Vec::new();
+    let mut indices = Vec::new();
+    for axis in 0..3 {
+        for sign in [-1.0f32, 1.0] {
+            let mut n = Vec3::ZERO;
+            n[axis] = sign;
+            let a = n.any_orthonormal_vector();
+            let b = n.cross(a);
+            let base = positions.len() as u32;
+            for (s, t) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+                positions.push((n + a * s + b * t) * h);
+                normals.push(n);
+            }
+            indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+        }
+    }
+    PrimitiveDesc {
+        positions,
+        normals: Some(normals),
+        uvs: None,
+        indices: Some(indices),
+        material: Some(material),
+        morph_targets: vec![],
+    }
+}
+
+/// A rectangle in the plane through `centre` spanned by `a` and `b` (half extents),
+/// facing `a × b`.
+pub fn quad(centre: Vec3, a: Vec3, b: Vec3, material: u32) -> PrimitiveDesc {
+    let n = a.cross(b).normalize();
+    PrimitiveDesc {
+        positions: vec![
+            centre - a - b,
+            centre + a - b,
+            centre + a + b,
+            centre - a + b,
+        ],
+        normals: Some(vec![n; 4]),
+        uvs: Some(vec![
+            glam::Vec2::new(0.0, 0.0),
+            glam::Vec2::new(1.0, 0.0),
+            glam::Vec2::new(1.0, 1.0),
+            glam::Vec2::new(0.0, 1.0),
+        ]),
+        indices: Some(vec![0, 1, 2, 0, 2, 3]),
+        material: Some(material),
+        morph_targets: vec![],
+    }
+}
+
+/// The test scene (1 s of animation, 24 fps recorded in `extras.fps`).
+pub fn builder() -> GltfBuilder {
+    let mut b = GltfBuilder::new();
+    let grey = b.add_material(MaterialDesc {
+        name: Some("floor".into()),
+        base_color: Vec4::new(0.7, 0.7, 0.7, 1.0),
+        roughness: 0.8,
+        ..Default::default()
+    });
+    let mirror = b.add_material(MaterialDesc {
+        name: Some("mirror".into()),
+        base_color: Vec4::new(0.9, 0.9, 0.9, 1.0),
+        metallic: 1.0,
+        roughness: 0.0,
+        ..Default::default()
+    });
+    let glass = b.add_material(MaterialDesc {
+        name: Some("glass".into()),
+        base_color: Vec4::ONE,
+        roughness: 0.0,
+        transmission: 1.0,
+        ior: 1.5,
+        double_sided: true,
+        ..Default::default()
+    });
+    let red = b.add_material(MaterialDesc {
+        name: Some("red".into()),
+        base_color: Vec4::new(0.8, 0.1, 0.1, 1.0),
+        roughness: 0.4,
+        ..Default::default()
+    });
+    let lamp = b.add_material(MaterialDesc {
+        name: Some("lamp".into()),
+        emissive: Vec3::new(1.0, 0.9, 0.6),
+        ..Default::default()
+    });
+    let statics = b.add_mesh(MeshDesc {
+        name: Some("room".into()),
+        primitives: vec![
+            quad(Vec3::ZERO, Vec3::Z * 5.0, Vec3::X * 5.0, grey),
+            quad(
+                Vec3::new(0.0, 1.5, -2.5),
+                Vec3::X * 2.0,
+                Vec3::Y * 1.5,
+                mirror,
+            ),
+            quad(
+                Vec3::new(3.0, 2.5, -2.0),
+                Vec3::X * 0.5,
+                Vec3::Y * 0.5,
+                lamp,
+            ),
+        ],
+        weights: vec![],
+    });
+    let glass_cube = b.add_mesh(MeshDesc {
+        name: Some("glass".into()),
+        primitives: vec![cube(Vec3::splat(0.5), glass)],
+        weights: vec![],
+    });
+    let red_cube = b.add_mesh(MeshDesc {
+        name: Some("mover".into()),
+        primitives: vec![cube(Vec3::new(0.4, 0.4, 0.4), red)],
+        weights: vec![],
+    });
+    let cam = b.add_camera(CameraDesc {
+        name: Some("main".into()),
+        yfov: 0.8,
+        aspect: None,
+        znear: 0.1,
+        zfar: None,
+    });
+    let side = b.add_camera(CameraDesc {
+        name: Some("side".into()),
+        yfov: 1.0,
+        aspect: Some(1.0),
+        znear: 0.1,
+        zfar: None,
+    });
+    let point = b.add_light(LightDef {
+        name: Some("bulb".into()),
+        kind: LightKind::Point,
+        color: Vec3::new(1.0, 0.95, 0.9),
+        intensity: 40.0,
+        range: None,
+    });
+    let sun = b.add_light(LightDef {
+        name: Some("sun".into()),
+        kind: LightKind::Directional,
+        color: Vec3::ONE,
+        intensity: 1.5,
+        range: None,
+    });
+    let room = b.add_node(NodeDesc {
+        name: Some("room".into()),
+        mesh: Some(statics),
+        ..Default::default()
+    });
+    let glass_node = b.add_node(NodeDesc {
+        name: Some("glass".into()),
+        mesh: Some(glass_cube),
+        translation: Vec3::new(-1.5, 0.5, 0.0),
+        ..Default::default()
+    });
+    let mover = b.add_node(NodeDesc {
+        name: Some("mover".into()),
+        mesh: Some(red_cube),
+        translation: Vec3::new(1.0, 0.4, 0.5),
+        ..Default::default()
+    });
+    let camera = b.add_node(NodeDesc {
+        name: Some("camera".into()),
+        camera: Some(cam),
+        translation: Vec3::new(0.0, 2.0, 6.0),
+        rotation: Quat::from_rotation_x(-(2.0f32 / 6.0).atan()),
+        ..Default::default()
+    });
+    let side_cam = b.add_node(NodeDesc {
+        name: Some("side camera".into()),
+        camera: Some(side),
+        translation: Vec3::new(6.0, 1.5, 0.0),
+        rotation: Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
+        ..Default::default()
+    });
+    let bulb = b.add_node(NodeDesc {
+        name: Some("bulb".into()),
+        light: Some(point),
+        translation: Vec3::new(2.0, 4.0, 3.0),
+        ..Default::default()
+    });
+    let sun_node = b.add_node(NodeDesc {
+        name: Some("sun".into()),
+        light: Some(sun),
+        rotation: Quat::from_rotation_x(-1.0) * Quat::from_rotation_y(0.5),
+        ..Default::default()
+    });
+    for n in [room, glass_node, mover, camera, side_cam, bulb, sun_node] {
+        b.add_root(n);
+    }
+    b.add_animation(AnimationDesc {
+        name: Some("move".into()),
+        channels: vec![
+            ChannelDesc {
+                node: mover,
+                property: Property::Translation,
+                interpolation: Interpolation::Linear,
+                times: vec![0.0, 1.0],
+                values: vec![1.0, 0.4, 0.5, 0.0, 1.2, 1.0],
+            },
+            ChannelDesc {
+                node: mover,
+                property: Property::Rotation,
+                interpolation: Interpolation::Linear,
+                times: vec![0.0, 1.0],
+                values: [
+                    Quat::IDENTITY.to_array(),
+                    Quat::from_rotation_y(1.5).to_array(),
+                ]
+                .concat(),
+            },
+            ChannelDesc {
+                node: camera,
+                property: Property::Translation,
+                interpolation: Interpolation::Linear,
+                times: vec![0.0, 1.0],
+                values: vec![0.0, 2.0, 6.0, 0.8, 2.2, 5.5],
+            },
+        ],
+    });
+    b.fps = Some(24.0);
+    b
+}
+
+/// Writes the test scene as `dir/scene.glb`.
+pub fn write_scene(dir: &Path) -> PathBuf {
+    let p = dir.join("scene.glb");
+    builder().write(&p).unwrap();
+    p
+}
+
+/// Every regular file under `dir` (recursively), relative, sorted.
+pub fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(rd) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p.strip_prefix(dir).unwrap().to_path_buf());
+            }
+        }
+    }
+    out.sort();
+    out
+}
