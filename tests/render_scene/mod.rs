@@ -48,6 +48,7 @@ pub fn cube(h: Vec3, material: u32) -> PrimitiveDesc {
         indices: Some(indices),
         material: Some(material),
         morph_targets: vec![],
+        morph_normals: vec![],
     }
 }
 
@@ -72,6 +73,7 @@ pub fn quad(centre: Vec3, a: Vec3, b: Vec3, material: u32) -> PrimitiveDesc {
         indices: Some(vec![0, 1, 2, 0, 2, 3]),
         material: Some(material),
         morph_targets: vec![],
+        morph_normals: vec![],
     }
 }
 
