@@ -3,6 +3,7 @@
 
 mod bake;
 mod convert;
+mod demo;
 mod generate;
 mod inspect;
 mod progress;
@@ -31,6 +32,8 @@ pub enum Command {
     Inspect(inspect::Args),
     /// Render a scene's animation to an EXR sequence (Whitted shading).
     Render(Box<render::Args>),
+    /// Render the built-in museum demo (no input needed) into a folder.
+    Demo(demo::Args),
     /// Convert a BART .aff / .nff scene to glTF 2.0 (.glb or .gltf), keyframes included.
     Convert(convert::Args),
     /// Write a built-in scene to a file (museum as glTF, animart as AFF).
@@ -44,6 +47,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bake(a) => bake::run(a),
         Command::Inspect(a) => inspect::run(a),
         Command::Convert(a) => convert::run(a),
+        Command::Demo(a) => demo::run(a),
         Command::Generate(a) => generate::run(a),
         Command::Render(a) => render::run(*a),
     }

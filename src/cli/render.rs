@@ -1,7 +1,7 @@
 //! `subfield render SCENE [--baked FILE.psf] -o PATTERN [...]`: a thin shell over
 //! `subfield::render::render_sequence` (flags as DESIGN.md §4 fixes them).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{bail, Context};
@@ -141,6 +141,18 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let opts = options(&a)?;
     super::set_threads(a.threads)?;
     let scene = Scene::load(&a.scene)?;
+    drive(&scene, &a.scene, &opts, a.quiet)
+        .with_context(|| format!("cannot render {}", a.scene.display()))?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Renders with progress and a closing report (shared with `subfield demo`).
+pub fn drive(
+    scene: &Scene,
+    label: &Path,
+    opts: &RenderOptions,
+    quiet: bool,
+) -> anyhow::Result<render::RenderSummary> {
     let mut bar: Option<Progress> = None;
     // Messages wait until every check has passed, so that an error is the only line.
     let mut pending: Vec<String> = scene
@@ -149,11 +161,11 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         .map(|w| format!("warning: {w}"))
         .collect();
     let mut done = 0u64;
-    let summary = render::render_sequence(&scene, &opts, &mut |e| match e {
+    let summary = render::render_sequence(scene, opts, &mut |e| match e {
         RenderEvent::Planned(p) => {
             pending.push(format!(
                 "{}: {}; frames {}..{} at {} fps, {} to render, {}x{} at {} spp",
-                a.scene.display(),
+                label.display(),
                 p.split,
                 p.range.start,
                 p.range.end,
@@ -178,14 +190,14 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
                 },
                 seconds
             ));
-            if !a.quiet {
+            if !quiet {
                 for line in pending.drain(..) {
                     eprintln!("{line}");
                 }
             }
         }
         RenderEvent::Frame(f) => {
-            let b = bar.get_or_insert_with(|| Progress::new("frames", f.total as u64, a.quiet));
+            let b = bar.get_or_insert_with(|| Progress::new("frames", f.total as u64, quiet));
             done += 1;
             let extra = match &f.stats {
                 Some(s) => {
@@ -201,16 +213,15 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             };
             b.set(done, &extra);
         }
-    })
-    .with_context(|| format!("cannot render {}", a.scene.display()))?;
-    if !a.quiet {
+    })?;
+    if !quiet {
         let n = summary.rendered.max(1) as f64;
         let per = |f: fn(&render::FrameStats) -> f64| summary.frames.iter().map(f).sum::<f64>() / n;
         let line = format!(
             "rendered {} frames ({} skipped as complete) to {} in {:.2} s; per frame: update {:.1} ms, trace {:.1} ms, shade {:.1} ms, write {:.1} ms",
             summary.rendered,
             summary.skipped,
-            a.output.display(),
+            opts.output.display(),
             summary.wall.as_secs_f64(),
             per(|s| s.update_ms),
             per(|s| s.trace_ms),
@@ -225,5 +236,5 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             None => eprintln!("{line}"),
         }
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(summary)
 }

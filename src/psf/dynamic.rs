@@ -82,6 +82,12 @@ impl DynamicLayer {
         Self::with_params(*static_psf.params()).expect("a built PSF has valid parameters")
     }
 
+    /// An empty layer sized for `n` moving triangles ([`PsfParams::for_triangles`]).
+    pub fn for_triangles(n: usize) -> DynamicLayer {
+        Self::with_params(PsfParams::for_triangles(n))
+            .expect("for_triangles gives valid parameters")
+    }
+
     /// An empty layer with its own direction level and tile count.
     pub fn with_params(params: PsfParams) -> Result<DynamicLayer, PsfError> {
         params.validate()?;

@@ -439,7 +439,10 @@ pub fn render_sequence(
             )?
             .psf
         }
-        None => Psf::build(&static_soup.positions, &PsfParams::default())?,
+        None => Psf::build(
+            &static_soup.positions,
+            &PsfParams::for_triangles(static_soup.len()),
+        )?,
     };
     let static_seconds = clock.elapsed().as_secs_f64();
 
@@ -513,7 +516,8 @@ pub fn render_sequence(
             }
         };
 
-        let mut dl = DynamicLayer::new(&psf);
+        // The moving triangles get their own grids, sized for their count like a bake.
+        let mut dl = DynamicLayer::for_triangles(plan.split.dynamic_triangles);
         let mut dyn_soup = TriangleSoup::new();
         let mut preview_pending = preview_frame;
         for (index, &frame) in plan.frames.iter().enumerate() {
