@@ -46,16 +46,17 @@ fn peak_rss_mib() -> f64 {
 
 fn update(frames: usize, dyn_params: &[PsfParams]) {
     println!("\n## update: ms per frame (median of {frames}), unstructured motion");
-    print!("| moving triangles |");
+    print!("| moving triangles | subfield (for_triangles) |");
     for p in dyn_params {
         print!(" subfield L{} T{} |", p.level, p.tiles);
     }
     println!(" obvhs rebuild (fastest) | obvhs rebuild (medium) | ratio |");
-    println!("|---|{}---|---|---|", "---|".repeat(dyn_params.len()));
+    println!("|---|---|{}---|---|---|", "---|".repeat(dyn_params.len()));
     for n in [1_000usize, 16_384, 100_000] {
         let mut tris = Vec::new();
         let mut ours = Vec::new();
-        for p in dyn_params {
+        let auto = PsfParams::for_triangles(n);
+        for p in std::iter::once(&auto).chain(dyn_params) {
             let mut layer = DynamicLayer::with_params(*p).unwrap();
             let mut times = Vec::new();
             for f in 0..frames + 2 {
@@ -96,7 +97,7 @@ fn update(frames: usize, dyn_params: &[PsfParams]) {
             peer[0] / ours[0]
         );
     }
-    println!("(ratio: obvhs fastest rebuild time / subfield update time with the first parameters; > 1 means subfield is faster)");
+    println!("(ratio: obvhs fastest rebuild time / subfield update time with the parameters the renderer uses, PsfParams::for_triangles(n): level 1, 32 tiles at 1k, 64 at 16k, 128 at 100k; > 1 means subfield is faster)");
 }
 
 /// Per-frame figures of one side.
@@ -140,21 +141,23 @@ fn secondary(
     (shadow, reflect)
 }
 
-fn frame(frames: usize, dyn_params: PsfParams) {
+fn frame(frames: usize, dyn_params: Option<PsfParams>) {
     let stat = common::room(10_000);
     let light = Vec3::new(0.0, 5.5, 0.0);
     let primary = common::camera_rays(320, 240);
     println!(
-        "\n## frame: {} static triangles + moving (dynamic layer L{} T{}); ms per frame (median of {frames}); 320x240 primary + shadow + reflection",
-        stat.len(), dyn_params.level, dyn_params.tiles
+        "\n## frame: {} static triangles + moving (dynamic layer: {}); ms per frame (median of {frames}); 320x240 primary + shadow + reflection",
+        stat.len(),
+        dyn_params.map_or("for_triangles(n), as the renderer".to_string(), |p| format!("L{} T{}", p.level, p.tiles))
     );
     println!("| moving | side | update | primary | shadow | reflection | frame | rays | Mrays/s (trace) |");
     println!("|---|---|---|---|---|---|---|---|---|");
-    let psf = Psf::build(&stat, &PsfParams::default()).unwrap();
+    let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).unwrap();
     let st_bvh = common::Obvhs::build(&stat);
     let nstat = stat.len() as u32;
     for n in [1_000usize, 16_384, 100_000] {
-        let mut layer = DynamicLayer::with_params(dyn_params).unwrap();
+        let mut layer =
+            DynamicLayer::with_params(dyn_params.unwrap_or(PsfParams::for_triangles(n))).unwrap();
         let (mut ours, mut peer) = (FrameTimes::default(), FrameTimes::default());
         let mut tris = Vec::new();
         let mut nrays = 0usize;
@@ -292,35 +295,30 @@ fn main() {
                 default,
                 PsfParams {
                     level: 1,
-                    tiles: 64,
-                },
-                PsfParams {
-                    level: 1,
                     tiles: 256,
                 },
                 PsfParams {
                     level: 0,
-                    tiles: 128,
+                    tiles: 64,
                 },
             ],
         );
     }
     if want("frame") {
         for p in [
-            default,
-            PsfParams {
-                level: 1,
-                tiles: 64,
-            },
-            PsfParams {
+            None,
+            Some(PsfParams {
                 level: 0,
                 tiles: 64,
-            },
+            }),
         ] {
             frame(frames, p);
         }
     }
     if want("memory") {
-        memory(if quick { 100 } else { 1000 }, default);
+        memory(
+            if quick { 100 } else { 1000 },
+            PsfParams::for_triangles(16_384),
+        );
     }
 }
