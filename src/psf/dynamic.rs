@@ -274,12 +274,13 @@ impl DynSubfield {
         let (slots, raw, touched) = (&mut self.slots, &mut self.raw, &mut self.touched);
         raw.clear();
         touched.clear();
-        // Room for a quarter more entries than last frame: buffers grow to the motion's
-        // peak with headroom once, rather than doubling whenever a frame sets a record.
+        // Buffers keep headroom over last frame's count: grown to 5/4 of it whenever less
+        // than 9/8 is left, so they settle after the first frames instead of doubling
+        // whenever a frame sets a record.
         let headroom = |n: usize| n + n / 4;
-        let want = headroom(self.entries.len());
-        if raw.capacity() < want {
-            raw.reserve_exact(want);
+        let last = self.entries.len();
+        if raw.capacity() < last + last / 8 {
+            raw.reserve_exact(headroom(last));
         }
         for (i, t) in tris.iter().enumerate() {
             self.frame
@@ -314,6 +315,9 @@ impl DynSubfield {
         self.entries.clear();
         if self.entries.capacity() < raw.len() {
             self.entries.reserve_exact(headroom(raw.len()));
+        }
+        if touched.capacity() < touched.len() + touched.len() / 8 {
+            touched.reserve_exact(touched.len() / 4);
         }
         self.entries.resize(raw.len(), Entry::default());
         for (t, e) in raw.iter() {
