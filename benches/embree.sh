@@ -115,24 +115,25 @@ if e["frames"] != s["frames"] or et["primary_rays"] != st["primary_rays"]:
     print("WARNING: the sides traced different frame or primary ray counts")
 f2 = lambda x: f"{x:.2f}"
 print("| side | static build ms | eval ms/frame | update ms/frame | primary Mrays/s | shadow Mrays/s "
-      "| reflection Mrays/s | ms/frame | primary hits | dynamic hits | shadows occluded | reflection hits |")
-print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+      "| reflection Mrays/s | ms/frame | update + trace ms/frame | primary hits | dynamic hits | shadows occluded | reflection hits |")
+print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 for name, _, m, t in sides:
     print(f"| {name} | {m['static_build_ms']:.0f} | {f2(m['mean_eval_ms'])} | {f2(m['mean_update_ms'])} "
           f"| {f2(m['primary_mrays_s'])} | {f2(m['shadow_mrays_s'])} | {f2(m['reflect_mrays_s'])} "
-          f"| {f2(m['mean_frame_ms'])} | {t['primary_hits']} | {t['dynamic_hits']} "
+          f"| {f2(m['mean_frame_ms'])} | {f2(m['mean_update_ms'] + m['mean_trace_ms'])} | {t['primary_hits']} | {t['dynamic_hits']} "
           f"| {t['shadow_occluded']} | {t['reflect_hits']} |")
 r = lambda a, b: f"{a / b:.2f}" if b else "n/a"
 print(f"| subfield / Embree | {r(s['static_build_ms'], e['static_build_ms'])} "
       f"| {r(s['mean_eval_ms'], e['mean_eval_ms'])} | **{r(s['mean_update_ms'], e['mean_update_ms'])}** "
       f"| {r(s['primary_mrays_s'], e['primary_mrays_s'])} | {r(s['shadow_mrays_s'], e['shadow_mrays_s'])} "
       f"| {r(s['reflect_mrays_s'], e['reflect_mrays_s'])} | **{r(s['mean_frame_ms'], e['mean_frame_ms'])}** "
+      f"| {r(s['mean_update_ms'] + s['mean_trace_ms'], e['mean_update_ms'] + e['mean_trace_ms'])} "
       f"| {r(st['primary_hits'], et['primary_hits'])} | {r(st['dynamic_hits'], et['dynamic_hits'])} "
       f"| {r(st['shadow_occluded'], et['shadow_occluded'])} | {r(st['reflect_hits'], et['reflect_hits'])} |")
 print()
 print(f"{s['frames']} frames, {st['primary_rays'] // s['frames']} primary rays per frame. Time ratios "
-      "(build, eval, update, ms/frame): <= 1.0 means subfield is as fast or faster; Mrays/s ratios: "
-      ">= 1.0 means subfield is faster. eval = posing the moving triangles (numpy on the Embree side).")
+      "(build, eval, update, ms/frame, update + trace): <= 1.0 means subfield is as fast or faster; Mrays/s ratios: "
+      ">= 1.0 means subfield is faster. eval = posing the moving triangles (numpy on the Embree side); ms/frame = eval + update + trace.")
 PY
 done
 echo
