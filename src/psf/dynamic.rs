@@ -23,8 +23,10 @@ use crate::geometry::{intersect_triangle, Aabb, Hit, Intersector, Ray, RayPre};
 /// Triangles spanning at most this many tiles are listed in each with their whole depth
 /// range, unclipped. `cargo bench --bench dynamic -- update` (16,384 moving triangles,
 /// level 1, 128 tiles, 2 cores): 21.5 ms per update with exact clipping everywhere, 8.5
-/// ms with this.
-const COARSE: u32 = 4;
+/// ms with a limit of 4 tiles. On the museum (`cargo bench --bench embree`, 160x120, every
+/// 30th frame), where gathered shapes make triangles span many small tiles, a limit of 4
+/// left frames at 18-27 ms; 16 keeps them under about 10 ms, tracing no slower.
+const COARSE: u32 = 16;
 
 /// Moving triangles, re-inserted by [`DynamicLayer::update`] each frame.
 #[derive(Debug)]
