@@ -5,6 +5,7 @@
 //! reach back up.
 
 pub mod aff;
+pub mod atomic;
 pub mod format;
 pub mod geometry;
 pub mod museum;

@@ -2,7 +2,7 @@
 //! [--fps R] [--seed S]` and `subfield generate animart --triangles N -o FILE.aff`: built-in
 //! scenes written to files (one subcommand per scene).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
@@ -117,7 +117,7 @@ fn animart(a: AnimartArgs) -> anyhow::Result<ExitCode> {
         seed: a.seed,
         frames: a.frames,
     });
-    write_atomically(&a.output, text.as_bytes())
+    subfield::atomic::write_atomically(&a.output, text.as_bytes())
         .with_context(|| format!("cannot write {}", a.output.display()))?;
     if !a.quiet {
         eprintln!(
@@ -129,31 +129,4 @@ fn animart(a: AnimartArgs) -> anyhow::Result<ExitCode> {
         );
     }
     Ok(ExitCode::SUCCESS)
-}
-
-/// Temporary file in the same folder, fsync, rename.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    use std::io::Write;
-    let folder = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let name = path
-        .file_name()
-        .ok_or_else(|| std::io::Error::other("no file name"))?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    tmp_name.push(format!(".tmp-{}", std::process::id()));
-    let tmp = folder.join(tmp_name);
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
 }

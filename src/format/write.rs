@@ -3,10 +3,7 @@
 //! atomically.
 
 use std::borrow::Cow;
-use std::fs::{self, File, OpenOptions};
-use std::io::Write;
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::path::Path;
 
 use rayon::prelude::*;
 use serde::Serialize;
@@ -185,41 +182,7 @@ pub fn write_psf(
 }
 
 fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), FormatError> {
-    let name = path
-        .file_name()
-        .ok_or_else(|| FormatError::io(path, std::io::ErrorKind::InvalidInput.into()))?;
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let tmp = dir.join(format!(
-        ".{}.{}-{}.tmp",
-        name.to_string_lossy(),
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let result = (|| {
-        let mut f = OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&tmp)
-            .map_err(|e| FormatError::io(&tmp, e))?;
-        f.write_all(bytes).map_err(|e| FormatError::io(&tmp, e))?;
-        f.sync_all().map_err(|e| FormatError::io(&tmp, e))?;
-        drop(f);
-        fs::rename(&tmp, path).map_err(|e| FormatError::io(path, e))?;
-        #[cfg(unix)]
-        File::open(&dir)
-            .and_then(|d| d.sync_all())
-            .map_err(|e| FormatError::io(&dir, e))?;
-        Ok(())
-    })();
-    if result.is_err() {
-        // Best effort: the temporary may not exist (create failed) or be gone (renamed).
-        let _ = fs::remove_file(&tmp);
-    }
-    result
+    crate::atomic::write_atomically(path, bytes).map_err(|e| FormatError::io(path, e))
 }
 
 #[cfg(test)]

@@ -7,7 +7,6 @@
 //! mismatch, a non-finite number) rather than write a file the importer would reject.
 //! Files are written atomically: a temporary file in the same folder, fsync, rename.
 
-use std::io::Write;
 use std::path::Path;
 
 use glam::{Quat, Vec2, Vec3, Vec4};
@@ -809,40 +808,11 @@ fn encode_base64(data: &[u8]) -> String {
     out
 }
 
-/// Temporary file in the same folder, fsync, rename: readers see the old file or the
-/// whole new one, never a part.
 fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), SceneError> {
-    let io = |source| SceneError::WriteIo {
+    crate::atomic::write_atomically(path, bytes).map_err(|source| SceneError::WriteIo {
         path: path.to_path_buf(),
         source,
-    };
-    let folder = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let name = path
-        .file_name()
-        .ok_or_else(|| io(std::io::Error::other("no file name")))?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    tmp_name.push(format!(".tmp-{}", std::process::id()));
-    let tmp = folder.join(tmp_name);
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)?;
-        // Persist the rename itself; not every platform can open a folder, so best effort.
-        if let Ok(dir) = std::fs::File::open(folder) {
-            let _ = dir.sync_all();
-        }
-        Ok(())
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.map_err(io)
+    })
 }
 
 #[cfg(test)]
