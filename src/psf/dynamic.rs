@@ -17,7 +17,9 @@ use rayon::prelude::*;
 
 use super::stats::{Counter, NoCount, RayStats};
 use super::traverse::walk_tiles;
-use super::{margin_for, DirectionTable, Entry, GridFrame, Psf, PsfError, PsfParams};
+use super::{
+    check_triangles, margin_for, DirectionTable, Entry, GridFrame, Psf, PsfError, PsfParams,
+};
 use crate::geometry::{intersect_triangle, Aabb, Hit, Intersector, Ray, RayPre};
 
 /// Triangles spanning at most this many tiles are listed in each with their whole depth
@@ -126,23 +128,7 @@ impl DynamicLayer {
     pub fn update(&mut self, tris: &[[Vec3; 3]]) -> Result<(), PsfError> {
         self.tris.clear();
         self.next_generation();
-        if tris.len() > u32::MAX as usize {
-            return Err(PsfError::TooManyTriangles {
-                count: tris.len(),
-                max: u32::MAX as usize,
-            });
-        }
-        for (i, t) in tris.iter().enumerate() {
-            for (k, v) in t.iter().enumerate() {
-                if !v.is_finite() {
-                    return Err(PsfError::NonFinite {
-                        triangle: i,
-                        vertex: k,
-                        value: v.to_array(),
-                    });
-                }
-            }
-        }
+        check_triangles(tris)?;
         self.tris.extend_from_slice(tris);
         let bounds = Aabb::from_triangles(tris);
         self.margin = margin_for(&bounds);

@@ -120,6 +120,29 @@ pub struct Psf {
     table: DirectionTable,
 }
 
+/// Refuses more triangles than a `u32` can number, and non-finite coordinates (naming
+/// the triangle and vertex).
+pub(crate) fn check_triangles(tris: &[[Vec3; 3]]) -> Result<(), PsfError> {
+    if tris.len() > u32::MAX as usize {
+        return Err(PsfError::TooManyTriangles {
+            count: tris.len(),
+            max: u32::MAX as usize,
+        });
+    }
+    for (i, t) in tris.iter().enumerate() {
+        for (k, v) in t.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(PsfError::NonFinite {
+                    triangle: i,
+                    vertex: k,
+                    value: v.to_array(),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The rounding allowance for a scene within `bounds`: 1e-5 of its scale (the largest
 /// coordinate magnitude or extent), some 80 float ulps. Raster, depth ranges and the
 /// traversal's early exit all widen by it, so the PSF never misses a hit that the
@@ -143,23 +166,7 @@ impl Psf {
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<Psf, PsfError> {
         params.validate()?;
-        if tris.len() > u32::MAX as usize {
-            return Err(PsfError::TooManyTriangles {
-                count: tris.len(),
-                max: u32::MAX as usize,
-            });
-        }
-        for (i, t) in tris.iter().enumerate() {
-            for (k, v) in t.iter().enumerate() {
-                if !v.is_finite() {
-                    return Err(PsfError::NonFinite {
-                        triangle: i,
-                        vertex: k,
-                        value: v.to_array(),
-                    });
-                }
-            }
-        }
+        check_triangles(tris)?;
         let bounds = Aabb::from_triangles(tris);
         let margin = margin_for(&bounds);
         let dirs = subfield_directions(params.level);
