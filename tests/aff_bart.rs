@@ -286,3 +286,85 @@ fn cli_generate_is_deterministic_and_convert_refuses_bad_input() {
     ]);
     assert!(!out.status.success());
 }
+
+/// Z (depth) channel of an EXR, read with the `exr` crate.
+fn read_z(path: &Path) -> Vec<f32> {
+    let img = exr::prelude::read_first_flat_layer_from_file(path).unwrap();
+    img.layer_data
+        .channel_data
+        .list
+        .iter()
+        .find(|c| c.name.to_string() == "Z")
+        .expect("a Z channel")
+        .sample_data
+        .values_as_f32()
+        .collect()
+}
+
+/// Rendering the `.aff` and its converted `.glb` gives the same `Z` at several frames
+/// (museum5: moving `tpa` triangles and the animated camera path both matter).
+#[test]
+fn aff_and_converted_glb_render_the_same_depth() {
+    let Some(b) = bart() else { return };
+    let dir = out_dir("render-z");
+    let aff = b.join("museum/museum5.aff");
+    let glb = dir.join("museum5.glb");
+    let out = subfield(&[
+        "convert",
+        aff.to_str().unwrap(),
+        "-o",
+        glb.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for (name, scene) in [("aff", &aff), ("glb", &glb)] {
+        for frames in ["0..1", "137..138", "299..300"] {
+            let pattern = dir.join(format!("{name}/f.####.exr"));
+            let out = subfield(&[
+                "render",
+                scene.to_str().unwrap(),
+                "-o",
+                pattern.to_str().unwrap(),
+                "--frames",
+                frames,
+                "--size",
+                "64x48",
+                "--aov",
+                "depth",
+                "--max-depth",
+                "1",
+                "--quiet",
+            ]);
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+    }
+    for f in ["0000", "0137", "0299"] {
+        let a = read_z(&dir.join(format!("aff/f.{f}.exr")));
+        let g = read_z(&dir.join(format!("glb/f.{f}.exr")));
+        assert_eq!(a.len(), 64 * 48);
+        let hits = a.iter().filter(|z| z.is_finite()).count();
+        assert!(
+            hits > a.len() / 2,
+            "frame {f}: only {hits} pixels hit anything"
+        );
+        let worst = a
+            .iter()
+            .zip(&g)
+            .map(|(x, y)| {
+                if x == y {
+                    0.0
+                } else {
+                    (x - y).abs() / x.abs().max(1.0)
+                }
+            })
+            .fold(0f32, f32::max);
+        assert!(worst <= 1e-5, "frame {f}: Z differs by {worst} (relative)");
+    }
+}

@@ -225,7 +225,11 @@ fn a_killed_run_resumed_gives_the_same_frames() {
     let mut resume = args(&part);
     resume.push("--resume".into());
     ok(&resume.iter().map(|a| a.as_str()).collect::<Vec<_>>());
-    assert_eq!(visible(&dir.join("part")), want, "killed after {done_before} frames");
+    assert_eq!(
+        visible(&dir.join("part")),
+        want,
+        "killed after {done_before} frames"
+    );
 }
 
 #[test]
