@@ -16,11 +16,11 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use super::stats::{Counter, NoCount, RayStats};
-use super::traverse::walk_tiles;
+use super::traverse::{test_candidate, walk_tiles};
 use super::{
     check_triangles, margin_for, DirectionTable, Entry, GridFrame, Psf, PsfError, PsfParams,
 };
-use crate::geometry::{intersect_triangle, Aabb, Hit, Intersector, Ray, RayPre};
+use crate::geometry::{Aabb, Hit, Intersector, Ray, RayPre};
 
 /// Triangles spanning at most this many tiles are listed in each with their whole depth
 /// range, unclipped. `cargo bench --bench dynamic -- update` (16,384 moving triangles,
@@ -228,16 +228,7 @@ impl DynamicLayer {
                     continue;
                 }
                 count.candidate();
-                let t_max = best.map_or(ray.t_max, |b| b.t);
-                if let Some((t, u, v)) =
-                    intersect_triangle(&pre, &tris[e.tri as usize], ray.t_min, t_max)
-                {
-                    let hit = Hit {
-                        t,
-                        tri: e.tri,
-                        u,
-                        v,
-                    };
+                if let Some(hit) = test_candidate(&pre, tris, e.tri, ray, &best) {
                     if ANY {
                         best = Some(hit);
                         return false;

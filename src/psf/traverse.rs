@@ -3,7 +3,7 @@
 //! far-away origins lose nothing), search each tile's BSP over the ray's depth interval
 //! there, and stop as soon as the best hit lies before the exit of the current tile.
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 
 use super::stats::{Counter, NoCount, RayStats};
 use super::{GridFrame, Psf};
@@ -63,6 +63,25 @@ pub(crate) fn walk_tiles(
             ty += dty;
         }
     }
+}
+
+/// Tests triangle `tri` against the ray between `t_min` and the best hit so far (or
+/// `t_max`): the one candidate test both layers share.
+#[inline(always)]
+pub(crate) fn test_candidate(
+    pre: &RayPre,
+    tris: &[[Vec3; 3]],
+    tri: u32,
+    ray: &Ray,
+    best: &Option<Hit>,
+) -> Option<Hit> {
+    let t_max = best.map_or(ray.t_max, |b| b.t);
+    intersect_triangle(pre, &tris[tri as usize], ray.t_min, t_max).map(|(t, u, v)| Hit {
+        t,
+        tri,
+        u,
+        v,
+    })
 }
 
 #[inline]
@@ -161,16 +180,7 @@ impl Psf {
                         continue;
                     }
                     count.candidate();
-                    let t_max = best.map_or(ray.t_max, |b| b.t);
-                    if let Some((t, u, v)) =
-                        intersect_triangle(&pre, &tris[e.tri as usize], ray.t_min, t_max)
-                    {
-                        let hit = Hit {
-                            t,
-                            tri: e.tri,
-                            u,
-                            v,
-                        };
+                    if let Some(hit) = test_candidate(&pre, tris, e.tri, ray, &best) {
                         if ANY {
                             best = Some(hit);
                             return false;
