@@ -2,7 +2,7 @@
 //! `../shared/peers/embree_anchor.py`, on the same glTF file, in our tracer.
 //!
 //! `cargo bench --bench embree -- SCENE.glb [--frames A:B[:S] | --frames F1,F2,..]
-//! [--width W] [--height H]` (defaults `0:300:30`, 640x480, as the harness's).
+//! [--width W] [--height H] [--psf LEVEL:TILES] [--dyn LEVEL:TILES]` (defaults `0:300:30`, 640x480, as the harness's).
 //! `benches/embree.sh` runs both sides and prints the table.
 //!
 //! What it mirrors, point by point (read off the harness's code):
@@ -40,9 +40,46 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
+use subfield::psf::RayStats;
 use subfield::render::CameraModel;
 use subfield::scene::{ClipSelection, LightKind, Scene, TriangleSoup};
 use subfield::{DynamicLayer, Hit, Intersector, Psf, PsfParams, Ray};
+
+/// Untimed, on the warm-up frame: the work per ray of each kind in each layer (tiles
+/// walked, entries scanned, candidates tested), as a `{"work": ..}` line, which
+/// `benches/embree.sh` passes over; for the perf log.
+fn work(psf: &Psf, layer: &DynamicLayer, kinds: [&[Ray]; 3]) {
+    let mut out = Map::new();
+    for (name, rays) in ["primary", "shadow", "reflect"].iter().zip(kinds) {
+        let (mut st, mut dy) = (RayStats::default(), RayStats::default());
+        for ray in rays {
+            let any = *name == "shadow";
+            let mut r = *ray;
+            if any {
+                if psf.occluded_counted(ray, &mut st) {
+                    continue;
+                }
+                layer.occluded_counted(&r, &mut dy);
+            } else {
+                if let Some(h) = psf.intersect_counted(ray, &mut st) {
+                    r.t_max = h.t;
+                }
+                layer.intersect_counted(&r, &mut dy);
+            }
+        }
+        let per = |s: &RayStats| {
+            let n = s.rays.max(1) as f64;
+            json!({"rays": s.rays, "tiles": r3(s.tiles_visited as f64 / n),
+                   "scanned": r3(s.entries_scanned as f64 / n),
+                   "candidates": r3(s.candidates_tested as f64 / n)})
+        };
+        out.insert(
+            name.to_string(),
+            json!({"static": per(&st), "dynamic": per(&dy)}),
+        );
+    }
+    println!("{}", json!({ "work": out }));
+}
 
 fn fail(msg: &str) -> ! {
     eprintln!("embree bench: {msg}");
@@ -54,6 +91,9 @@ struct Args {
     frames: Vec<i64>,
     width: u32,
     height: u32,
+    /// Overrides of the defaults, for parameter sweeps: `--psf L:N`, `--dyn L:N`.
+    psf: Option<PsfParams>,
+    dynamic: Option<PsfParams>,
 }
 
 /// `start:stop[:step]` like Python's `range`, or a comma list.
@@ -86,6 +126,7 @@ fn parse_args() -> Args {
     let mut scene = None;
     let mut frames = "0:300:30".to_string();
     let (mut width, mut height) = (640u32, 480u32);
+    let (mut psf, mut dynamic) = (None, None);
     let mut it = std::env::args().skip(1).filter(|a| a != "--bench");
     while let Some(a) = it.next() {
         let mut val = |name: &str| {
@@ -105,6 +146,24 @@ fn parse_args() -> Args {
                     width = n
                 } else {
                     height = n
+                }
+            }
+            "--psf" | "--dyn" => {
+                let v = val(&a);
+                let p = v
+                    .split_once(':')
+                    .and_then(|(l, n)| {
+                        Some(PsfParams {
+                            level: l.parse().ok()?,
+                            tiles: n.parse().ok()?,
+                        })
+                    })
+                    .filter(|p| p.validate().is_ok())
+                    .unwrap_or_else(|| fail(&format!("{a} {v}: want LEVEL:TILES")));
+                if a == "--psf" {
+                    psf = Some(p)
+                } else {
+                    dynamic = Some(p)
                 }
             }
             _ if a.starts_with('-') => fail(&format!(
@@ -127,6 +186,8 @@ fn parse_args() -> Args {
         frames,
         width,
         height,
+        psf,
+        dynamic,
     }
 }
 
@@ -211,12 +272,17 @@ fn main() {
         .map_or(0.0, |(lo, hi)| (hi - lo).length() as f64);
     let eps = (1e-4 * diag) as f32;
 
-    let params = PsfParams::for_triangles(statics.len());
+    let params = a
+        .psf
+        .unwrap_or_else(|| PsfParams::for_triangles(statics.len()));
     let t = Instant::now();
     let psf = Psf::build(&statics.positions, &params)
         .unwrap_or_else(|e| fail(&format!("baking the static part: {e}")));
     let static_build_ms = ms(t);
-    let mut layer = DynamicLayer::for_triangles(ndyn);
+    let mut layer = match a.dynamic {
+        Some(p) => DynamicLayer::with_params(p).unwrap_or_else(|e| fail(&e.to_string())),
+        None => DynamicLayer::for_triangles(ndyn),
+    };
     let nstat = statics.len() as u32;
 
     let threads = rayon::current_num_threads();
@@ -303,6 +369,9 @@ fn main() {
         r.reflect_rays = reflect.len();
         r.reflect_hits = rhits.iter().flatten().count();
 
+        if fi == 0 {
+            work(&psf, &layer, [&primary, &shadow, &reflect]);
+        }
         println!(
             "{}",
             json!({

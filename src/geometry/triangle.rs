@@ -5,18 +5,17 @@
 //! one of them. Where an edge function is exactly zero in f32 it is recomputed in f64,
 //! as the paper prescribes.
 
-use glam::Vec3;
+use glam::{Mat3A, Vec3, Vec3A};
 
-/// What the test needs from a ray, computed once per ray.
+/// What the test needs from a ray, computed once per ray: the origin and the shear,
+/// as a matrix whose rows pick and shear the coordinates, `(x, y, z)' = (p[kx] - sx
+/// p[kz], p[ky] - sy p[kz], sz p[kz])`. Each row has one or two non-zero entries and
+/// the others exactly 0 or 1, so `m * p` rounds exactly as the scalar formulas do (a
+/// product by 0 or 1 and a sum with 0 are exact), with no indexing by `kx, ky, kz`.
 #[derive(Clone, Copy, Debug)]
 pub struct RayPre {
-    pub org: Vec3,
-    kx: usize,
-    ky: usize,
-    kz: usize,
-    sx: f32,
-    sy: f32,
-    sz: f32,
+    pub org: Vec3A,
+    shear: Mat3A,
 }
 
 impl RayPre {
@@ -35,14 +34,17 @@ impl RayPre {
         if dir[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
+        let (sx, sy, sz) = (dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
+        // Rows of the shear; the matrix is stored by columns.
+        let mut rows = [[0.0f32; 3]; 3];
+        rows[0][kx] = 1.0;
+        rows[0][kz] = -sx;
+        rows[1][ky] = 1.0;
+        rows[1][kz] = -sy;
+        rows[2][kz] = sz;
         RayPre {
-            org,
-            kx,
-            ky,
-            kz,
-            sx: dir[kx] / dir[kz],
-            sy: dir[ky] / dir[kz],
-            sz: 1.0 / dir[kz],
+            org: org.into(),
+            shear: Mat3A::from_cols_array_2d(&rows).transpose(),
         }
     }
 }
@@ -57,17 +59,10 @@ pub fn intersect_triangle(
     t_min: f32,
     t_max: f32,
 ) -> Option<(f32, f32, f32)> {
-    let a = tri[0] - r.org;
-    let b = tri[1] - r.org;
-    let c = tri[2] - r.org;
-    let (kx, ky, kz) = (r.kx, r.ky, r.kz);
-
-    let ax = a[kx] - r.sx * a[kz];
-    let ay = a[ky] - r.sy * a[kz];
-    let bx = b[kx] - r.sx * b[kz];
-    let by = b[ky] - r.sy * b[kz];
-    let cx = c[kx] - r.sx * c[kz];
-    let cy = c[ky] - r.sy * c[kz];
+    let a = r.shear * (Vec3A::from(tri[0]) - r.org);
+    let b = r.shear * (Vec3A::from(tri[1]) - r.org);
+    let c = r.shear * (Vec3A::from(tri[2]) - r.org);
+    let (ax, ay, bx, by, cx, cy) = (a.x, a.y, b.x, b.y, c.x, c.y);
 
     let mut u = cx * by - cy * bx;
     let mut v = ax * cy - ay * cx;
@@ -90,9 +85,7 @@ pub fn intersect_triangle(
         return None;
     }
 
-    let az = r.sz * a[kz];
-    let bz = r.sz * b[kz];
-    let cz = r.sz * c[kz];
+    let (az, bz, cz) = (a.z, b.z, c.z);
     let t_scaled = u * az + v * bz + w * cz;
     let inv = 1.0 / det;
     let t = t_scaled * inv;

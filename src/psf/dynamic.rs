@@ -51,11 +51,81 @@ struct DynSubfield {
     /// Per tile of the largest grid the parameters allow (`tiles × tiles`): its version
     /// `V` and, when current, its run of `entries`.
     slots: Vec<Slot>,
-    /// This frame's entries, grouped by tile (in order of first touch).
-    entries: Vec<Entry>,
+    /// This frame's entries, grouped by tile (in order of first touch), by columns:
+    /// depth ranges apart from triangle numbers, so a query filters a tile's list by
+    /// depth eight entries at a time (`depth_mask`).
+    entries: Entries,
     /// Scratch reused every update: entries in raster order, and the tiles touched.
     raw: Vec<(u32, Entry)>,
     touched: Vec<u32>,
+}
+
+/// Entries by columns.
+#[derive(Debug, Default)]
+struct Entries {
+    zmin: Vec<f32>,
+    zmax: Vec<f32>,
+    tri: Vec<u32>,
+}
+
+impl Entries {
+    fn len(&self) -> usize {
+        self.tri.len()
+    }
+
+    fn capacity(&self) -> usize {
+        self.tri.capacity()
+    }
+
+    fn clear(&mut self) {
+        self.zmin.clear();
+        self.zmax.clear();
+        self.tri.clear();
+    }
+
+    fn reserve_exact(&mut self, n: usize) {
+        self.zmin.reserve_exact(n);
+        self.zmax.reserve_exact(n);
+        self.tri.reserve_exact(n);
+    }
+
+    fn resize(&mut self, n: usize) {
+        self.zmin.resize(n, 0.0);
+        self.zmax.resize(n, 0.0);
+        self.tri.resize(n, 0);
+    }
+
+    #[inline]
+    fn set(&mut self, i: usize, e: &Entry) {
+        self.zmin[i] = e.zmin;
+        self.zmax[i] = e.zmax;
+        self.tri[i] = e.tri;
+    }
+}
+
+/// Entries filtered by depth at a time: one bit each in `depth_mask`.
+const LANES: usize = 8;
+
+/// Bit `j` set where entry `j` of the chunk (at most `LANES` long) overlaps `[lo, hi]`.
+/// Branch-free, so a full chunk compiles to vector compares.
+#[inline(always)]
+fn depth_mask(zmin: &[f32], zmax: &[f32], lo: f32, hi: f32) -> u32 {
+    if let (Ok(a), Ok(b)) = (
+        <&[f32; LANES]>::try_from(zmin),
+        <&[f32; LANES]>::try_from(zmax),
+    ) {
+        let mut m = 0u32;
+        for j in 0..LANES {
+            m |= ((b[j] >= lo) as u32 & (a[j] <= hi) as u32) << j;
+        }
+        m
+    } else {
+        let mut m = 0u32;
+        for (j, (a, b)) in zmin.iter().zip(zmax).enumerate() {
+            m |= ((*b >= lo) as u32 & (*a <= hi) as u32) << j;
+        }
+        m
+    }
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -103,7 +173,7 @@ impl DynamicLayer {
                 dir,
                 frame: GridFrame::new(dir, &Aabb::EMPTY, 1),
                 slots: vec![Slot::default(); n],
-                entries: Vec::new(),
+                entries: Entries::default(),
                 raw: Vec::new(),
                 touched: Vec::new(),
             })
@@ -192,6 +262,18 @@ impl DynamicLayer {
         st
     }
 
+    /// The closest hit among this frame's triangles, also counting the work done.
+    pub fn intersect_counted(&self, ray: &Ray, stats: &mut RayStats) -> Option<Hit> {
+        stats.rays += 1;
+        self.trace::<false, _>(ray, stats)
+    }
+
+    /// Any hit among this frame's triangles, also counting the work done.
+    pub fn occluded_counted(&self, ray: &Ray, stats: &mut RayStats) -> bool {
+        stats.rays += 1;
+        self.trace::<true, _>(ray, stats).is_some()
+    }
+
     fn trace<const ANY: bool, C: Counter>(&self, ray: &Ray, count: &mut C) -> Option<Hit> {
         if self.tris.is_empty() || !ray.is_valid() {
             return None;
@@ -217,24 +299,32 @@ impl DynamicLayer {
             if slot.version != gv {
                 return true;
             }
-            let list = &sf.entries[slot.start as usize..(slot.start + slot.count) as usize];
-            count.scanned(list.len());
+            let run = slot.start as usize..(slot.start + slot.count) as usize;
+            let (zmin, zmax, ids) = (
+                &sf.entries.zmin[run.clone()],
+                &sf.entries.zmax[run.clone()],
+                &sf.entries.tri[run],
+            );
+            count.scanned(ids.len());
             // The ray's depth interval over this tile, cut at the best hit so far.
             let t_far = best.map_or(t_exit, |b| t_exit.min(b.t as f64 + slack));
             let (za, zb) = (oz + t_enter * dz, oz + t_far * dz);
             let (lo, hi) = ((za.min(zb) as f32) - margin, (za.max(zb) as f32) + margin);
-            for e in list {
-                if e.zmax < lo || e.zmin > hi {
-                    continue;
-                }
-                count.candidate();
-                if let Some(hit) = test_candidate(&pre, tris, e.tri, ray, &best) {
-                    if ANY {
-                        best = Some(hit);
-                        return false;
-                    }
-                    if best.is_none_or(|b| hit.is_closer_than(&b)) {
-                        best = Some(hit);
+            for (k, (cmin, cmax)) in zmin.chunks(LANES).zip(zmax.chunks(LANES)).enumerate() {
+                let mut mask = depth_mask(cmin, cmax, lo, hi);
+                while mask != 0 {
+                    let j = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    count.candidate();
+                    let tri = ids[k * LANES + j];
+                    if let Some(hit) = test_candidate(&pre, tris, tri, ray, &best) {
+                        if ANY {
+                            best = Some(hit);
+                            return false;
+                        }
+                        if best.is_none_or(|b| hit.is_closer_than(&b)) {
+                            best = Some(hit);
+                        }
                     }
                 }
             }
@@ -298,10 +388,10 @@ impl DynSubfield {
         if touched.capacity() < touched.len() + touched.len() / 8 {
             touched.reserve_exact(touched.len() / 4);
         }
-        self.entries.resize(raw.len(), Entry::default());
+        self.entries.resize(raw.len());
         for (t, e) in raw.iter() {
             let slot = &mut slots[*t as usize];
-            self.entries[(slot.start + slot.count) as usize] = *e;
+            self.entries.set((slot.start + slot.count) as usize, e);
             slot.count += 1;
         }
     }
