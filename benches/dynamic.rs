@@ -55,7 +55,7 @@ fn update(frames: usize, dyn_params: &[PsfParams]) {
     for n in [1_000usize, 16_384, 100_000] {
         let mut tris = Vec::new();
         let mut ours = Vec::new();
-        let auto = PsfParams::for_triangles(n);
+        let auto = *DynamicLayer::for_triangles(n).params();
         for p in std::iter::once(&auto).chain(dyn_params) {
             let mut layer = DynamicLayer::with_params(*p).unwrap();
             let mut times = Vec::new();
@@ -97,7 +97,7 @@ fn update(frames: usize, dyn_params: &[PsfParams]) {
             peer[0] / ours[0]
         );
     }
-    println!("(ratio: obvhs fastest rebuild time / subfield update time with the parameters the renderer uses, PsfParams::for_triangles(n): level 1, 32 tiles at 1k, 64 at 16k, 128 at 100k; > 1 means subfield is faster)");
+    println!("(ratio: obvhs fastest rebuild time / subfield update time with the parameters the renderer uses, DynamicLayer::for_triangles(n): level 1, 32 tiles at 1k, 64 at 16k, 128 at 100k; > 1 means subfield is faster)");
 }
 
 /// Per-frame figures of one side.
@@ -156,8 +156,10 @@ fn frame(frames: usize, dyn_params: Option<PsfParams>) {
     let st_bvh = common::Obvhs::build(&stat);
     let nstat = stat.len() as u32;
     for n in [1_000usize, 16_384, 100_000] {
-        let mut layer =
-            DynamicLayer::with_params(dyn_params.unwrap_or(PsfParams::for_triangles(n))).unwrap();
+        let mut layer = DynamicLayer::with_params(
+            dyn_params.unwrap_or(*DynamicLayer::for_triangles(n).params()),
+        )
+        .unwrap();
         let (mut ours, mut peer) = (FrameTimes::default(), FrameTimes::default());
         let mut tris = Vec::new();
         let mut nrays = 0usize;
@@ -318,7 +320,7 @@ fn main() {
     if want("memory") {
         memory(
             if quick { 100 } else { 1000 },
-            PsfParams::for_triangles(16_384),
+            *DynamicLayer::for_triangles(16_384).params(),
         );
     }
 }

@@ -19,9 +19,10 @@ pub struct Args {
     /// The baked file to write (atomically).
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Direction level 0..=4 (4, 10, 34, 130, 514 directions; antipodes share a subfield).
-    #[arg(long, default_value_t = PsfParams::default().level)]
-    pub levels: u32,
+    /// Direction level 0..=4 (4, 10, 34, 130, 514 directions; antipodes share a subfield;
+    /// default: from the triangle count, 2 below 65,536 triangles, else 1).
+    #[arg(long)]
+    pub levels: Option<u32>,
     /// Tiles along the longer side of each subfield's grid, 1..=4096 (default: from the
     /// triangle count, 0.5·√n rounded to a power of two within 4..=256).
     #[arg(long)]
@@ -41,7 +42,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     super::set_threads(a.threads)?;
     // Check the flags before reading the scene; the tile count may wait for it.
     PsfParams {
-        level: a.levels,
+        level: a.levels.unwrap_or(1),
         tiles: a.tiles.unwrap_or(1),
     }
     .validate()?;
@@ -57,11 +58,10 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let split = scene.split(ClipSelection::All);
     say(format!("{}: {}", a.scene.display(), split.summary()));
     let soup = scene.static_triangles(&split);
+    let auto = PsfParams::for_triangles(soup.len());
     let params = PsfParams {
-        level: a.levels,
-        tiles: a
-            .tiles
-            .unwrap_or_else(|| PsfParams::for_triangles(soup.len()).tiles),
+        level: a.levels.unwrap_or(auto.level),
+        tiles: a.tiles.unwrap_or(auto.tiles),
     };
 
     let start = Instant::now();

@@ -52,14 +52,20 @@ impl Default for PsfParams {
 impl PsfParams {
     pub const MAX_TILES: u32 = 4096;
 
-    /// Level 1 and a tile count for `n` triangles: `0.5·√n` rounded to a power of two,
-    /// within 4..=256 (10k → 64, 100k → 128, 1M → 256). `SWEEP_TRIS=10000 cargo bench
-    /// --bench sweep` put 64 tiles ahead of 128 at 10k (camera 0.35× against 0.30× obvhs,
-    /// random 0.27× against 0.14×); at 100k the sweep chose 128.
+    /// Parameters for `n` static triangles. Tiles: `0.5·√n` rounded to a power of two,
+    /// within 4..=256 (10k → 64, 100k → 128, 1M → 256); `SWEEP_TRIS=10000 cargo bench
+    /// --bench sweep` put 64 tiles ahead of 128 at 10k (camera 0.35× against 0.30×
+    /// obvhs, random 0.27× against 0.14×), and at 100k the sweep chose 128. Level: 2
+    /// below 65,536 triangles, else 1. On the museum-class scene (10,284 static +
+    /// 16,384 moving, camera + shadow + mirror rays, `benches/embree.rs --psf L:N`)
+    /// level 2 traced 16% faster than level 1 at 64 tiles (89 against 106 ms a frame at
+    /// 320x240) and level 3 no faster than 2; at 100k the sweep put level 1 ahead on
+    /// random rays, and level 2 costs 3.4 times the bake time and memory there.
     pub fn for_triangles(n: usize) -> PsfParams {
         let want = (0.5 * (n as f64).sqrt()).max(1.0);
         let tiles = (2f64.powf(want.log2().round()) as u32).clamp(4, 256);
-        PsfParams { level: 1, tiles }
+        let level = if n < 65_536 { 2 } else { 1 };
+        PsfParams { level, tiles }
     }
 
     pub fn validate(&self) -> Result<(), PsfError> {
@@ -399,5 +405,7 @@ mod params_tests {
             [4, 4, 64, 128, 256]
         );
         assert!(PsfParams::for_triangles(123_456).validate().is_ok());
+        let l = |n| PsfParams::for_triangles(n).level;
+        assert_eq!([l(36), l(65_535), l(65_536), l(1_000_000)], [2, 2, 1, 1]);
     }
 }
