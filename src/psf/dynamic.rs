@@ -15,7 +15,6 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
-use super::grid::masks_meet;
 use super::stats::{Counter, NoCount, RayStats};
 use super::traverse::{test_candidate, walk_tiles};
 use super::{
@@ -57,7 +56,7 @@ struct DynSubfield {
     /// depth eight entries at a time (`depth_mask`).
     entries: Entries,
     /// Scratch reused every update: entries in raster order, and the tiles touched.
-    raw: Vec<(u32, (Entry, u32))>,
+    raw: Vec<(u32, Entry)>,
     touched: Vec<u32>,
 }
 
@@ -66,8 +65,6 @@ struct DynSubfield {
 struct Entries {
     zmin: Vec<f32>,
     zmax: Vec<f32>,
-    /// The [`sub_mask`](super::grid::sub_mask) of the triangle over the tile.
-    sub: Vec<u32>,
     tri: Vec<u32>,
 }
 
@@ -83,77 +80,52 @@ impl Entries {
     fn clear(&mut self) {
         self.zmin.clear();
         self.zmax.clear();
-        self.sub.clear();
         self.tri.clear();
     }
 
     fn reserve_exact(&mut self, n: usize) {
         self.zmin.reserve_exact(n);
         self.zmax.reserve_exact(n);
-        self.sub.reserve_exact(n);
         self.tri.reserve_exact(n);
     }
 
     fn resize(&mut self, n: usize) {
         self.zmin.resize(n, 0.0);
         self.zmax.resize(n, 0.0);
-        self.sub.resize(n, 0);
         self.tri.resize(n, 0);
     }
 
     #[inline]
-    fn set(&mut self, i: usize, (e, sub): &(Entry, u32)) {
+    fn set(&mut self, i: usize, e: &Entry) {
         self.zmin[i] = e.zmin;
         self.zmax[i] = e.zmax;
-        self.sub[i] = *sub;
         self.tri[i] = e.tri;
     }
 }
 
-/// Entries filtered at a time: one bit each in `filter_mask`.
-const LANES: usize = 4;
+/// Entries filtered by depth at a time: one bit each in `depth_mask`.
+const LANES: usize = 8;
 
-/// Bit `j` set where entry `j` of the chunk (at most `LANES` long) overlaps the depth
-/// interval `[lo, hi]` and its sub-cells meet the ray's footprint `foot` over the tile
-/// ([`masks_meet`]). A full chunk takes SSE2 compares on x86-64 (the compiler left the
-/// scalar form unvectorised, and that form cost more than the candidates it saved).
+/// Bit `j` set where entry `j` of the chunk (at most `LANES` long) overlaps `[lo, hi]`.
+/// Branch-free, so a full chunk compiles to vector compares.
 #[inline(always)]
-fn filter_mask(zmin: &[f32], zmax: &[f32], sub: &[u32], lo: f32, hi: f32, foot: u32) -> u32 {
-    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
-    if let (Ok(a), Ok(b), Ok(s)) = (
+fn depth_mask(zmin: &[f32], zmax: &[f32], lo: f32, hi: f32) -> u32 {
+    if let (Ok(a), Ok(b)) = (
         <&[f32; LANES]>::try_from(zmin),
         <&[f32; LANES]>::try_from(zmax),
-        <&[u32; LANES]>::try_from(sub),
     ) {
-        use std::arch::x86_64::*;
-        // SAFETY: these intrinsics take no pointers (arguments by value, no memory
-        // access) and need only SSE and SSE2, which the `cfg` above guarantees are
-        // enabled for this build (every x86-64 CPU has them); that is all their
-        // `#[target_feature]` asks of the caller.
-        let ok = unsafe {
-            let a = _mm_set_ps(a[3], a[2], a[1], a[0]);
-            let b = _mm_set_ps(b[3], b[2], b[1], b[0]);
-            let depth = _mm_and_ps(
-                _mm_cmpge_ps(b, _mm_set1_ps(lo)),
-                _mm_cmple_ps(a, _mm_set1_ps(hi)),
-            );
-            let s = _mm_set_epi32(s[3] as i32, s[2] as i32, s[1] as i32, s[0] as i32);
-            let x = _mm_and_si128(s, _mm_set1_epi32(foot as i32));
-            let zero = _mm_setzero_si128();
-            let no_col = _mm_cmpeq_epi32(_mm_and_si128(x, _mm_set1_epi32(0xffff)), zero);
-            let no_row = _mm_cmpeq_epi32(_mm_srli_epi32::<16>(x), zero);
-            _mm_movemask_ps(_mm_andnot_ps(
-                _mm_castsi128_ps(_mm_or_si128(no_col, no_row)),
-                depth,
-            ))
-        };
-        return ok as u32;
+        let mut m = 0u32;
+        for j in 0..LANES {
+            m |= ((b[j] >= lo) as u32 & (a[j] <= hi) as u32) << j;
+        }
+        m
+    } else {
+        let mut m = 0u32;
+        for (j, (a, b)) in zmin.iter().zip(zmax).enumerate() {
+            m |= ((*b >= lo) as u32 & (*a <= hi) as u32) << j;
+        }
+        m
     }
-    let mut m = 0u32;
-    for (j, ((a, b), s)) in zmin.iter().zip(zmax).zip(sub).enumerate() {
-        m |= ((*b >= lo && *a <= hi && masks_meet(*s, foot)) as u32) << j;
-    }
-    m
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -281,8 +253,8 @@ impl DynamicLayer {
         };
         for s in &self.subfields {
             st.bytes += s.slots.capacity() * std::mem::size_of::<Slot>()
-                + s.entries.capacity() * (std::mem::size_of::<Entry>() + 4)
-                + s.raw.capacity() * std::mem::size_of::<(u32, (Entry, u32))>()
+                + s.entries.capacity() * std::mem::size_of::<Entry>()
+                + s.raw.capacity() * std::mem::size_of::<(u32, Entry)>()
                 + s.touched.capacity() * 4;
             if self.tris.is_empty() {
                 continue;
@@ -327,17 +299,16 @@ impl DynamicLayer {
         let fd: DVec3 = sf.frame.d.as_dvec3();
         let (oz, dz) = (o.dot(fd), d.dot(fd));
         let mut best: Option<Hit> = None;
-        walk_tiles(&sf.frame, o, d, t0, t1, |tile, t_enter, t_exit, foot| {
+        walk_tiles(&sf.frame, o, d, t0, t1, |tile, t_enter, t_exit| {
             count.tile();
             let slot = sf.slots[tile];
             if slot.version != gv {
                 return true;
             }
             let run = slot.start as usize..(slot.start + slot.count) as usize;
-            let (zmin, zmax, subs, ids) = (
+            let (zmin, zmax, ids) = (
                 &sf.entries.zmin[run.clone()],
                 &sf.entries.zmax[run.clone()],
-                &sf.entries.sub[run.clone()],
                 &sf.entries.tri[run],
             );
             count.scanned(ids.len());
@@ -345,12 +316,8 @@ impl DynamicLayer {
             let t_far = best.map_or(t_exit, |b| t_exit.min(b.t as f64 + slack));
             let (za, zb) = (oz + t_enter * dz, oz + t_far * dz);
             let (lo, hi) = ((za.min(zb) as f32) - margin, (za.max(zb) as f32) + margin);
-            let chunks = zmin
-                .chunks(LANES)
-                .zip(zmax.chunks(LANES))
-                .zip(subs.chunks(LANES));
-            for (k, ((cmin, cmax), csub)) in chunks.enumerate() {
-                let mut mask = filter_mask(cmin, cmax, csub, lo, hi, foot);
+            for (k, (cmin, cmax)) in zmin.chunks(LANES).zip(zmax.chunks(LANES)).enumerate() {
+                let mut mask = depth_mask(cmin, cmax, lo, hi);
                 while mask != 0 {
                     let j = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
@@ -392,7 +359,7 @@ impl DynSubfield {
         }
         for (i, t) in tris.iter().enumerate() {
             self.frame
-                .raster_with(t, margin, COARSE, |tile, zmin, zmax, sub| {
+                .raster_with(t, margin, COARSE, |tile, zmin, zmax| {
                     let slot = &mut slots[tile as usize];
                     if slot.version != gv {
                         *slot = Slot {
@@ -403,12 +370,14 @@ impl DynSubfield {
                         touched.push(tile);
                     }
                     slot.count += 1;
-                    let e = Entry {
-                        tri: i as u32,
-                        zmin,
-                        zmax,
-                    };
-                    raw.push((tile, (e, sub)));
+                    raw.push((
+                        tile,
+                        Entry {
+                            tri: i as u32,
+                            zmin,
+                            zmax,
+                        },
+                    ));
                 });
         }
         let mut at = 0u32;

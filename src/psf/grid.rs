@@ -89,22 +89,20 @@ impl GridFrame {
     /// rectangles are grown by `margin` (world units) on every side, and depths by
     /// `margin` plus a relative allowance for the rounding of the clip, so a triangle
     /// that touches a tile, even at a corner, is listed in it whatever the rounding.
-    pub fn raster(&self, tri: &[Vec3; 3], margin: f32, mut emit: impl FnMut(u32, f32, f32)) {
-        self.raster_with(tri, margin, 1, |t, a, b, _| emit(t, a, b))
+    pub fn raster(&self, tri: &[Vec3; 3], margin: f32, emit: impl FnMut(u32, f32, f32)) {
+        self.raster_with(tri, margin, 1, emit)
     }
 
     /// As [`raster`](Self::raster), but a triangle whose grown bounding rectangle spans at
     /// most `coarse` tiles is listed in all of them with its whole depth range, without
     /// clipping: looser lists, much faster insertion (the dynamic layer, every frame).
-    /// `emit` also gets the [`sub_mask`] of the triangle's grown bounding rectangle in
-    /// that tile.
     #[inline]
     pub fn raster_with(
         &self,
         tri: &[Vec3; 3],
         margin: f32,
         coarse: u32,
-        mut emit: impl FnMut(u32, f32, f32, u32),
+        mut emit: impl FnMut(u32, f32, f32),
     ) {
         let p = [
             self.project(tri[0]),
@@ -122,14 +120,10 @@ impl GridFrame {
         let cell = |x: f32, n: u32| (x.floor() as i64).clamp(0, n as i64 - 1) as u32;
         let (i0, i1) = (cell(lo_u, self.nu), cell(hi_u, self.nu));
         let (j0, j1) = (cell(lo_v, self.nv), cell(hi_v, self.nv));
-        let mask = |i: u32, j: u32| {
-            let (i, j) = (i as f32, j as f32);
-            sub_mask(lo_u - i, hi_u - i, lo_v - j, hi_v - j)
-        };
         if (i1 - i0 + 1) * (j1 - j0 + 1) <= coarse {
             for j in j0..=j1 {
                 for i in i0..=i1 {
-                    emit(j * self.nu + i, zmin - dz, zmax + dz, mask(i, j));
+                    emit(j * self.nu + i, zmin - dz, zmax + dz);
                 }
             }
             return;
@@ -143,37 +137,11 @@ impl GridFrame {
                     j as f32 + 1.0 + m,
                 ];
                 if let Some((a, b)) = clipped_depth_range(&p, rect) {
-                    emit(j * self.nu + i, a - dz, b + dz, mask(i, j));
+                    emit(j * self.nu + i, a - dz, b + dz);
                 }
             }
         }
     }
-}
-
-/// Sub-cells a tile is cut into along each axis for [`sub_mask`].
-pub const SUB: u32 = 16;
-
-/// Which of a tile's `SUB × SUB` sub-cells the rectangle `[u_lo, u_hi] × [v_lo, v_hi]`
-/// (tile units, relative to the tile's corner; clamped into the tile) may touch, as one
-/// bit per column (bits 0..16) and one per row (bits 16..32): two rectangles can only
-/// share a point when their masks share a bit in both halves ([`masks_meet`]).
-#[inline]
-pub fn sub_mask(u_lo: f32, u_hi: f32, v_lo: f32, v_hi: f32) -> u32 {
-    let n = SUB as f32;
-    // Clamped first (`max` and `min` drop NaN): the conversion then needs no saturation.
-    let cell = |x: f32| (x * n).max(0.0).min(n - 1.0) as i32 as u32;
-    let bits = |lo: f32, hi: f32| {
-        let (a, b) = (cell(lo), cell(hi).max(cell(lo)));
-        (2u32 << b).wrapping_sub(1 << a)
-    };
-    bits(u_lo, u_hi) | bits(v_lo, v_hi) << 16
-}
-
-/// Whether two [`sub_mask`]s share a column and a row.
-#[inline(always)]
-pub fn masks_meet(a: u32, b: u32) -> bool {
-    let x = a & b;
-    (x & 0xffff) != 0 && (x >> 16) != 0
 }
 
 /// Clips the triangle (grid coordinates, depth carried along) to the rectangle
@@ -289,42 +257,6 @@ mod tests {
             assert!(hi <= i as f32 + 0.6, "tile {tile}: hi {hi}");
             assert!(lo >= (i as f32 - 0.6).max(-0.1), "tile {tile}: lo {lo}");
         }
-    }
-
-    #[test]
-    fn sub_masks_meet_exactly_when_rectangles_may_share_a_point() {
-        // a point's mask meets the mask of every rectangle holding it
-        let rects = [
-            (0.0, 1.0, 0.0, 1.0),
-            (0.30, 0.31, 0.70, 0.95),
-            (-3.0, 0.01, 0.99, 7.0),
-            (0.5, 0.5, 0.5, 0.5),
-        ];
-        for (i, &(a, b, c, d)) in rects.iter().enumerate() {
-            let m = sub_mask(a, b, c, d);
-            for k in 0..=64 {
-                for l in 0..=64 {
-                    let (u, v) = (k as f32 / 64.0, l as f32 / 64.0);
-                    if u >= a && u <= b && v >= c && v <= d {
-                        assert!(
-                            masks_meet(m, sub_mask(u, u, v, v)),
-                            "rect {i} at ({u}, {v})"
-                        );
-                    }
-                }
-            }
-        }
-        // disjoint by more than a sub-cell along either axis: masks do not meet
-        assert!(!masks_meet(
-            sub_mask(0.0, 0.2, 0.0, 1.0),
-            sub_mask(0.4, 1.0, 0.0, 1.0)
-        ));
-        assert!(!masks_meet(
-            sub_mask(0.0, 1.0, 0.7, 1.0),
-            sub_mask(0.0, 1.0, 0.0, 0.6)
-        ));
-        // NaN clamps into the tile instead of emptying the mask
-        assert_ne!(sub_mask(f32::NAN, f32::NAN, 0.0, 1.0) & 0xffff, 0);
     }
 
     #[test]

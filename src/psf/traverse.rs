@@ -5,15 +5,13 @@
 
 use glam::{DVec3, Vec3};
 
-use super::grid::sub_mask;
 use super::stats::{Counter, NoCount, RayStats};
 use super::{GridFrame, Psf};
 use crate::geometry::{intersect_triangle, Hit, Intersector, Ray, RayPre};
 
 /// Walks the tiles of `frame` that the line `o + t d`, `t` in `[t0, t1]`, passes through,
-/// in order of `t`, calling `visit(tile, t_enter, t_exit, mask)` until it returns
-/// `false`; `mask` is the [`sub_mask`] of the line's stretch over the tile, grown by
-/// `FOOT_EPS` of a tile against rounding. Amanatides-Woo.
+/// in order of `t`, calling `visit(tile, t_enter, t_exit)` until it returns `false`.
+/// Amanatides-Woo.
 #[inline]
 pub(crate) fn walk_tiles(
     f: &GridFrame,
@@ -21,7 +19,7 @@ pub(crate) fn walk_tiles(
     d: DVec3,
     t0: f64,
     t1: f64,
-    mut visit: impl FnMut(usize, f64, f64, u32) -> bool,
+    mut visit: impl FnMut(usize, f64, f64) -> bool,
 ) {
     let inv = f.inv_tile as f64;
     let (u, v) = (f.u.as_dvec3(), f.v.as_dvec3());
@@ -47,20 +45,7 @@ pub(crate) fn walk_tiles(
     let mut t = t0;
     loop {
         let t_exit = tx.min(ty).min(t1).max(t);
-        let foot = || {
-            let (fx, fy) = (ix as f64, iy as f64);
-            let (u0, u1) = (ax + t * bx - fx, ax + t_exit * bx - fx);
-            let (v0, v1) = (ay + t * by - fy, ay + t_exit * by - fy);
-            let (u0, u1) = if bx < 0.0 { (u1, u0) } else { (u0, u1) };
-            let (v0, v1) = if by < 0.0 { (v1, v0) } else { (v0, v1) };
-            sub_mask(
-                (u0 - FOOT_EPS) as f32,
-                (u1 + FOOT_EPS) as f32,
-                (v0 - FOOT_EPS) as f32,
-                (v1 + FOOT_EPS) as f32,
-            )
-        };
-        if !visit((iy * nu + ix) as usize, t, t_exit, foot()) || t_exit >= t1 {
+        if !visit((iy * nu + ix) as usize, t, t_exit) || t_exit >= t1 {
             return;
         }
         t = t_exit;
@@ -98,10 +83,6 @@ pub(crate) fn test_candidate(
         v,
     })
 }
-
-/// How far (in tiles) a ray's footprint over a tile is grown on every side: far above
-/// the rounding of the walk's f64 arithmetic, far below a sub-cell (1/16).
-const FOOT_EPS: f64 = 1e-3;
 
 #[inline]
 fn step(b: f64) -> i64 {
@@ -157,7 +138,7 @@ impl Psf {
         let ascending = dz >= 0.0;
         let mut best: Option<Hit> = None;
 
-        walk_tiles(&sf.frame, o, d, t0, t1, |tile, t_enter, t_exit, _| {
+        walk_tiles(&sf.frame, o, d, t0, t1, |tile, t_enter, t_exit| {
             count.tile();
             let h = tiles[tile];
             if h.slab_count == 0 {
