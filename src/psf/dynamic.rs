@@ -15,6 +15,7 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
+use super::batch::binned;
 use super::stats::{Counter, NoCount, RayStats};
 use super::traverse::{test_candidate, walk_tiles};
 use super::{
@@ -472,5 +473,28 @@ impl Intersector for Layered<'_> {
 
     fn occluded(&self, ray: &Ray) -> bool {
         self.trace::<true, _>(ray, &mut NoCount).is_some()
+    }
+
+    /// Binned by the static PSF's subfield ([`binned`]).
+    fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        let bins = self.psf.subfields().len().max(1);
+        binned(
+            rays,
+            out,
+            bins,
+            |r| self.psf.bin_of(r),
+            |r| self.intersect(r),
+        );
+    }
+
+    fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
+        let bins = self.psf.subfields().len().max(1);
+        binned(
+            rays,
+            out,
+            bins,
+            |r| self.psf.bin_of(r),
+            |r| self.occluded(r),
+        );
     }
 }

@@ -7,6 +7,7 @@
 //! * [`bake`](Psf::build): all of it for a static triangle set, in parallel and deterministic.
 //! * `traverse`: closest-hit and any-hit queries (2D DDA near to far, early exit).
 
+mod batch;
 pub mod bsp;
 pub mod directions;
 pub mod dynamic;

@@ -5,6 +5,7 @@
 
 use glam::{DVec3, Vec3};
 
+use super::batch::binned;
 use super::stats::{Counter, NoCount, RayStats};
 use super::{GridFrame, Psf};
 use crate::geometry::{intersect_triangle, Hit, Intersector, Ray, RayPre};
@@ -213,5 +214,28 @@ impl Intersector for Psf {
 
     fn occluded(&self, ray: &Ray) -> bool {
         self.trace::<true, _>(ray, &mut NoCount).is_some()
+    }
+
+    /// Binned by subfield ([`binned`]).
+    fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        let bins = self.subfields.len().max(1);
+        binned(rays, out, bins, |r| self.bin_of(r), |r| self.intersect(r));
+    }
+
+    fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
+        let bins = self.subfields.len().max(1);
+        binned(rays, out, bins, |r| self.bin_of(r), |r| self.occluded(r));
+    }
+}
+
+impl Psf {
+    /// The subfield a ray's direction picks (0 for a direction without one).
+    #[inline]
+    pub(crate) fn bin_of(&self, ray: &Ray) -> usize {
+        if self.subfields.is_empty() || !ray.dir.is_finite() {
+            0
+        } else {
+            self.table.lookup(ray.dir)
+        }
     }
 }
