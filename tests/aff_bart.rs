@@ -40,6 +40,23 @@ fn subfield(args: &[&str]) -> std::process::Output {
         .expect("run subfield")
 }
 
+/// `subfield convert SRC -o DST`, which must succeed; returns what it printed on stderr.
+fn convert_ok(src: &Path, dst: &Path) -> String {
+    let out = subfield(&[
+        "convert",
+        src.to_str().unwrap(),
+        "-o",
+        dst.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(
+        out.status.success(),
+        "convert {} failed: {err}",
+        src.display()
+    );
+    err
+}
+
 /// Validates `file`; returns (errors, warnings, the report line).
 fn validate(file: &Path) -> (u64, u64, String) {
     let ci = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci");
@@ -79,18 +96,7 @@ fn check_scene(rel: &str, expect_triangles: usize, expect_animated: usize) -> Op
     let src = bart()?.join(rel);
     let dir = out_dir(rel.replace('/', "-").as_str());
     let glb = dir.join("scene.glb");
-    let out = subfield(&[
-        "convert",
-        src.to_str().unwrap(),
-        "-o",
-        glb.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "convert failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    eprintln!("{}", String::from_utf8_lossy(&out.stderr).trim());
+    eprintln!("{}", convert_ok(&src, &glb).trim());
 
     let (errors, warnings, report) = validate(&glb);
     eprintln!("validator: {report}");
@@ -205,17 +211,7 @@ fn museum_with_generated_animart_pairs_with_the_static_part() {
     assert_eq!(aff.animated_triangle_count(), 16_384);
     assert_eq!(aff.triangle_count(), 12_076 - 1_024 + 16_384);
     let glb = dir.join("museum7like.glb");
-    let out = subfield(&[
-        "convert",
-        path.to_str().unwrap(),
-        "-o",
-        glb.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    convert_ok(&path, &glb);
     let (errors, warnings, report) = validate(&glb);
     assert_eq!((errors, warnings), (0, 0), "{report}");
     let scene = Scene::load(&glb).unwrap();
@@ -250,12 +246,7 @@ fn cli_generate_is_deterministic_and_convert_refuses_bad_input() {
 
     // Converted as .gltf too, and valid.
     let gltf = dir.join("a.gltf");
-    let out = subfield(&["convert", a.to_str().unwrap(), "-o", gltf.to_str().unwrap()]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    convert_ok(&a, &gltf);
     let (errors, warnings, report) = validate(&gltf);
     assert_eq!((errors, warnings), (0, 0), "{report}");
 
@@ -309,17 +300,7 @@ fn aff_and_converted_glb_render_the_same_depth() {
     let dir = out_dir("render-z");
     let aff = b.join("museum/museum5.aff");
     let glb = dir.join("museum5.glb");
-    let out = subfield(&[
-        "convert",
-        aff.to_str().unwrap(),
-        "-o",
-        glb.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    convert_ok(&aff, &glb);
     for (name, scene) in [("aff", &aff), ("glb", &glb)] {
         for frames in ["0..1", "137..138", "299..300"] {
             let pattern = dir.join(format!("{name}/f.####.exr"));

@@ -17,7 +17,7 @@ use rayon::prelude::*;
 
 use super::batch::binned;
 use super::stats::{Counter, NoCount, RayStats};
-use super::traverse::{test_candidate, walk_tiles};
+use super::traverse::{clipped_span, test_candidate, walk_tiles};
 use super::{
     check_triangles, margin_for, DirectionTable, Entry, GridFrame, Psf, PsfError, PsfParams,
 };
@@ -285,14 +285,7 @@ impl DynamicLayer {
         if self.tris.is_empty() || !ray.is_valid() {
             return None;
         }
-        let o = ray.origin.as_dvec3();
-        let d = ray.dir.as_dvec3();
-        let (ta, tb) = self.clip.clip_line(o.to_array(), d.to_array())?;
-        let t0 = ta.max(ray.t_min as f64);
-        let t1 = tb.min(ray.t_max as f64);
-        if t0.is_nan() || t1.is_nan() || t0 > t1 {
-            return None;
-        }
+        let (o, d, t0, t1) = clipped_span(&self.clip, ray)?;
         let sf = &self.subfields[self.table.lookup(ray.dir)];
         let pre = RayPre::new(ray.origin, ray.dir);
         let (margin, gv, tris) = (self.margin, self.generation, &self.tris);

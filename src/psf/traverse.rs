@@ -8,7 +8,7 @@ use glam::{DVec3, Vec3};
 use super::batch::binned;
 use super::stats::{Counter, NoCount, RayStats};
 use super::{GridFrame, Psf};
-use crate::geometry::{intersect_triangle, Hit, Intersector, Ray, RayPre};
+use crate::geometry::{intersect_triangle, Aabb, Hit, Intersector, Ray, RayPre};
 
 /// Walks the tiles of `frame` that the line `o + t d`, `t` in `[t0, t1]`, passes through,
 /// in order of `t`, calling `visit(tile, t_enter, t_exit)` until it returns `false`.
@@ -66,6 +66,22 @@ pub(crate) fn walk_tiles(
     }
 }
 
+/// The ray as the f64 line `o + t d` and the part of `[t_min, t_max]` inside `clip`,
+/// `(o, d, t0, t1)`; `None` when that is empty (NaN bounds, as of a segment like
+/// `[NaN, 1]`, count as empty).
+#[inline]
+pub(crate) fn clipped_span(clip: &Aabb, ray: &Ray) -> Option<(DVec3, DVec3, f64, f64)> {
+    let o = ray.origin.as_dvec3();
+    let d = ray.dir.as_dvec3();
+    let (ta, tb) = clip.clip_line(o.to_array(), d.to_array())?;
+    let t0 = ta.max(ray.t_min as f64);
+    let t1 = tb.min(ray.t_max as f64);
+    if t0.is_nan() || t1.is_nan() || t0 > t1 {
+        return None;
+    }
+    Some((o, d, t0, t1))
+}
+
 /// Tests triangle `tri` against the ray between `t_min` and the best hit so far (or
 /// `t_max`): the one candidate test both layers share.
 #[inline(always)]
@@ -117,15 +133,7 @@ impl Psf {
         if !ray.is_valid() || self.subfields.is_empty() {
             return None;
         }
-        let o = ray.origin.as_dvec3();
-        let d = ray.dir.as_dvec3();
-        let (ta, tb) = self.clip.clip_line(o.to_array(), d.to_array())?;
-        let t0 = ta.max(ray.t_min as f64);
-        let t1 = tb.min(ray.t_max as f64);
-        // NaN bounds (a ray segment like [NaN, 1]) count as empty.
-        if t0.is_nan() || t1.is_nan() || t0 > t1 {
-            return None;
-        }
+        let (o, d, t0, t1) = clipped_span(&self.clip, ray)?;
         let sf = &self.subfields[self.table.lookup(ray.dir)];
         let (tiles, starts, entries, tris) =
             (&*sf.tiles, &*sf.slab_starts, &*sf.entries, &*self.triangles);
