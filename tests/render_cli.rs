@@ -168,7 +168,8 @@ fn resume_completes_an_interrupted_run_and_redoes_broken_frames() {
 
 /// A run really killed (SIGKILL) part-way, then resumed over the whole range, gives the
 /// files of an uninterrupted run. The killed run may leave a hidden temporary beside
-/// the frame it was writing; the visible frames are what must match.
+/// the frame it was writing; the resumed run removes it (where `/proc` shows the
+/// writer is gone), so the folder ends up exactly as an uninterrupted run's.
 #[test]
 fn a_killed_run_resumed_gives_the_same_frames() {
     let dir = temp_dir("kill");
@@ -222,6 +223,10 @@ fn a_killed_run_resumed_gives_the_same_frames() {
     let _ = child.wait();
     let done_before = visible(&dir.join("part")).len();
     eprintln!("killed with {done_before} of 24 frames written");
+    // And one stale temporary for sure, as a writer killed mid-file leaves it (the pid
+    // is above Linux's largest, so no such process runs).
+    let stale = dir.join("part/.f.0005.exr.4194321-0.tmp");
+    std::fs::write(&stale, b"half a frame").unwrap();
     let mut resume = args(&part);
     resume.push("--resume".into());
     ok(&resume.iter().map(|a| a.as_str()).collect::<Vec<_>>());
@@ -230,6 +235,16 @@ fn a_killed_run_resumed_gives_the_same_frames() {
         want,
         "killed after {done_before} frames"
     );
+    if Path::new("/proc/self").exists() {
+        let names: Vec<PathBuf> = want.iter().map(|(p, _)| p.clone()).collect();
+        assert_eq!(
+            files_under(&dir.join("part")),
+            names,
+            "a temporary of the killed run is left"
+        );
+    } else {
+        assert!(stale.exists(), "removed without knowing its writer is gone");
+    }
 }
 
 #[test]

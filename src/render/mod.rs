@@ -448,7 +448,21 @@ pub fn render_sequence(
 
     // Folders, last of the checks.
     if let Some(&first) = plan.frames.first() {
-        check_writable(&plan.pattern.path(first))?;
+        let first = plan.pattern.path(first);
+        check_writable(&first)?;
+        // Temporaries a killed run left beside this run's frames go; those of a live
+        // process (a concurrent shard) stay. Best effort: a folder that cannot be
+        // listed has failed the check above already.
+        let names: std::collections::HashSet<String> = plan
+            .frames
+            .iter()
+            .filter_map(|&f| Some(plan.pattern.path(f).file_name()?.to_str()?.to_owned()))
+            .collect();
+        let dir = match first.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => std::path::PathBuf::from("."),
+        };
+        let _ = crate::atomic::remove_stale_temporaries(&dir, |t| names.contains(t));
     }
     for p in [&opts.stats, &opts.plot].into_iter().flatten() {
         check_writable(p)?;
