@@ -786,3 +786,83 @@ fn animart_generator_is_deterministic_and_parses() {
         assert!(((*p - c).abs().max_element() - 0.5).abs() < 1e-4);
     }
 }
+
+/// A plain NFF file (the AFF subset Eric Haines' SPD scenes use): viewpoint, background,
+/// lights, a fill material, a polygon, a sphere and a cone load through `Scene::load` by
+/// its `.nff` extension, with the camera where `v` puts it, the lights, and the geometry;
+/// `subfield render` takes it like any scene.
+#[test]
+fn plain_nff_loads_and_renders() {
+    let path = write_scene(
+        "nff",
+        &[(
+            "spd.nff",
+            "v\nfrom 0 -6 2\nat 0 0 0.5\nup 0 0 1\nangle 45\nhither 0.01\nresolution 64 48\n\
+             b 0.1 0.2 0.3\n\
+             l 4 -4 6\nl -4 -4 6 1 1 1\n\
+             f 0.8 0.6 0.4 0.7 0.3 20 0 1\n\
+             p 4\n-3 -3 0\n3 -3 0\n3 3 0\n-3 3 0\n\
+             f 0.2 0.5 0.9 0.5 0.5 40 0.5 1\n\
+             s 0 0 1 0.75\n\
+             c 1.5 0 0 0.4 1.5 0 1.2 0.1\n",
+        )],
+    );
+    let scene = Scene::load(&path).unwrap();
+    let tris = soup_at(&scene, 0.0);
+    let aff = AffScene::load(&path).unwrap();
+    assert_eq!(tris.len(), aff.triangle_count());
+    // The square floor is 2 triangles; the sphere and the cone add many more.
+    assert!(tris.len() > 2 + 50, "{} triangles", tris.len());
+    assert!(
+        tris.iter().take(2).flatten().all(|p| p.z == 0.0),
+        "the floor comes first, at z = 0"
+    );
+    // The sphere's triangles lie on it (within tessellation: vertices exactly).
+    let on_sphere = tris
+        .iter()
+        .flatten()
+        .filter(|p| ((**p - Vec3::new(0.0, 0.0, 1.0)).length() - 0.75).abs() < 1e-5)
+        .count();
+    assert!(on_sphere > 100, "{on_sphere} vertices on the sphere");
+
+    let cam = scene
+        .camera_at(ClipSelection::All, 0.0, None)
+        .expect("the NFF viewpoint becomes a camera");
+    assert_close(
+        cam.position,
+        Vec3::new(0.0, -6.0, 2.0),
+        1e-5,
+        "camera position",
+    );
+    let fwd = cam.rotation * Vec3::NEG_Z;
+    let want = (Vec3::new(0.0, 0.0, 0.5) - Vec3::new(0.0, -6.0, 2.0)).normalize();
+    assert_close(fwd, want, 1e-5, "camera looks at `at`");
+    let lights = scene.lights_at(ClipSelection::All, 0.0);
+    assert_eq!(lights.len(), 2);
+    assert_close(
+        lights[0].position,
+        Vec3::new(4.0, -4.0, 6.0),
+        1e-5,
+        "light 0",
+    );
+
+    let out = path.with_file_name("f.exr");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_subfield"))
+        .args([
+            "render",
+            path.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "64x48",
+            "--quiet",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(out.exists());
+}
