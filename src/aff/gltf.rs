@@ -230,26 +230,17 @@ impl Conv<'_> {
     }
 
     fn animate_trs(&mut self, node: u32, tr: &Tracks) {
+        let vec3 = |v: Option<DVec3>, rest: DVec3| v.unwrap_or(rest).as_vec3().to_array().to_vec();
         if !tr.translation.is_empty() {
             self.sampled(node, Property::Translation, |t| {
-                tr.translation_at(t)
-                    .unwrap_or(DVec3::ZERO)
-                    .as_vec3()
-                    .to_array()
-                    .to_vec()
+                vec3(tr.translation_at(t), DVec3::ZERO)
             });
         }
         if !tr.rotation.is_empty() {
             self.sampled_rotation(node, |t| f32q(tr.rotation_at(t).unwrap_or(DQuat::IDENTITY)));
         }
         if !tr.scale.is_empty() {
-            self.sampled(node, Property::Scale, |t| {
-                tr.scale_at(t)
-                    .unwrap_or(DVec3::ONE)
-                    .as_vec3()
-                    .to_array()
-                    .to_vec()
-            });
+            self.sampled(node, Property::Scale, |t| vec3(tr.scale_at(t), DVec3::ONE));
         }
     }
 
