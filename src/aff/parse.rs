@@ -25,11 +25,7 @@ pub(super) fn parse_file(path: &Path) -> Result<AffScene, AffError> {
         path: path.to_path_buf(),
         source,
     })?;
-    let folder = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    parse_text(&bytes, path, folder)
+    parse_text(&bytes, path, &crate::atomic::folder_of(path))
 }
 
 pub(super) fn parse_text(bytes: &[u8], path: &Path, folder: &Path) -> Result<AffScene, AffError> {

@@ -380,10 +380,7 @@ fn create_parent(path: &Path) -> Result<(), RenderError> {
 /// Creates `path`'s folder and checks a file can be made there (the probe is removed).
 fn check_writable(path: &Path) -> Result<(), RenderError> {
     create_parent(path)?;
-    let folder = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
+    let folder = crate::atomic::folder_of(path);
     let probe = folder.join(format!(".subfield-probe-{}", std::process::id()));
     std::fs::File::create(&probe).map_err(|source| RenderError::Io {
         path: folder.clone(),
@@ -458,10 +455,7 @@ pub fn render_sequence(
             .iter()
             .filter_map(|&f| Some(plan.pattern.path(f).file_name()?.to_str()?.to_owned()))
             .collect();
-        let dir = match first.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => std::path::PathBuf::from("."),
-        };
+        let dir = crate::atomic::folder_of(&first);
         let _ = crate::atomic::remove_stale_temporaries(&dir, |t| names.contains(t));
     }
     for p in [&opts.stats, &opts.plot].into_iter().flatten() {
