@@ -42,6 +42,14 @@ pub struct DynamicLayer {
     /// This frame's bounds grown by the rounding allowance; rays are clipped to it.
     clip: Aabb,
     tris: Vec<[Vec3; 3]>,
+    /// The same triangles in the order of their centroids' Morton codes (`local[k] =
+    /// tris[order[k]]`): entries name positions in `local`, so the candidates of a tile,
+    /// and of neighbouring tiles, sit together in memory whatever the input order.
+    local: Vec<[Vec3; 3]>,
+    order: Vec<u32>,
+    /// Scratch of the reordering: per-triangle keys and bucket counts.
+    keys: Vec<u32>,
+    counts: Vec<u32>,
     subfields: Vec<DynSubfield>,
 }
 
@@ -102,6 +110,19 @@ impl Entries {
         self.zmax[i] = e.zmax;
         self.tri[i] = e.tri;
     }
+}
+
+/// Interleaves the low 10 bits of `x`, `y`, `z` (`x` lowest).
+#[inline]
+fn morton3(x: u32, y: u32, z: u32) -> u32 {
+    fn spread(v: u32) -> u32 {
+        let mut v = v & 0x3ff;
+        v = (v | (v << 16)) & 0x0300_00ff;
+        v = (v | (v << 8)) & 0x0300_f00f;
+        v = (v | (v << 4)) & 0x030c_30c3;
+        (v | (v << 2)) & 0x0924_9249
+    }
+    spread(x) | (spread(y) << 1) | (spread(z) << 2)
 }
 
 /// Entries filtered by depth at a time: one bit each in `depth_mask`.
@@ -192,6 +213,10 @@ impl DynamicLayer {
             margin: 0.0,
             clip: Aabb::EMPTY,
             tris: Vec::new(),
+            local: Vec::new(),
+            order: Vec::new(),
+            keys: Vec::new(),
+            counts: Vec::new(),
             subfields,
         })
     }
@@ -213,12 +238,50 @@ impl DynamicLayer {
         if tris.is_empty() {
             return Ok(());
         }
+        self.reorder(&bounds);
         let (gv, margin, clip, tiles) =
             (self.generation, self.margin, self.clip, self.params.tiles);
+        let local = &self.local;
         self.subfields
             .par_iter_mut()
-            .for_each(|s| s.insert(tris, gv, margin, &clip, tiles));
+            .for_each(|s| s.insert(local, gv, margin, &clip, tiles));
         Ok(())
+    }
+
+    /// Fills `local` and `order`: the triangles sorted by the Morton code of their
+    /// centroid within `bounds`, cut to about one bucket a triangle (a stable counting
+    /// sort, so ties keep the input order and the result depends on the input alone).
+    fn reorder(&mut self, bounds: &Aabb) {
+        let n = self.tris.len();
+        // 3 bits of code per level of an octree with about n leaves, 3..=30 bits.
+        let levels = ((usize::BITS - n.leading_zeros()).div_ceil(3)).clamp(1, 10);
+        let bits = 3 * levels;
+        let scale = Vec3::splat((1u32 << levels) as f32) / bounds.extent().max(Vec3::splat(1e-30));
+        let top = ((1u32 << levels) - 1) as f32;
+        self.keys.clear();
+        self.keys.extend(self.tris.iter().map(|t| {
+            let c = ((t[0] + t[1] + t[2]) * (1.0 / 3.0) - bounds.min) * scale;
+            let q = |x: f32| x.clamp(0.0, top) as u32;
+            morton3(q(c.x), q(c.y), q(c.z))
+        }));
+        self.counts.clear();
+        self.counts.resize((1usize << bits) + 1, 0);
+        for &k in &self.keys {
+            self.counts[k as usize + 1] += 1;
+        }
+        for i in 0..1usize << bits {
+            self.counts[i + 1] += self.counts[i];
+        }
+        self.order.clear();
+        self.order.resize(n, 0);
+        for (i, &k) in self.keys.iter().enumerate() {
+            let at = &mut self.counts[k as usize];
+            self.order[*at as usize] = i as u32;
+            *at += 1;
+        }
+        self.local.clear();
+        self.local
+            .extend(self.order.iter().map(|&i| self.tris[i as usize]));
     }
 
     /// Advances `GV`; on the (4-billion-frame) wrap every stamp is reset once.
@@ -249,7 +312,9 @@ impl DynamicLayer {
     pub fn stats(&self) -> DynamicStats {
         let mut st = DynamicStats {
             triangles: self.tris.len(),
-            bytes: std::mem::size_of::<Self>() + self.tris.capacity() * 36,
+            bytes: std::mem::size_of::<Self>()
+                + (self.tris.capacity() + self.local.capacity()) * 36
+                + (self.order.capacity() + self.keys.capacity() + self.counts.capacity()) * 4,
             ..DynamicStats::default()
         };
         for s in &self.subfields {
@@ -288,7 +353,7 @@ impl DynamicLayer {
         let (o, d, t0, t1) = clipped_span(&self.clip, ray)?;
         let sf = &self.subfields[self.table.lookup(ray.dir)];
         let pre = RayPre::new(ray.origin, ray.dir);
-        let (margin, gv, tris) = (self.margin, self.generation, &self.tris);
+        let (margin, gv, tris, order) = (self.margin, self.generation, &self.local, &self.order);
         let slack = (margin as f64 + 1e-6 * o.length()) / d.length();
         let fd: DVec3 = sf.frame.d.as_dvec3();
         let (oz, dz) = (o.dot(fd), d.dot(fd));
@@ -317,7 +382,8 @@ impl DynamicLayer {
                     mask &= mask - 1;
                     count.candidate();
                     let tri = ids[k * LANES + j];
-                    if let Some(hit) = test_candidate(&pre, tris, tri, ray, &best) {
+                    if let Some(mut hit) = test_candidate(&pre, tris, tri, ray, &best) {
+                        hit.tri = order[tri as usize];
                         if ANY {
                             best = Some(hit);
                             return false;
