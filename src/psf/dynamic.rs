@@ -12,7 +12,7 @@
 //! outside the static scene is fine. Queries walk the static PSF first, then the dynamic
 //! grid of the same direction up to the static hit, scanning each tile's list.
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec3, Vec4};
 use rayon::prelude::*;
 
 use super::batch::binned;
@@ -128,26 +128,18 @@ fn morton3(x: u32, y: u32, z: u32) -> u32 {
 /// Entries filtered by depth at a time: one bit each in `depth_mask`.
 const LANES: usize = 8;
 
-/// Bit `j` set where entry `j` of the chunk (at most `LANES` long) overlaps `[lo, hi]`.
-/// Branch-free, so a full chunk compiles to vector compares.
+/// Bit `j` set where entry `at + j` overlaps `[lo, hi]`, for `j` in `0..LANES`: two
+/// 4-wide compares and a move-mask each. The columns hold `LANES` entries of padding
+/// past the last list, so the loads stay in bounds; bits past a list's end are for the
+/// caller to clear.
 #[inline(always)]
-fn depth_mask(zmin: &[f32], zmax: &[f32], lo: f32, hi: f32) -> u32 {
-    if let (Ok(a), Ok(b)) = (
-        <&[f32; LANES]>::try_from(zmin),
-        <&[f32; LANES]>::try_from(zmax),
-    ) {
-        let mut m = 0u32;
-        for j in 0..LANES {
-            m |= ((b[j] >= lo) as u32 & (a[j] <= hi) as u32) << j;
-        }
-        m
-    } else {
-        let mut m = 0u32;
-        for (j, (a, b)) in zmin.iter().zip(zmax).enumerate() {
-            m |= ((*b >= lo) as u32 & (*a <= hi) as u32) << j;
-        }
-        m
-    }
+fn depth_mask(zmin: &[f32], zmax: &[f32], at: usize, lo: Vec4, hi: Vec4) -> u32 {
+    let half = |k: usize| {
+        let a = Vec4::from_slice(&zmin[at + k..]);
+        let b = Vec4::from_slice(&zmax[at + k..]);
+        (b.cmpge(lo) & a.cmple(hi)).bitmask()
+    };
+    half(0) | half(4) << 4
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -364,24 +356,26 @@ impl DynamicLayer {
             if slot.version != gv {
                 return true;
             }
-            let run = slot.start as usize..(slot.start + slot.count) as usize;
-            let (zmin, zmax, ids) = (
-                &sf.entries.zmin[run.clone()],
-                &sf.entries.zmax[run.clone()],
-                &sf.entries.tri[run],
-            );
-            count.scanned(ids.len());
+            let (start, len) = (slot.start as usize, slot.count as usize);
+            let e = &sf.entries;
+            count.scanned(len);
             // The ray's depth interval over this tile, cut at the best hit so far.
             let t_far = best.map_or(t_exit, |b| t_exit.min(b.t as f64 + slack));
             let (za, zb) = (oz + t_enter * dz, oz + t_far * dz);
             let (lo, hi) = ((za.min(zb) as f32) - margin, (za.max(zb) as f32) + margin);
-            for (k, (cmin, cmax)) in zmin.chunks(LANES).zip(zmax.chunks(LANES)).enumerate() {
-                let mut mask = depth_mask(cmin, cmax, lo, hi);
+            let (lo4, hi4) = (Vec4::splat(lo), Vec4::splat(hi));
+            for k in (0..len).step_by(LANES) {
+                let valid = if len - k >= LANES {
+                    u32::MAX
+                } else {
+                    (1u32 << (len - k)) - 1
+                };
+                let mut mask = depth_mask(&e.zmin, &e.zmax, start + k, lo4, hi4) & valid;
                 while mask != 0 {
                     let j = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     count.candidate();
-                    let tri = ids[k * LANES + j];
+                    let tri = e.tri[start + k + j];
                     if let Some(mut hit) = test_candidate(&pre, tris, tri, ray, &best) {
                         hit.tri = order[tri as usize];
                         if ANY {
@@ -448,13 +442,14 @@ impl DynSubfield {
             slot.count = 0;
         }
         self.entries.clear();
-        if self.entries.capacity() < raw.len() {
-            self.entries.reserve_exact(headroom(raw.len()));
+        if self.entries.capacity() < raw.len() + LANES {
+            self.entries.reserve_exact(headroom(raw.len()) + LANES);
         }
         if touched.capacity() < touched.len() + touched.len() / 8 {
             touched.reserve_exact(touched.len() / 4);
         }
-        self.entries.resize(raw.len());
+        // `LANES` entries of padding for the last chunk's loads (`depth_mask`).
+        self.entries.resize(raw.len() + LANES);
         for (t, e) in raw.iter() {
             let slot = &mut slots[*t as usize];
             self.entries.set((slot.start + slot.count) as usize, e);
