@@ -21,7 +21,7 @@ use super::traverse::{clipped_span, test_candidate, walk_tiles};
 use super::{
     check_triangles, margin_for, DirectionTable, Entry, GridFrame, Psf, PsfError, PsfParams,
 };
-use crate::geometry::{Aabb, Hit, Intersector, Ray, RayPre};
+use crate::geometry::{Aabb, Hit, Intersector, Ray, RayPre, TriPre};
 
 /// Triangles spanning at most this many tiles are listed in each with their whole depth
 /// range, unclipped. `cargo bench --bench dynamic -- update` (16,384 moving triangles,
@@ -43,9 +43,12 @@ pub struct DynamicLayer {
     clip: Aabb,
     tris: Vec<[Vec3; 3]>,
     /// The same triangles in the order of their centroids' Morton codes (`local[k] =
-    /// tris[order[k]]`): entries name positions in `local`, so the candidates of a tile,
-    /// and of neighbouring tiles, sit together in memory whatever the input order.
-    local: Vec<[Vec3; 3]>,
+    /// tris[order[k]]`), laid out for the candidate test: entries name positions in
+    /// `local`, so the candidates of a tile, and of neighbouring tiles, sit together in
+    /// memory whatever the input order.
+    local: Vec<TriPre>,
+    /// `local` as plain vertices, which the insertion rasterises in order.
+    sorted: Vec<[Vec3; 3]>,
     order: Vec<u32>,
     /// Scratch of the reordering: per-triangle keys and bucket counts.
     keys: Vec<u32>,
@@ -206,6 +209,7 @@ impl DynamicLayer {
             clip: Aabb::EMPTY,
             tris: Vec::new(),
             local: Vec::new(),
+            sorted: Vec::new(),
             order: Vec::new(),
             keys: Vec::new(),
             counts: Vec::new(),
@@ -233,14 +237,14 @@ impl DynamicLayer {
         self.reorder(&bounds);
         let (gv, margin, clip, tiles) =
             (self.generation, self.margin, self.clip, self.params.tiles);
-        let local = &self.local;
+        let sorted = &self.sorted;
         self.subfields
             .par_iter_mut()
-            .for_each(|s| s.insert(local, gv, margin, &clip, tiles));
+            .for_each(|s| s.insert(sorted, gv, margin, &clip, tiles));
         Ok(())
     }
 
-    /// Fills `local` and `order`: the triangles sorted by the Morton code of their
+    /// Fills `order`, `sorted` and `local`: the triangles sorted by the Morton code of their
     /// centroid within `bounds`, cut to about one bucket a triangle (a stable counting
     /// sort, so ties keep the input order and the result depends on the input alone).
     fn reorder(&mut self, bounds: &Aabb) {
@@ -271,9 +275,11 @@ impl DynamicLayer {
             self.order[*at as usize] = i as u32;
             *at += 1;
         }
-        self.local.clear();
-        self.local
+        self.sorted.clear();
+        self.sorted
             .extend(self.order.iter().map(|&i| self.tris[i as usize]));
+        self.local.clear();
+        self.local.extend(self.sorted.iter().map(TriPre::new));
     }
 
     /// Advances `GV`; on the (4-billion-frame) wrap every stamp is reset once.
@@ -305,7 +311,8 @@ impl DynamicLayer {
         let mut st = DynamicStats {
             triangles: self.tris.len(),
             bytes: std::mem::size_of::<Self>()
-                + (self.tris.capacity() + self.local.capacity()) * 36
+                + (self.tris.capacity() + self.sorted.capacity()) * 36
+                + self.local.capacity() * std::mem::size_of::<TriPre>()
                 + (self.order.capacity() + self.keys.capacity() + self.counts.capacity()) * 4,
             ..DynamicStats::default()
         };

@@ -106,7 +106,8 @@ pub struct PsfStats {
     pub entries_per_tile_mean: f64,
     pub entries_per_tile_max: u64,
     pub entries_per_tile: Histogram,
-    /// Bytes of triangles, tile headers, slab offsets and entries.
+    /// Bytes held in memory: triangles (as stored, and in the candidate test's layout
+    /// built on load), tile headers, slab offsets and entries.
     pub bytes: usize,
 }
 
@@ -117,7 +118,7 @@ impl Psf {
             subfields: self.subfields().len(),
             ..Default::default()
         };
-        s.bytes = std::mem::size_of_val(self.triangles());
+        s.bytes = std::mem::size_of_val(self.triangles()) + std::mem::size_of_val(&*self.pre);
         let mut total = 0u64;
         for sf in self.subfields() {
             s.bytes += std::mem::size_of_val(&*sf.tiles)

@@ -3,12 +3,12 @@
 //! far-away origins lose nothing), search each tile's BSP over the ray's depth interval
 //! there, and stop as soon as the best hit lies before the exit of the current tile.
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 
 use super::batch::binned;
 use super::stats::{Counter, NoCount, RayStats};
 use super::{GridFrame, Psf};
-use crate::geometry::{intersect_triangle, Aabb, Hit, Intersector, Ray, RayPre};
+use crate::geometry::{intersect_pre, Aabb, Hit, Intersector, Ray, RayPre, TriPre};
 
 /// Walks the tiles of `frame` that the line `o + t d`, `t` in `[t0, t1]`, passes through,
 /// in order of `t`, calling `visit(tile, t_enter, t_exit)` until it returns `false`.
@@ -87,18 +87,13 @@ pub(crate) fn clipped_span(clip: &Aabb, ray: &Ray) -> Option<(DVec3, DVec3, f64,
 #[inline(always)]
 pub(crate) fn test_candidate(
     pre: &RayPre,
-    tris: &[[Vec3; 3]],
+    tris: &[TriPre],
     tri: u32,
     ray: &Ray,
     best: &Option<Hit>,
 ) -> Option<Hit> {
     let t_max = best.map_or(ray.t_max, |b| b.t);
-    intersect_triangle(pre, &tris[tri as usize], ray.t_min, t_max).map(|(t, u, v)| Hit {
-        t,
-        tri,
-        u,
-        v,
-    })
+    intersect_pre(pre, &tris[tri as usize], ray.t_min, t_max).map(|(t, u, v)| Hit { t, tri, u, v })
 }
 
 #[inline]
@@ -136,7 +131,7 @@ impl Psf {
         let (o, d, t0, t1) = clipped_span(&self.clip, ray)?;
         let sf = &self.subfields[self.table.lookup(ray.dir)];
         let (tiles, starts, entries, tris) =
-            (&*sf.tiles, &*sf.slab_starts, &*sf.entries, &*self.triangles);
+            (&*sf.tiles, &*sf.slab_starts, &*sf.entries, &*self.pre);
         let pre = RayPre::new(ray.origin, ray.dir);
         let margin = self.margin;
         // How far (in t) a computed hit may sit from where the line truly meets its
