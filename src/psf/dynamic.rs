@@ -65,18 +65,19 @@ struct DynSubfield {
     slots: Vec<Slot>,
     /// This frame's entries, grouped by tile (in order of first touch), by columns:
     /// depth ranges apart from triangle numbers, so a query filters a tile's list by
-    /// depth eight entries at a time (`depth_mask`).
+    /// depth eight entries at a time (`depth_mask`). Each tile's run starts at a
+    /// multiple of 8 and is padded to one with entries no depth interval meets.
     entries: Entries,
     /// Scratch reused every update: entries in raster order, and the tiles touched.
     raw: Vec<(u32, Entry)>,
     touched: Vec<u32>,
 }
 
-/// Entries by columns.
+/// Entries by columns, the depths in blocks of `LANES`.
 #[derive(Debug, Default)]
 struct Entries {
-    zmin: Vec<f32>,
-    zmax: Vec<f32>,
+    zmin: Vec<[f32; LANES]>,
+    zmax: Vec<[f32; LANES]>,
     tri: Vec<u32>,
 }
 
@@ -95,22 +96,25 @@ impl Entries {
         self.tri.clear();
     }
 
+    /// Room for `n` entries, a multiple of `LANES`.
     fn reserve_exact(&mut self, n: usize) {
-        self.zmin.reserve_exact(n);
-        self.zmax.reserve_exact(n);
+        self.zmin.reserve_exact(n / LANES);
+        self.zmax.reserve_exact(n / LANES);
         self.tri.reserve_exact(n);
     }
 
-    fn resize(&mut self, n: usize) {
-        self.zmin.resize(n, 0.0);
-        self.zmax.resize(n, 0.0);
+    /// `n` entries (a multiple of `LANES`), all of them padding: a depth range from
+    /// +inf to -inf, which no interval meets.
+    fn resize_padding(&mut self, n: usize) {
+        self.zmin.resize(n / LANES, [f32::INFINITY; LANES]);
+        self.zmax.resize(n / LANES, [f32::NEG_INFINITY; LANES]);
         self.tri.resize(n, 0);
     }
 
     #[inline]
     fn set(&mut self, i: usize, e: &Entry) {
-        self.zmin[i] = e.zmin;
-        self.zmax[i] = e.zmax;
+        self.zmin[i / LANES][i % LANES] = e.zmin;
+        self.zmax[i / LANES][i % LANES] = e.zmax;
         self.tri[i] = e.tri;
     }
 }
@@ -131,18 +135,15 @@ fn morton3(x: u32, y: u32, z: u32) -> u32 {
 /// Entries filtered by depth at a time: one bit each in `depth_mask`.
 const LANES: usize = 8;
 
-/// Bit `j` set where entry `at + j` overlaps `[lo, hi]`, for `j` in `0..LANES`: two
-/// 4-wide compares and a move-mask each. The columns hold `LANES` entries of padding
-/// past the last list, so the loads stay in bounds; bits past a list's end are for the
-/// caller to clear.
+/// Bit `j` set where entry `j` of a block overlaps `[lo, hi]`: two 4-wide compares and a
+/// move-mask each half.
 #[inline(always)]
-fn depth_mask(zmin: &[f32], zmax: &[f32], at: usize, lo: Vec4, hi: Vec4) -> u32 {
-    let half = |k: usize| {
-        let a = Vec4::from_slice(&zmin[at + k..]);
-        let b = Vec4::from_slice(&zmax[at + k..]);
-        (b.cmpge(lo) & a.cmple(hi)).bitmask()
-    };
-    half(0) | half(4) << 4
+fn depth_mask(zmin: &[f32; LANES], zmax: &[f32; LANES], lo: Vec4, hi: Vec4) -> u32 {
+    let lower =
+        (Vec4::from_slice(&zmax[..4]).cmpge(lo) & Vec4::from_slice(&zmin[..4]).cmple(hi)).bitmask();
+    let upper =
+        (Vec4::from_slice(&zmax[4..]).cmpge(lo) & Vec4::from_slice(&zmin[4..]).cmple(hi)).bitmask();
+    lower | upper << 4
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -371,18 +372,16 @@ impl DynamicLayer {
             let (za, zb) = (oz + t_enter * dz, oz + t_far * dz);
             let (lo, hi) = ((za.min(zb) as f32) - margin, (za.max(zb) as f32) + margin);
             let (lo4, hi4) = (Vec4::splat(lo), Vec4::splat(hi));
-            for k in (0..len).step_by(LANES) {
-                let valid = if len - k >= LANES {
-                    u32::MAX
-                } else {
-                    (1u32 << (len - k)) - 1
-                };
-                let mut mask = depth_mask(&e.zmin, &e.zmax, start + k, lo4, hi4) & valid;
+            let blocks = start / LANES..(start + len).div_ceil(LANES);
+            let (zmin, zmax) = (&e.zmin[blocks.clone()], &e.zmax[blocks]);
+            let ids = &e.tri[start..start + zmin.len() * LANES];
+            for (k, (a, b)) in zmin.iter().zip(zmax).enumerate() {
+                let mut mask = depth_mask(a, b, lo4, hi4);
                 while mask != 0 {
                     let j = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     count.candidate();
-                    let tri = e.tri[start + k + j];
+                    let tri = ids[k * LANES + j];
                     if let Some(mut hit) = test_candidate(&pre, tris, tri, ray, &best) {
                         hit.tri = order[tri as usize];
                         if ANY {
@@ -441,22 +440,24 @@ impl DynSubfield {
                     ));
                 });
         }
+        // Runs start at multiples of `LANES`.
         let mut at = 0u32;
         for &t in touched.iter() {
             let slot = &mut slots[t as usize];
             slot.start = at;
-            at += slot.count;
+            at += slot.count.next_multiple_of(LANES as u32);
             slot.count = 0;
         }
+        let at = at as usize;
         self.entries.clear();
-        if self.entries.capacity() < raw.len() + LANES {
-            self.entries.reserve_exact(headroom(raw.len()) + LANES);
+        if self.entries.capacity() < at {
+            self.entries
+                .reserve_exact(headroom(at).next_multiple_of(LANES));
         }
         if touched.capacity() < touched.len() + touched.len() / 8 {
             touched.reserve_exact(touched.len() / 4);
         }
-        // `LANES` entries of padding for the last chunk's loads (`depth_mask`).
-        self.entries.resize(raw.len() + LANES);
+        self.entries.resize_padding(at);
         for (t, e) in raw.iter() {
             let slot = &mut slots[*t as usize];
             self.entries.set((slot.start + slot.count) as usize, e);
