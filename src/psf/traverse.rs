@@ -27,8 +27,9 @@ pub(crate) fn walk_tiles(
     let (ax, bx) = ((o.dot(u) - f.u0 as f64) * inv, d.dot(u) * inv);
     let (ay, by) = ((o.dot(v) - f.v0 as f64) * inv, d.dot(v) * inv);
     let (nu, nv) = (f.nu as i64, f.nv as i64);
-    let mut ix = ((ax + t0 * bx).floor() as i64).clamp(0, nu - 1);
-    let mut iy = ((ay + t0 * by).floor() as i64).clamp(0, nv - 1);
+    // Floor by truncation after clamping negatives to 0 (no libm call).
+    let mut ix = ((ax + t0 * bx).max(0.0) as i64).min(nu - 1);
+    let mut iy = ((ay + t0 * by).max(0.0) as i64).min(nv - 1);
     let (sx, sy) = (step(bx), step(by));
     // Parameter at which the line leaves the current column / row, and the parameter
     // span of one tile along each axis. Accumulating in f64 drifts by ~1e-13 of a tile
