@@ -111,10 +111,10 @@ pub fn intersect_pre(r: &RayPre, tri: &TriPre, t_min: f32, t_max: f32) -> Option
     let sy = x * m[3] + y * m[4] + z * m[5];
     let sz = x * m[6] + y * m[7] + z * m[8];
     // (u, v, w) = (cx by - cy bx, ax cy - ay cx, bx ay - by ax).
-    let uvw = sx.zxyw() * sy.yzxw() - sy.zxyw() * sx.yzxw();
-    let (mut u, mut v, mut w) = (uvw.x, uvw.y, uvw.z);
+    let mut uvw = sx.zxyw() * sy.yzxw() - sy.zxyw() * sx.yzxw();
 
-    if u == 0.0 || v == 0.0 || w == 0.0 {
+    // The scalar test's branches as lane masks (lanes 0..3), one branch each.
+    if uvw.cmpeq(Vec4::ZERO).bitmask() & 7 != 0 {
         let (ax, ay, bx, by, cx, cy) = (
             sx.x as f64,
             sy.x as f64,
@@ -123,14 +123,19 @@ pub fn intersect_pre(r: &RayPre, tri: &TriPre, t_min: f32, t_max: f32) -> Option
             sx.z as f64,
             sy.z as f64,
         );
-        u = (cx * by - cy * bx) as f32;
-        v = (ax * cy - ay * cx) as f32;
-        w = (bx * ay - by * ax) as f32;
+        uvw = Vec4::new(
+            (cx * by - cy * bx) as f32,
+            (ax * cy - ay * cx) as f32,
+            (bx * ay - by * ax) as f32,
+            0.0,
+        );
     }
-
-    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+    let neg = uvw.cmplt(Vec4::ZERO).bitmask() & 7;
+    let pos = uvw.cmpgt(Vec4::ZERO).bitmask() & 7;
+    if (neg != 0) & (pos != 0) {
         return None;
     }
+    let (u, v, w) = (uvw.x, uvw.y, uvw.z);
     let det = u + v + w;
     if det == 0.0 || !det.is_finite() {
         return None;
