@@ -28,7 +28,7 @@ pub use grid::GridFrame;
 pub use stats::{Histogram, PsfStats, RayStats};
 pub use storage::{Buf, SharedBytes};
 
-use crate::geometry::{Aabb, TriPre};
+use crate::geometry::Aabb;
 
 /// How a PSF is built. The defaults (level 1, 128 tiles) come from `cargo bench --bench
 /// sweep` on a 100k-triangle room: the best random-ray speed, near-best camera-ray
@@ -124,8 +124,6 @@ pub struct Psf {
     /// `bounds` grown by the rounding allowance: rays are clipped to it.
     clip: Aabb,
     triangles: Buf<[Vec3; 3]>,
-    /// The triangles laid out for the candidate test, built on load (not stored).
-    pre: Vec<TriPre>,
     subfields: Vec<Subfield>,
     table: DirectionTable,
 }
@@ -200,7 +198,6 @@ impl Psf {
             margin,
             clip: grid_bounds,
             triangles: Buf::Owned(tris.to_vec()),
-            pre: tris.iter().map(TriPre::new).collect(),
             subfields,
             table: DirectionTable::new(&dirs),
         })
@@ -325,7 +322,6 @@ impl Psf {
             bounds,
             margin,
             clip: bounds.padded(2.0 * margin),
-            pre: triangles.iter().map(TriPre::new).collect(),
             triangles,
             subfields,
             table: DirectionTable::new(&dirs),

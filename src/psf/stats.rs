@@ -106,8 +106,7 @@ pub struct PsfStats {
     pub entries_per_tile_mean: f64,
     pub entries_per_tile_max: u64,
     pub entries_per_tile: Histogram,
-    /// Bytes held in memory: triangles (as stored, and in the candidate test's layout
-    /// built on load), tile headers, slab offsets and entries.
+    /// Bytes of triangles, tile headers, slab offsets and entries.
     pub bytes: usize,
 }
 
@@ -118,7 +117,7 @@ impl Psf {
             subfields: self.subfields().len(),
             ..Default::default()
         };
-        s.bytes = std::mem::size_of_val(self.triangles()) + std::mem::size_of_val(&*self.pre);
+        s.bytes = std::mem::size_of_val(self.triangles());
         let mut total = 0u64;
         for sf in self.subfields() {
             s.bytes += std::mem::size_of_val(&*sf.tiles)

@@ -3,12 +3,14 @@
 //! far-away origins lose nothing), search each tile's BSP over the ray's depth interval
 //! there, and stop as soon as the best hit lies before the exit of the current tile.
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 
 use super::batch::binned;
 use super::stats::{Counter, NoCount, RayStats};
 use super::{GridFrame, Psf};
-use crate::geometry::{intersect_pre, Aabb, Hit, Intersector, Ray, RayPre, TriPre};
+use crate::geometry::{
+    intersect_pre, intersect_triangle, Aabb, Hit, Intersector, Ray, RayPre, TriPre,
+};
 
 /// Walks the tiles of `frame` that the line `o + t d`, `t` in `[t0, t1]`, passes through,
 /// in order of `t`, calling `visit(tile, t_enter, t_exit)` until it returns `false`.
@@ -83,18 +85,41 @@ pub(crate) fn clipped_span(clip: &Aabb, ray: &Ray) -> Option<(DVec3, DVec3, f64,
     Some((o, d, t0, t1))
 }
 
+/// A triangle as a query stores it: the static PSF's as plain vertices (as the baked
+/// file holds them, so opening a file builds nothing), the dynamic layer's as
+/// [`TriPre`] (built with its sorted copy every update).
+pub(crate) trait Candidate {
+    fn intersect(&self, pre: &RayPre, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)>;
+}
+
+impl Candidate for [Vec3; 3] {
+    #[inline(always)]
+    fn intersect(&self, pre: &RayPre, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
+        intersect_triangle(pre, self, t_min, t_max)
+    }
+}
+
+impl Candidate for TriPre {
+    #[inline(always)]
+    fn intersect(&self, pre: &RayPre, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
+        intersect_pre(pre, self, t_min, t_max)
+    }
+}
+
 /// Tests triangle `tri` against the ray between `t_min` and the best hit so far (or
 /// `t_max`): the one candidate test both layers share.
 #[inline(always)]
-pub(crate) fn test_candidate(
+pub(crate) fn test_candidate<T: Candidate>(
     pre: &RayPre,
-    tris: &[TriPre],
+    tris: &[T],
     tri: u32,
     ray: &Ray,
     best: &Option<Hit>,
 ) -> Option<Hit> {
     let t_max = best.map_or(ray.t_max, |b| b.t);
-    intersect_pre(pre, &tris[tri as usize], ray.t_min, t_max).map(|(t, u, v)| Hit { t, tri, u, v })
+    tris[tri as usize]
+        .intersect(pre, ray.t_min, t_max)
+        .map(|(t, u, v)| Hit { t, tri, u, v })
 }
 
 #[inline]
@@ -132,7 +157,7 @@ impl Psf {
         let (o, d, t0, t1) = clipped_span(&self.clip, ray)?;
         let sf = &self.subfields[self.table.lookup(ray.dir)];
         let (tiles, starts, entries, tris) =
-            (&*sf.tiles, &*sf.slab_starts, &*sf.entries, &*self.pre);
+            (&*sf.tiles, &*sf.slab_starts, &*sf.entries, &*self.triangles);
         let pre = RayPre::new(ray.origin, ray.dir);
         let margin = self.margin;
         // How far (in t) a computed hit may sit from where the line truly meets its
