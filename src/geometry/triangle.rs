@@ -113,31 +113,8 @@ pub fn intersect_pre(r: &RayPre, tri: &TriPre, t_min: f32, t_max: f32) -> Option
     let sy = x * m[3] + y * m[4] + z * m[5];
     let sz = x * m[6] + y * m[7] + z * m[8];
     // (u, v, w) = (cx by - cy bx, ax cy - ay cx, bx ay - by ax).
-    let mut uvw = sx.zxyw() * sy.yzxw() - sy.zxyw() * sx.yzxw();
-
-    // The scalar test's branches as lane masks (lanes 0..3), one branch each.
-    if uvw.cmpeq(Vec4::ZERO).bitmask() & 7 != 0 {
-        let (ax, ay, bx, by, cx, cy) = (
-            sx.x as f64,
-            sy.x as f64,
-            sx.y as f64,
-            sy.y as f64,
-            sx.z as f64,
-            sy.z as f64,
-        );
-        uvw = Vec4::new(
-            (cx * by - cy * bx) as f32,
-            (ax * cy - ay * cx) as f32,
-            (bx * ay - by * ax) as f32,
-            0.0,
-        );
-    }
-    let neg = uvw.cmplt(Vec4::ZERO).bitmask() & 7;
-    let pos = uvw.cmpgt(Vec4::ZERO).bitmask() & 7;
-    if (neg != 0) & (pos != 0) {
-        return None;
-    }
-    let (u, v, w) = (uvw.x, uvw.y, uvw.z);
+    let uvw = sx.zxyw() * sy.yzxw() - sy.zxyw() * sx.yzxw();
+    let (u, v, w) = edge_weights(uvw, [sx.x, sy.x, sx.y, sy.y, sx.z, sy.z])?;
     let det = u + v + w;
     if det == 0.0 || !det.is_finite() {
         return None;
@@ -169,28 +146,8 @@ pub fn intersect_triangle(
     let c = r.shear * (Vec3A::from(tri[2]) - r.org);
     let (ax, ay, bx, by, cx, cy) = (a.x, a.y, b.x, b.y, c.x, c.y);
 
-    let mut uvw = Vec4::new(cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax, 0.0);
-
-    // The zero and sign checks as lane masks, one branch each: branches on the signs
-    // one by one are mispredicted half the time (a ray meets or misses the plane's
-    // triangles about evenly), and that cost 15% of a query (benches/PERF.md).
-    if uvw.cmpeq(Vec4::ZERO).bitmask() & 7 != 0 {
-        let (ax, ay, bx, by, cx, cy) = (
-            ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
-        );
-        uvw = Vec4::new(
-            (cx * by - cy * bx) as f32,
-            (ax * cy - ay * cx) as f32,
-            (bx * ay - by * ax) as f32,
-            0.0,
-        );
-    }
-    let neg = uvw.cmplt(Vec4::ZERO).bitmask() & 7;
-    let pos = uvw.cmpgt(Vec4::ZERO).bitmask() & 7;
-    if (neg != 0) & (pos != 0) {
-        return None;
-    }
-    let (u, v, w) = (uvw.x, uvw.y, uvw.z);
+    let uvw = Vec4::new(cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax, 0.0);
+    let (u, v, w) = edge_weights(uvw, [ax, ay, bx, by, cx, cy])?;
     let det = u + v + w;
     if det == 0.0 || !det.is_finite() {
         return None;
@@ -207,6 +164,32 @@ pub fn intersect_triangle(
         return None;
     }
     Some((t, v * inv, w * inv))
+}
+
+/// The edge functions `(u, v, w) = (cx by - cy bx, ax cy - ay cx, bx ay - by ax)` of the
+/// sheared vertices `[ax, ay, bx, by, cx, cy]`, given in f32 as lanes 0..3 of `uvw`:
+/// recomputed in f64 where one is exactly zero, and `None` when their signs differ (the
+/// ray passes beside the triangle). The checks are lane masks, one branch each: branches
+/// on the signs one by one are mispredicted about half the time (a ray meets or misses
+/// the triangles it is tested against about evenly), which cost 15% of a query
+/// (`benches/PERF.md`, step 14).
+#[inline(always)]
+fn edge_weights(mut uvw: Vec4, sheared: [f32; 6]) -> Option<(f32, f32, f32)> {
+    if uvw.cmpeq(Vec4::ZERO).bitmask() & 7 != 0 {
+        let [ax, ay, bx, by, cx, cy] = sheared.map(f64::from);
+        uvw = Vec4::new(
+            (cx * by - cy * bx) as f32,
+            (ax * cy - ay * cx) as f32,
+            (bx * ay - by * ax) as f32,
+            0.0,
+        );
+    }
+    let neg = uvw.cmplt(Vec4::ZERO).bitmask() & 7;
+    let pos = uvw.cmpgt(Vec4::ZERO).bitmask() & 7;
+    if (neg != 0) & (pos != 0) {
+        return None;
+    }
+    Some((uvw.x, uvw.y, uvw.z))
 }
 
 /// A triangle without area up to float rounding: the sine of its angle at `a` below
