@@ -60,8 +60,8 @@ impl PsfParams {
     /// below 65,536 triangles, else 1. On the museum-class scene (10,284 static +
     /// 16,384 moving, camera + shadow + mirror rays, `benches/embree.rs --psf L:N`)
     /// level 2 traced 9% faster than level 1 at 64 tiles (alternating one-thread runs,
-    /// `benches/PERF.md` step 3); level 3 traced about 5% faster than 2 there for three
-    /// times the bake time and memory (PERF.md, round 2 sweep), not worth it as a
+    /// `benches/PERF.md` step 3); level 3 traced 2–5% faster than 2 there for three to
+    /// five times the bake time and memory (PERF.md, round 2 sweep), not worth it as a
     /// default. At 100k the sweep put level 1 ahead on random rays, and level 2 costs
     /// 3.4 times the bake time and memory there.
     pub fn for_triangles(n: usize) -> PsfParams {
