@@ -134,6 +134,37 @@ fn default_museum_has_the_requested_counts_camera_lights_and_fps() {
     assert!(scene.materials.iter().any(|m| m.transmission > 0.0));
 }
 
+/// The renderer's default range is the whole animation, last key included: `frames`
+/// frames, for frame counts whose last key time `(frames − 1) / fps` rounds below the
+/// exact value in f32 (299 / 30 does).
+#[test]
+fn default_render_range_has_every_frame_of_the_museum() {
+    for (frames, fps) in [
+        (300, 30.0),
+        (2, 30.0),
+        (301, 24.0),
+        (1000, 60.0),
+        (97, 29.97),
+    ] {
+        let p = MuseumParams {
+            frames,
+            fps,
+            ..small(MIN_STATIC_TRIS, 4)
+        };
+        let scene = load(&museum_glb(&p).unwrap());
+        let opts = subfield::render::RenderOptions {
+            output: "f.####.exr".into(),
+            ..Default::default()
+        };
+        let plan = subfield::render::plan(&scene, &opts).unwrap();
+        assert_eq!(
+            (plan.range.start, plan.range.end),
+            (0, frames),
+            "{frames} frames at {fps} fps"
+        );
+    }
+}
+
 #[test]
 fn static_count_is_exact_for_any_budget() {
     for (st, dy) in [

@@ -230,8 +230,15 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
         }
         None => {
             let d = scene.duration(selection) as f64;
+            // The last frame at or before the end of the animation. The end is an f32 key
+            // time, a few ulps (2^-24 each, relative) off the frame time it stands for:
+            // 299/30 s is stored as 9.966666 s, 298.99999 frames at 30 fps. Allow 2^-20
+            // of it, so the last key's frame is not dropped.
             let last = if d > 0.0 {
-                (d * fps as f64 + 1e-6).floor().min(u32::MAX as f64 - 1.0) as u32
+                let x = d * fps as f64;
+                (x + x * (1.0 / 1_048_576.0) + 1e-6)
+                    .floor()
+                    .min(u32::MAX as f64 - 1.0) as u32
             } else {
                 0
             };
