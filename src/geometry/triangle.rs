@@ -134,7 +134,7 @@ pub fn intersect_pre(r: &RayPre, tri: &TriPre, t_min: f32, t_max: f32) -> Option
 /// Intersects one triangle; returns `(t, u, v)` with `t` in `[t_min, t_max]` (both
 /// inclusive), `u`, `v` the weights of vertices 1 and 2. Both faces are hit; a triangle
 /// of zero area in the ray's view is never hit.
-#[inline]
+#[inline(always)]
 pub fn intersect_triangle(
     r: &RayPre,
     tri: &[Vec3; 3],
