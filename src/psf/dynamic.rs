@@ -68,9 +68,26 @@ struct DynSubfield {
     /// depth eight entries at a time (`depth_mask`). Each tile's run starts at a
     /// multiple of 8 and is padded to one with entries no depth interval meets.
     entries: Entries,
-    /// Scratch reused every update: entries in raster order, and the tiles touched.
+    /// Scratch reused every update: each triangle's rectangle of tiles (a coarse one's;
+    /// a placeholder for a triangle clipped tile by tile), the clipped triangles' entries
+    /// in raster order with, per such triangle, its number and the end of its entries,
+    /// and the tiles touched.
+    rects: Vec<Rect>,
     raw: Vec<(u32, Entry)>,
+    clipped: Vec<(u32, u32)>,
     touched: Vec<u32>,
+}
+
+/// A coarse triangle's [`Footprint`](super::grid::Footprint), packed in 16 bytes: the
+/// second pass of an insertion reads it instead of an entry record per tile.
+#[derive(Clone, Copy, Debug, Default)]
+struct Rect {
+    i0: u16,
+    i1: u16,
+    j0: u16,
+    j1: u16,
+    zmin: f32,
+    zmax: f32,
 }
 
 /// Entries by columns, the depths in blocks of `LANES`.
@@ -82,10 +99,6 @@ struct Entries {
 }
 
 impl Entries {
-    fn len(&self) -> usize {
-        self.tri.len()
-    }
-
     fn capacity(&self) -> usize {
         self.tri.capacity()
     }
@@ -198,7 +211,9 @@ impl DynamicLayer {
                 frame: GridFrame::new(dir, &Aabb::EMPTY, 1),
                 slots: vec![Slot::default(); n],
                 entries: Entries::default(),
+                rects: Vec::new(),
                 raw: Vec::new(),
+                clipped: Vec::new(),
                 touched: Vec::new(),
             })
             .collect();
@@ -320,7 +335,9 @@ impl DynamicLayer {
         for s in &self.subfields {
             st.bytes += s.slots.capacity() * std::mem::size_of::<Slot>()
                 + s.entries.capacity() * std::mem::size_of::<Entry>()
+                + s.rects.capacity() * std::mem::size_of::<Rect>()
                 + s.raw.capacity() * std::mem::size_of::<(u32, Entry)>()
+                + s.clipped.capacity() * 8
                 + s.touched.capacity() * 4;
             if self.tris.is_empty() {
                 continue;
@@ -401,44 +418,68 @@ impl DynamicLayer {
 }
 
 impl DynSubfield {
-    /// Inserts this frame's triangles (generation `gv`): raster into `raw`, counting per
-    /// tile and stamping each tile on first touch, then place the entries by tile. Time
-    /// and memory follow the entries, never the grid; the buffers are reused.
+    /// Inserts this frame's triangles (generation `gv`) in two passes. The first finds
+    /// each triangle's rectangle of tiles, counts entries per tile and stamps each tile
+    /// on first touch; the second writes the entries into each tile's run, in triangle
+    /// order. A triangle spanning more than `COARSE` tiles is clipped tile by tile in the
+    /// first pass and its entries kept until the second. Time and memory follow the
+    /// entries, never the grid; the buffers are reused.
     fn insert(&mut self, tris: &[[Vec3; 3]], gv: u32, margin: f32, clip: &Aabb, tiles: u32) {
         self.frame = GridFrame::new(self.dir, clip, tiles);
-        let (slots, raw, touched) = (&mut self.slots, &mut self.raw, &mut self.touched);
+        let frame = &self.frame;
+        let nu = frame.nu;
+        let (slots, touched) = (&mut self.slots, &mut self.touched);
+        let (rects, raw, clipped) = (&mut self.rects, &mut self.raw, &mut self.clipped);
+        rects.clear();
         raw.clear();
+        clipped.clear();
         touched.clear();
-        // Buffers keep headroom over last frame's count: grown to 5/4 of it whenever less
-        // than 9/8 is left, so they settle after the first frames instead of doubling
-        // whenever a frame sets a record.
-        let headroom = |n: usize| n + n / 4;
-        let last = self.entries.len();
-        if raw.capacity() < last + last / 8 {
-            raw.reserve_exact(headroom(last));
-        }
-        for (i, t) in tris.iter().enumerate() {
-            self.frame
-                .raster_with(t, margin, COARSE, |tile, zmin, zmax| {
-                    let slot = &mut slots[tile as usize];
-                    if slot.version != gv {
-                        *slot = Slot {
-                            version: gv,
-                            start: 0,
-                            count: 0,
-                        };
-                        touched.push(tile);
+        let mut count = |tile: u32| {
+            let slot = &mut slots[tile as usize];
+            if slot.version != gv {
+                *slot = Slot {
+                    version: gv,
+                    start: 0,
+                    count: 0,
+                };
+                touched.push(tile);
+            }
+            slot.count += 1;
+        };
+        for (k, t) in tris.iter().enumerate() {
+            match frame.coarse_footprint(t, margin, COARSE) {
+                Some(f) => {
+                    for j in f.j0..=f.j1 {
+                        for i in f.i0..=f.i1 {
+                            count(j * nu + i);
+                        }
                     }
-                    slot.count += 1;
-                    raw.push((
-                        tile,
-                        Entry {
-                            tri: i as u32,
-                            zmin,
-                            zmax,
-                        },
-                    ));
-                });
+                    // Tile indices are below `PsfParams::MAX_TILES` (4096): they fit.
+                    rects.push(Rect {
+                        i0: f.i0 as u16,
+                        i1: f.i1 as u16,
+                        j0: f.j0 as u16,
+                        j1: f.j1 as u16,
+                        zmin: f.zmin,
+                        zmax: f.zmax,
+                    });
+                }
+                None => {
+                    frame.raster_with(t, margin, COARSE, |tile, zmin, zmax| {
+                        count(tile);
+                        raw.push((
+                            tile,
+                            Entry {
+                                tri: k as u32,
+                                zmin,
+                                zmax,
+                            },
+                        ));
+                    });
+                    rects.push(Rect::default());
+                    clipped.push((k as u32, raw.len() as u32));
+                }
+            }
         }
         // Runs start at multiples of `LANES`.
         let mut at = 0u32;
@@ -449,19 +490,43 @@ impl DynSubfield {
             slot.count = 0;
         }
         let at = at as usize;
+        // Buffers keep headroom over this frame's need: grown to 5/4 of it whenever they
+        // are short, so they settle after the first frames instead of doubling whenever a
+        // frame sets a record.
         self.entries.clear();
         if self.entries.capacity() < at {
             self.entries
-                .reserve_exact(headroom(at).next_multiple_of(LANES));
-        }
-        if touched.capacity() < touched.len() + touched.len() / 8 {
-            touched.reserve_exact(touched.len() / 4);
+                .reserve_exact((at + at / 4).next_multiple_of(LANES));
         }
         self.entries.resize_padding(at);
-        for (t, e) in raw.iter() {
-            let slot = &mut slots[*t as usize];
-            self.entries.set((slot.start + slot.count) as usize, e);
+        let entries = &mut self.entries;
+        let mut put = |tile: usize, e: &Entry| {
+            let slot = &mut slots[tile];
+            entries.set((slot.start + slot.count) as usize, e);
             slot.count += 1;
+        };
+        let (mut next_clipped, mut from) = (clipped.iter().peekable(), 0usize);
+        for (k, r) in rects.iter().enumerate() {
+            if let Some(&&(c, end)) = next_clipped.peek() {
+                if c as usize == k {
+                    for (tile, e) in &raw[from..end as usize] {
+                        put(*tile as usize, e);
+                    }
+                    from = end as usize;
+                    next_clipped.next();
+                    continue;
+                }
+            }
+            let e = Entry {
+                tri: k as u32,
+                zmin: r.zmin,
+                zmax: r.zmax,
+            };
+            for j in r.j0 as usize..=r.j1 as usize {
+                for i in r.i0 as usize..=r.i1 as usize {
+                    put(j * nu as usize + i, &e);
+                }
+            }
         }
     }
 }

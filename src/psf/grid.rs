@@ -104,6 +104,44 @@ impl GridFrame {
         coarse: u32,
         mut emit: impl FnMut(u32, f32, f32),
     ) {
+        let (p, m, dz, f) = self.prepare(tri, margin);
+        if f.tiles() <= coarse {
+            for j in f.j0..=f.j1 {
+                for i in f.i0..=f.i1 {
+                    emit(j * self.nu + i, f.zmin, f.zmax);
+                }
+            }
+            return;
+        }
+        for j in f.j0..=f.j1 {
+            for i in f.i0..=f.i1 {
+                let rect = [
+                    i as f32 - m,
+                    i as f32 + 1.0 + m,
+                    j as f32 - m,
+                    j as f32 + 1.0 + m,
+                ];
+                if let Some((a, b)) = clipped_depth_range(&p, rect) {
+                    emit(j * self.nu + i, a - dz, b + dz);
+                }
+            }
+        }
+    }
+
+    /// The coarse listing of [`raster_with`](Self::raster_with) as one rectangle, when
+    /// the triangle's grown bounding rectangle spans at most `coarse` tiles: every tile
+    /// of it, each with the whole grown depth range. `None` for a larger triangle, which
+    /// `raster_with` clips tile by tile.
+    #[inline]
+    pub fn coarse_footprint(&self, tri: &[Vec3; 3], margin: f32, coarse: u32) -> Option<Footprint> {
+        let (_, _, _, f) = self.prepare(tri, margin);
+        (f.tiles() <= coarse).then_some(f)
+    }
+
+    /// The triangle in grid coordinates, the margin in tile units, the depth allowance
+    /// and the grown bounding rectangle with the grown depth range.
+    #[inline(always)]
+    fn prepare(&self, tri: &[Vec3; 3], margin: f32) -> ([[f32; 3]; 3], f32, f32, Footprint) {
         let p = [
             self.project(tri[0]),
             self.project(tri[1]),
@@ -120,29 +158,34 @@ impl GridFrame {
         // Truncation is floor once negatives are clamped to 0, without `floor`'s libm
         // call (5% of an update); `as` saturates and maps NaN to 0, as before.
         let cell = |x: f32, n: u32| ((x.max(0.0) as i64).min(n as i64 - 1)) as u32;
-        let (i0, i1) = (cell(lo_u, self.nu), cell(hi_u, self.nu));
-        let (j0, j1) = (cell(lo_v, self.nv), cell(hi_v, self.nv));
-        if (i1 - i0 + 1) * (j1 - j0 + 1) <= coarse {
-            for j in j0..=j1 {
-                for i in i0..=i1 {
-                    emit(j * self.nu + i, zmin - dz, zmax + dz);
-                }
-            }
-            return;
-        }
-        for j in j0..=j1 {
-            for i in i0..=i1 {
-                let rect = [
-                    i as f32 - m,
-                    i as f32 + 1.0 + m,
-                    j as f32 - m,
-                    j as f32 + 1.0 + m,
-                ];
-                if let Some((a, b)) = clipped_depth_range(&p, rect) {
-                    emit(j * self.nu + i, a - dz, b + dz);
-                }
-            }
-        }
+        let f = Footprint {
+            i0: cell(lo_u, self.nu),
+            i1: cell(hi_u, self.nu),
+            j0: cell(lo_v, self.nv),
+            j1: cell(hi_v, self.nv),
+            zmin: zmin - dz,
+            zmax: zmax + dz,
+        };
+        (p, m, dz, f)
+    }
+}
+
+/// A rectangle of tiles, columns `i0..=i1` and rows `j0..=j1`, with a depth range.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Footprint {
+    pub i0: u32,
+    pub i1: u32,
+    pub j0: u32,
+    pub j1: u32,
+    pub zmin: f32,
+    pub zmax: f32,
+}
+
+impl Footprint {
+    /// Tiles in the rectangle.
+    #[inline]
+    pub fn tiles(&self) -> u32 {
+        (self.i1 - self.i0 + 1) * (self.j1 - self.j0 + 1)
     }
 }
 
