@@ -32,35 +32,40 @@ impl RayPre {
         } else {
             2
         };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        // Keep the winding: swapping x and y when the ray runs along -z.
-        if dir[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
-        let (sx, sy, sz) = (dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
-        // Rows of the shear; the matrix is stored by columns.
-        let mut rows = [[0.0f32; 3]; 3];
-        rows[0][kx] = 1.0;
-        rows[0][kz] = -sx;
-        rows[1][ky] = 1.0;
-        rows[1][kz] = -sy;
-        rows[2][kz] = sz;
-        let r = |i: usize, j: usize| Vec4::splat(rows[i][j]);
+        // (kx, ky) = (kz + 1, kz + 2) mod 3, swapped when the ray runs along -z to keep
+        // the winding.
+        let d = dir.to_array();
+        let (kx, ky) = match (kz, d[kz] < 0.0) {
+            (0, false) => (1, 2),
+            (0, true) => (2, 1),
+            (1, false) => (2, 0),
+            (1, true) => (0, 2),
+            (_, false) => (0, 1),
+            (_, true) => (1, 0),
+        };
+        let (sx, sy, sz) = (d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
+        // The shear by columns: column kx is (1, 0, 0), column ky (0, 1, 0), column kz
+        // (-sx, -sy, sz). Whole vectors are stored and loaded, never single lanes.
+        let mut cols = [Vec3A::ZERO; 3];
+        cols[kx] = Vec3A::X;
+        cols[ky] = Vec3A::Y;
+        cols[kz] = Vec3A::new(-sx, -sy, sz);
+        let [c0, c1, c2] = cols;
+        let s = Vec4::splat;
         RayPre {
             org: org.into(),
-            shear: Mat3A::from_cols_array_2d(&rows).transpose(),
-            org4: [Vec4::splat(org.x), Vec4::splat(org.y), Vec4::splat(org.z)],
+            shear: Mat3A::from_cols(c0, c1, c2),
+            org4: [s(org.x), s(org.y), s(org.z)],
             rows4: [
-                r(0, 0),
-                r(0, 1),
-                r(0, 2),
-                r(1, 0),
-                r(1, 1),
-                r(1, 2),
-                r(2, 0),
-                r(2, 1),
-                r(2, 2),
+                s(c0.x),
+                s(c1.x),
+                s(c2.x),
+                s(c0.y),
+                s(c1.y),
+                s(c2.y),
+                s(c0.z),
+                s(c1.z),
+                s(c2.z),
             ],
         }
     }
@@ -302,6 +307,72 @@ mod tests {
 
     fn vec3() -> impl Strategy<Value = Vec3> {
         (coord(), coord(), coord()).prop_map(|(x, y, z)| Vec3::new(x, y, z))
+    }
+
+    /// The shear as the paper writes it, entry by entry: row 0 picks `kx` and takes `sx`
+    /// times `kz`, row 1 the same with `ky` and `sy`, row 2 scales `kz` by `sz`.
+    fn reference_rows(dir: Vec3) -> [[f32; 3]; 3] {
+        let a = dir.abs();
+        let kz = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if dir[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let (sx, sy, sz) = (dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
+        let mut rows = [[0.0f32; 3]; 3];
+        rows[0][kx] = 1.0;
+        rows[0][kz] = -sx;
+        rows[1][ky] = 1.0;
+        rows[1][kz] = -sy;
+        rows[2][kz] = sz;
+        rows
+    }
+
+    #[test]
+    fn shear_matches_the_reference_entry_by_entry() {
+        let mut dirs = vec![];
+        // every dominant axis, both signs, and ties between axes
+        for &(x, y, z) in &[
+            (1.0, 0.2, -0.3),
+            (-1.0, 0.2, 0.3),
+            (0.2, 1.0, -0.3),
+            (0.2, -1.0, 0.3),
+            (0.2, -0.3, 1.0),
+            (0.2, 0.3, -1.0),
+            (1.0, 1.0, 1.0),
+            (-1.0, -1.0, 0.5),
+            (0.5, -1.0, -1.0),
+            (0.0, 0.0, -2.0),
+            (-0.0, 3.0, 0.0),
+        ] {
+            dirs.push(Vec3::new(x, y, z));
+        }
+        let mut seed = 7u64;
+        for _ in 0..2000 {
+            let mut r = || {
+                seed = seed
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((seed >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+            };
+            dirs.push(Vec3::new(r(), r(), r()));
+        }
+        for d in dirs {
+            let rows = reference_rows(d);
+            let pre = RayPre::new(Vec3::new(1.0, 2.0, 3.0), d);
+            let got = pre.shear.transpose().to_cols_array_2d();
+            let bits = |m: [[f32; 3]; 3]| m.map(|r| r.map(f32::to_bits));
+            assert_eq!(bits(got), bits(rows), "direction {d}");
+            let splats: Vec<Vec4> = rows.iter().flatten().map(|&x| Vec4::splat(x)).collect();
+            assert_eq!(pre.rows4.to_vec(), splats, "direction {d}");
+        }
     }
 
     proptest! {

@@ -363,13 +363,26 @@ impl DynamicLayer {
         self.trace::<true, _>(ray, stats).is_some()
     }
 
+    #[inline]
     fn trace<const ANY: bool, C: Counter>(&self, ray: &Ray, count: &mut C) -> Option<Hit> {
-        if self.tris.is_empty() || !ray.is_valid() {
+        if !ray.is_valid() {
+            return None;
+        }
+        self.trace_pre::<ANY, C>(ray, &RayPre::new(ray.origin, ray.dir), count)
+    }
+
+    /// [`trace`](Self::trace) of a valid ray with its [`RayPre`] given.
+    fn trace_pre<const ANY: bool, C: Counter>(
+        &self,
+        ray: &Ray,
+        pre: &RayPre,
+        count: &mut C,
+    ) -> Option<Hit> {
+        if self.tris.is_empty() {
             return None;
         }
         let (o, d, t0, t1) = clipped_span(&self.clip, ray)?;
         let sf = &self.subfields[self.table.lookup(ray.dir)];
-        let pre = RayPre::new(ray.origin, ray.dir);
         let (margin, gv, tris, order) = (self.margin, self.generation, &self.local, &self.order);
         let slack = (margin as f64 + 1e-6 * o.length()) / d.length();
         let fd: DVec3 = sf.frame.d.as_dvec3();
@@ -399,7 +412,7 @@ impl DynamicLayer {
                     mask &= mask - 1;
                     count.candidate();
                     let tri = ids[k * LANES + j];
-                    if let Some(mut hit) = test_candidate(&pre, tris, tri, ray, &best) {
+                    if let Some(mut hit) = test_candidate(pre, tris, tri, ray, &best) {
                         hit.tri = order[tri as usize];
                         if ANY {
                             best = Some(hit);
@@ -559,7 +572,12 @@ impl Psf {
 
 impl Layered<'_> {
     fn trace<const ANY: bool, C: Counter>(&self, ray: &Ray, count: &mut C) -> Option<Hit> {
-        let s = self.psf.trace::<ANY, C>(ray, count);
+        if !ray.is_valid() {
+            return None;
+        }
+        // One shear for both layers: the dynamic walk's ray differs in `t_max` alone.
+        let pre = RayPre::new(ray.origin, ray.dir);
+        let s = self.psf.trace_pre::<ANY, C>(ray, &pre, count);
         if ANY && s.is_some() {
             return s;
         }
@@ -570,10 +588,13 @@ impl Layered<'_> {
             r.t_max = h.t;
         }
         let offset = self.psf.triangles().len() as u32;
-        let d = self.dynamic.trace::<ANY, C>(&r, count).map(|mut h| {
-            h.tri += offset;
-            h
-        });
+        let d = self
+            .dynamic
+            .trace_pre::<ANY, C>(&r, &pre, count)
+            .map(|mut h| {
+                h.tri += offset;
+                h
+            });
         match (s, d) {
             (Some(a), Some(b)) => Some(if b.is_closer_than(&a) { b } else { a }),
             (a, b) => a.or(b),
