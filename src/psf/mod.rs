@@ -56,18 +56,27 @@ impl PsfParams {
     /// Parameters for `n` static triangles. Tiles: `0.5·√n` rounded to a power of two,
     /// within 4..=256 (10k → 64, 100k → 128, 1M → 256); `SWEEP_TRIS=10000 cargo bench
     /// --bench sweep` put 64 tiles ahead of 128 at 10k (camera 0.35× against 0.30×
-    /// obvhs, random 0.27× against 0.14×), and at 100k the sweep chose 128. Level: 2
-    /// below 65,536 triangles, else 1. On the museum-class scene (10,284 static +
-    /// 16,384 moving, camera + shadow + mirror rays, `benches/embree.rs --psf L:N`)
-    /// level 2 traced 9% faster than level 1 at 64 tiles (alternating one-thread runs,
-    /// `benches/PERF.md` step 3); level 3 traced 2–5% faster than 2 there for three to
-    /// five times the bake time and memory (PERF.md, round 2 sweep), not worth it as a
-    /// default. At 100k the sweep put level 1 ahead on random rays, and level 2 costs
-    /// 3.4 times the bake time and memory there.
+    /// obvhs, random 0.27× against 0.14×), and at 100k the sweep chose 128. Level: 3
+    /// below 16,384 triangles, 2 below 65,536, else 1, for the renderer's coherent rays
+    /// (camera, shadow, mirror). On the museum-class scene (10,284 static + 16,384
+    /// moving, camera + shadow + mirror rays, `benches/embree.rs --psf L:N`) level 2
+    /// traced 9% faster than level 1 at 64 tiles (`benches/PERF.md` step 3), and level
+    /// 3 8.7% faster than level 2 (PERF.md round 3, step 27; two threads, 640x480) for
+    /// four times the bake time (0.06 → 0.25 s) and memory (14 → 60 MB raw, 7 → 33 MB
+    /// stored). Incoherent rays lose with more directions: on the 10k room level 3 traces
+    /// random rays 38% slower than level 2 (`SWEEP_TRIS=10000 cargo bench --bench
+    /// sweep`), camera rays 17% faster. At 100k the sweep put level 1 ahead on random
+    /// rays, and level 2 costs 3.4 times the bake time and memory there.
     pub fn for_triangles(n: usize) -> PsfParams {
         let want = (0.5 * (n as f64).sqrt()).max(1.0);
         let tiles = (2f64.powf(want.log2().round()) as u32).clamp(4, 256);
-        let level = if n < 65_536 { 2 } else { 1 };
+        let level = if n < 16_384 {
+            3
+        } else if n < 65_536 {
+            2
+        } else {
+            1
+        };
         PsfParams { level, tiles }
     }
 
@@ -409,6 +418,16 @@ mod params_tests {
         );
         assert!(PsfParams::for_triangles(123_456).validate().is_ok());
         let l = |n| PsfParams::for_triangles(n).level;
-        assert_eq!([l(36), l(65_535), l(65_536), l(1_000_000)], [2, 2, 1, 1]);
+        assert_eq!(
+            [
+                l(36),
+                l(16_383),
+                l(16_384),
+                l(65_535),
+                l(65_536),
+                l(1_000_000)
+            ],
+            [3, 3, 2, 2, 1, 1]
+        );
     }
 }
