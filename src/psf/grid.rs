@@ -3,7 +3,7 @@
 //! into those tiles with the depth range each covers over each tile.
 
 use bytemuck::{Pod, Zeroable};
-use glam::Vec3;
+use glam::{Mat3A, Vec3, Vec3A};
 
 use super::directions::frame_for;
 use crate::geometry::Aabb;
@@ -142,18 +142,24 @@ impl GridFrame {
     /// and the grown bounding rectangle with the grown depth range.
     #[inline(always)]
     fn prepare(&self, tri: &[Vec3; 3], margin: f32) -> ([[f32; 3]; 3], f32, f32, Footprint) {
-        let p = [
-            self.project(tri[0]),
-            self.project(tri[1]),
-            self.project(tri[2]),
-        ];
+        // `project` for the three vertices, three lanes at a time: the same products
+        // summed in the same order, so the same bits (`projection_is_project` below).
+        let (u, v, d) = (self.u, self.v, self.d);
+        let m3 = Mat3A::from_cols(
+            Vec3A::new(u.x, v.x, d.x),
+            Vec3A::new(u.y, v.y, d.y),
+            Vec3A::new(u.z, v.z, d.z),
+        );
+        let (off, scale) = (
+            Vec3A::new(self.u0, self.v0, 0.0),
+            Vec3A::new(self.inv_tile, self.inv_tile, 1.0),
+        );
+        let q = tri.map(|x| (m3 * Vec3A::from(x) - off) * scale);
+        let p = q.map(|x| x.to_array());
+        let (lo, hi) = (q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
         let m = margin * self.inv_tile;
-        let lo_u = p[0][0].min(p[1][0]).min(p[2][0]) - m;
-        let hi_u = p[0][0].max(p[1][0]).max(p[2][0]) + m;
-        let lo_v = p[0][1].min(p[1][1]).min(p[2][1]) - m;
-        let hi_v = p[0][1].max(p[1][1]).max(p[2][1]) + m;
-        let zmin = p[0][2].min(p[1][2]).min(p[2][2]);
-        let zmax = p[0][2].max(p[1][2]).max(p[2][2]);
+        let (lo_u, hi_u, lo_v, hi_v) = (lo.x - m, hi.x + m, lo.y - m, hi.y + m);
+        let (zmin, zmax) = (lo.z, hi.z);
         let dz = margin + 1e-5 * (zmax - zmin);
         // Truncation is floor once negatives are clamped to 0, without `floor`'s libm
         // call (5% of an update); `as` saturates and maps NaN to 0, as before.
@@ -244,6 +250,35 @@ fn clipped_depth_range(tri: &[[f32; 3]; 3], rect: [f32; 4]) -> Option<(f32, f32)
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn projection_is_project() {
+        // The raster's three-lane projection against `project`, bit for bit.
+        let mut seed = 99u64;
+        let mut r = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        };
+        for level in 0..3 {
+            for dir in crate::psf::subfield_directions(level) {
+                let b = Aabb {
+                    min: Vec3::new(-3.0, -1.0, -7.0),
+                    max: Vec3::new(5.0, 2.0, 1.0),
+                };
+                let g = GridFrame::new(dir, &b, 37);
+                for _ in 0..200 {
+                    let tri = [(); 3].map(|_| Vec3::new(r() * 9.0, r() * 4.0, r() * 11.0));
+                    let (p, _, _, _) = g.prepare(&tri, 1e-3);
+                    for k in 0..3 {
+                        let want = g.project(tri[k]).map(f32::to_bits);
+                        assert_eq!(p[k].map(f32::to_bits), want, "{dir} {tri:?}");
+                    }
+                }
+            }
+        }
+    }
 
     fn grid() -> GridFrame {
         let b = Aabb {
