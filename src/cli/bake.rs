@@ -20,7 +20,8 @@ pub struct Args {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Direction level 0..=4 (4, 10, 34, 130, 514 directions; antipodes share a subfield;
-    /// default: from the triangle count, 2 below 65,536 triangles, else 1).
+    /// default: from the triangle count, 3 below 16,384 triangles, 2 below 65,536, else
+    /// 1; these suit camera, shadow and mirror rays, use 2 or 1 for random directions).
     #[arg(long)]
     pub levels: Option<u32>,
     /// Tiles along the longer side of each subfield's grid, 1..=4096 (default: from the
