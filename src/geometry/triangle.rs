@@ -354,16 +354,8 @@ mod tests {
         ] {
             dirs.push(Vec3::new(x, y, z));
         }
-        let mut seed = 7u64;
-        for _ in 0..2000 {
-            let mut r = || {
-                seed = seed
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((seed >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-            };
-            dirs.push(Vec3::new(r(), r(), r()));
-        }
+        let mut rng = crate::synth::Rng::new(7);
+        dirs.extend((0..2000).map(|_| rng.in_box(Vec3::splat(-1.0), Vec3::ONE)));
         for d in dirs {
             let rows = reference_rows(d);
             let pre = RayPre::new(Vec3::new(1.0, 2.0, 3.0), d);
