@@ -158,8 +158,8 @@ impl Psf {
         self.trace_pre::<ANY, C>(ray, &RayPre::new(ray.origin, ray.dir), count)
     }
 
-    /// [`trace`](Self::trace) of a valid ray with its [`RayPre`] given (the layered
-    /// query computes it once for both layers: 5% of a frame when each made its own).
+    /// [`trace`](Self::trace) of a valid ray with its [`RayPre`] given: the layered
+    /// query makes one for both layers (`benches/PERF.md`, step 31).
     pub(crate) fn trace_pre<const ANY: bool, C: Counter>(
         &self,
         ray: &Ray,
