@@ -4,9 +4,11 @@
 //! Every subfield of the layer keeps, per tile, a list of entries and a version `V`; the
 //! layer keeps a generation `GV`. A list is current only when its `V` equals `GV`, so
 //! advancing `GV` at the start of an update invalidates every list at once without
-//! visiting any. Insertion clears a stale list on first touch (keeping its memory) and
-//! stamps it; after the first frames an update allocates nothing, and it costs time in
-//! proportion to the tiles the moved triangles cover, not to the size of the grid.
+//! visiting any. Insertion stamps the tiles it fills; after the first frames an update
+//! allocates nothing. It costs time in proportion to the tiles the moved triangles
+//! cover, plus, on grids of no more cells than a few per triangle (the defaults), one
+//! prefix-sum pass over the grid (`dense_counts`); finer grids are counted tile by
+//! tile on first touch, never visiting the rest of the grid.
 //!
 //! The grids cover this frame's bounds of the moving triangles, wherever they are: far
 //! outside the static scene is fine. Queries walk the static PSF first, then the dynamic
@@ -448,11 +450,12 @@ impl DynSubfield {
     /// more than `COARSE` tiles is clipped tile by tile in the first pass and its
     /// entries kept until the second.
     ///
-    /// Dense counting (chosen by [`dense_counts`] unless `dense` says), a rectangle is counted by its four corners in a difference array and
-    /// the counts come from its prefix sums, runs in tile order: no loop over the
-    /// rectangle's tiles and none of their branches. Otherwise each tile is counted
-    /// and stamped on first touch, runs in that order, so that time and memory follow
-    /// the entries, never the grid. The buffers are reused.
+    /// Counting is dense where [`dense_counts`] says so (or `dense`, in tests): a
+    /// rectangle is counted by its four corners in a difference array, and the counts
+    /// come from its prefix sums, runs in tile order; no loop over the rectangle's tiles
+    /// and none of their branches. Otherwise each tile is counted and stamped on first
+    /// touch, runs in that order, so that time follows the entries, never the grid. The
+    /// buffers are reused.
     fn insert(
         &mut self,
         tris: &[[Vec3; 3]],
@@ -603,7 +606,7 @@ impl DynSubfield {
             };
             // The rectangle's tiles row by row in one loop, the step to the next row by
             // selects: one loop exit to mispredict a triangle, not one a row (−18% on
-            // this pass, `benches/PERF.md` step 42).
+            // this pass, `benches/PERF.md` step 43).
             let (i0, i1) = (r.i0 as usize, r.i1 as usize);
             let w = i1 - i0 + 1;
             let n = w * (r.j1 as usize - r.j0 as usize + 1);
