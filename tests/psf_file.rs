@@ -1,4 +1,4 @@
-//! The baked file (`formats/psf-v1.md`): round trip against the PSF built in memory,
+//! The baked file (`formats/psf-v2.md`): round trip against the PSF built in memory,
 //! deterministic bytes, and every kind of damage giving an error that names the section
 //! or the cause, never a panic.
 //!
@@ -280,7 +280,7 @@ fn a_flipped_byte_in_any_section_names_that_section() {
     for codec in [Codec::None, Codec::Zstd] {
         let good = to_bytes(&psf, &opts(codec)).unwrap();
         let sections = open_mem(&good).unwrap().sections;
-        assert_eq!(sections.len(), 2 + 3 * psf.subfields().len());
+        assert_eq!(sections.len(), 2 + 4 * psf.subfields().len());
         let mut checked = 0;
         for s in &sections {
             if s.stored_length == 0 {
@@ -325,11 +325,11 @@ fn a_flipped_byte_in_header_table_or_padding_is_caught() {
             (
                 FormatError::Version {
                     found,
-                    supported: 1,
+                    supported: 2,
                 },
                 8..=11,
             ) => {
-                assert_eq!(*found, 1 ^ (1 << (8 * (at - 8))))
+                assert_eq!(*found, 2 ^ (1 << (8 * (at - 8))))
             }
             (FormatError::NotSupported { what }, 12..=15) => assert!(what.contains("byte-order")),
             (FormatError::Checksum { section, .. }, 16..) => assert_eq!(section, "header"),
@@ -424,20 +424,17 @@ fn wrong_magic_version_or_byte_order() {
         Err(FormatError::Magic(_))
     ));
 
-    let mut v2 = good.clone();
-    v2[8..12].copy_from_slice(&2u32.to_le_bytes());
-    let err = open_mem(&v2).unwrap_err();
-    assert!(
-        matches!(
-            err,
-            FormatError::Version {
-                found: 2,
-                supported: 1
-            }
-        ),
-        "{err}"
-    );
-    assert!(err.to_string().contains("re-bake"));
+    // A newer file, and a version 1 file (before flat tiles): both refused by name.
+    for v in [3u32, 1] {
+        let mut other = good.clone();
+        other[8..12].copy_from_slice(&v.to_le_bytes());
+        let err = open_mem(&other).unwrap_err();
+        assert!(
+            matches!(err, FormatError::Version { found, supported: 2 } if found == v),
+            "{err}"
+        );
+        assert!(err.to_string().contains("re-bake"), "{err}");
+    }
 
     let mut be = good.clone();
     be[12..16].copy_from_slice(&0x0A0B_0C0Du32.to_be_bytes());
@@ -501,7 +498,17 @@ fn a_header_hash_that_does_not_match_its_triangles_is_refused() {
 
 #[test]
 fn resealed_structural_damage_is_caught() {
-    let (_, psf) = small_psf();
+    // Coarse enough that some tiles keep a BSP (more than 32 entries), fine enough that
+    // others are flat.
+    let (tris, _) = small_psf();
+    let mixed = |p: &Psf| {
+        let tiles = || p.subfields().iter().flat_map(|s| s.tiles.iter());
+        tiles().any(|h| h.is_flat()) && tiles().any(|h| h.slabs() > 0)
+    };
+    let psf = (2..8)
+        .map(|tiles| Psf::build(&tris, &PsfParams { level: 1, tiles }).unwrap())
+        .find(|p| mixed(p))
+        .expect("a grid with both kinds of tile");
     let good = to_bytes(&psf, &opts(Codec::None)).unwrap();
     let sections = open_mem(&good).unwrap().sections;
     let word = |b: &mut Vec<u8>, at: u64, v: u32| {
@@ -509,15 +516,45 @@ fn resealed_structural_damage_is_caught() {
         reseal(b);
     };
     let find = |name: &str| sections.iter().find(|s| s.id.to_string() == name).unwrap();
+    // The first non-empty section of a per-subfield kind, and its subfield.
+    let first = |kind: &str| {
+        let s = sections
+            .iter()
+            .find(|s| s.id.to_string().starts_with(kind) && s.raw_length > 0)
+            .unwrap_or_else(|| panic!("no {kind} section holds anything"));
+        (s.offset, format!("subfield[{}]", s.id.subfield))
+    };
+    // The first tile header (file offset, subfield) whose slab count passes `pick`.
+    let tile = |pick: &dyn Fn(u32) -> bool| {
+        let s = psf
+            .subfields()
+            .iter()
+            .enumerate()
+            .find_map(|(k, s)| {
+                let i = s.tiles.iter().position(|h| pick(h.slab_count))?;
+                Some((find(&format!("tiles[{k}]")).offset + 16 * i as u64, k))
+            })
+            .expect("a tile of that kind");
+        (s.0, format!("subfield[{}]", s.1))
+    };
+    let (entries, entries_sub) = first("entries[");
+    let (blocks, blocks_sub) = first("blocks[");
+    let (bsp, bsp_sub) = tile(&|n| n > 0 && n < 1 << 31);
+    let (flat, flat_sub) = tile(&|n| n & (1 << 31) != 0);
     let cases: Vec<(u64, u32, &str)> = vec![
         // header: level, tiles, triangle count
         (20, 9, "header"),
         (24, 0, "header"),
         (40, 1, "triangles"),
         // an entry naming a triangle that does not exist
-        (find("entries[2]").offset, 1_000_000, "subfield[2]"),
+        (entries, 1_000_000, &entries_sub),
+        // a flat tile's block naming one (lane 0's triangle, after the depths)
+        (blocks + 64, 1_000_000, &blocks_sub),
         // a tile whose slabs run past the slab starts
-        (find("tiles[1]").offset + 16 * 3 + 4, 1000, "subfield[1]"),
+        (bsp + 4, 1000, &bsp_sub),
+        // a flat tile whose blocks run past the blocks, or that has five of them
+        (flat, 1_000_000, &flat_sub),
+        (flat + 4, (1 << 31) | 5, &flat_sub),
         // a frame with a different grid: the tile section no longer fits it
         (find("frames").offset + 52, 3, "tiles[0]"),
         // a table row whose offset moves its section
@@ -649,7 +686,7 @@ fn inspect_describes_the_file_and_serialises_to_json() {
     let ins = format::inspect(&path).unwrap();
     assert_eq!(ins.header.file_length, report.file_length);
     assert_eq!(ins.header.scene_hash, scene_hash(&tris));
-    assert_eq!(ins.sections.len(), 2 + 3 * psf.subfields().len());
+    assert_eq!(ins.sections.len(), 2 + 4 * psf.subfields().len());
     assert_eq!(ins.raw_bytes, report.raw_length);
     assert!(ins.stored_bytes < report.file_length);
     assert_eq!(ins.directions.len(), psf.subfields().len());

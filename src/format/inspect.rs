@@ -7,7 +7,9 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use super::{open_psf, BakedPsf, Codec, FormatError, Header, OpenOptions, SectionKind};
+use super::{
+    open_psf, BakedPsf, Codec, FormatError, Header, OpenOptions, SectionKind, PER_SUBFIELD,
+};
 use crate::psf::SharedBytes;
 
 /// Everything `subfield inspect` shows. Opening validates the whole file, so an
@@ -104,11 +106,7 @@ impl Inspection {
             .map(|e| SectionInfo {
                 name: e.id.to_string(),
                 kind: e.id.kind,
-                subfield: matches!(
-                    e.id.kind,
-                    SectionKind::Tiles | SectionKind::SlabStarts | SectionKind::Entries
-                )
-                .then_some(e.id.subfield),
+                subfield: e.id.kind.per_subfield().then_some(e.id.subfield),
                 codec: e.codec,
                 offset: e.offset,
                 stored_length: e.stored_length,
@@ -130,7 +128,10 @@ impl Inspection {
             .map(|(k, s)| {
                 let (mut empty, mut total, mut max) = (0u64, 0u64, 0u64);
                 for h in s.tiles.iter() {
-                    let n = if h.slab_count == 0 {
+                    let n = if h.is_flat() {
+                        // In range: Psf::from_parts checked every flat tile's blocks.
+                        s.blocks[h.blocks()].iter().flat_map(|b| b.used()).count() as u64
+                    } else if h.slab_count == 0 {
                         0
                     } else {
                         // In range: Psf::from_parts checked every tile's slabs.
@@ -149,7 +150,7 @@ impl Inspection {
                     total += n;
                     max = max.max(n);
                 }
-                let own = &sections[2 + 3 * k..5 + 3 * k];
+                let own = &sections[2 + PER_SUBFIELD * k..2 + PER_SUBFIELD * (k + 1)];
                 DirectionInfo {
                     subfield: k as u32,
                     direction: s.frame.d.to_array(),

@@ -1,8 +1,8 @@
 //! The baked file (`.psf`): a static scene's parallel subfields, written once and opened
-//! many times. The normative description is `formats/psf-v1.md`; this module follows it.
+//! many times. The normative description is `formats/psf-v2.md`; this module follows it.
 //!
 //! * [`write_psf`] / [`to_bytes`]: one section per array (triangles, frames, and per
-//!   subfield its tiles, slab starts and entries), each its own zstd frame compressed in
+//!   subfield its tiles, slab starts, entries and flat tiles' blocks), each its own zstd frame compressed in
 //!   parallel (single-threaded per frame, so the bytes do not depend on the thread count)
 //!   or stored raw and 64-byte aligned; written atomically.
 //! * [`open_psf`] / [`from_bytes`]: memory-maps the file and validates all of it once
@@ -33,8 +33,11 @@ pub use write::{to_bytes, write_psf, WriteOptions, WriteReport};
 /// The first 8 bytes of every file. After PNG: a non-ASCII first byte, and CR LF / SUB / LF
 /// so that text-mode transfers that rewrite line ends are caught.
 pub const MAGIC: [u8; 8] = *b"\x89PSF\r\n\x1a\n";
-/// The format version this build reads and writes.
-pub const VERSION: u32 = 1;
+/// The format version this build reads and writes. Version 2 added flat tiles and their
+/// `blocks` section; a version 1 file is refused (rebake it: the file is a cache).
+pub const VERSION: u32 = 2;
+/// Sections per subfield: tiles, slab starts, entries, blocks.
+pub(crate) const PER_SUBFIELD: usize = 4;
 /// Written as a little-endian `u32`: a reader that sees other bytes (`0a 0b 0c 0d`) was
 /// handed a byte-swapped file.
 pub const ENDIAN_MARKER: u32 = 0x0A0B_0C0D;
@@ -68,6 +71,9 @@ pub enum SectionKind {
     SlabStarts = 4,
     /// [`Entry`](crate::psf::Entry) per listed triangle of one subfield, 12 bytes.
     Entries = 5,
+    /// [`Block`](crate::psf::Block) of eight entries of the flat tiles of one subfield,
+    /// 96 bytes.
+    Blocks = 6,
 }
 
 impl SectionKind {
@@ -78,6 +84,7 @@ impl SectionKind {
             3 => SectionKind::Tiles,
             4 => SectionKind::SlabStarts,
             5 => SectionKind::Entries,
+            6 => SectionKind::Blocks,
             _ => return None,
         })
     }
@@ -90,6 +97,7 @@ impl SectionKind {
             SectionKind::Tiles => 16,
             SectionKind::SlabStarts => 4,
             SectionKind::Entries => 12,
+            SectionKind::Blocks => 96,
         }
     }
 
@@ -100,13 +108,17 @@ impl SectionKind {
             SectionKind::Tiles => "tiles",
             SectionKind::SlabStarts => "slab_starts",
             SectionKind::Entries => "entries",
+            SectionKind::Blocks => "blocks",
         }
     }
 
-    fn per_subfield(self) -> bool {
+    pub(crate) fn per_subfield(self) -> bool {
         matches!(
             self,
-            SectionKind::Tiles | SectionKind::SlabStarts | SectionKind::Entries
+            SectionKind::Tiles
+                | SectionKind::SlabStarts
+                | SectionKind::Entries
+                | SectionKind::Blocks
         )
     }
 }
@@ -116,6 +128,7 @@ const _: () = assert!(std::mem::size_of::<[Vec3; 3]>() == 36);
 const _: () = assert!(std::mem::size_of::<crate::psf::GridFrame>() == 60);
 const _: () = assert!(std::mem::size_of::<crate::psf::TileHeader>() == 16);
 const _: () = assert!(std::mem::size_of::<crate::psf::Entry>() == 12);
+const _: () = assert!(std::mem::size_of::<crate::psf::Block>() == 96);
 
 /// How a section's bytes are stored.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -226,7 +239,7 @@ impl fmt::Display for SectionId {
 }
 
 /// The sections of a file with `subfields` subfields, in the order the spec fixes:
-/// triangles, frames, then per subfield its tiles, slab starts and entries.
+/// triangles, frames, then per subfield its tiles, slab starts, entries and blocks.
 pub(crate) fn section_ids(subfields: u32) -> impl Iterator<Item = SectionId> {
     let head = [SectionKind::Triangles, SectionKind::Frames]
         .into_iter()
@@ -236,6 +249,7 @@ pub(crate) fn section_ids(subfields: u32) -> impl Iterator<Item = SectionId> {
             SectionKind::Tiles,
             SectionKind::SlabStarts,
             SectionKind::Entries,
+            SectionKind::Blocks,
         ]
         .into_iter()
         .map(move |kind| SectionId { kind, subfield: k })

@@ -22,7 +22,7 @@ use rayon::prelude::*;
 
 use super::{
     align_up, checksum, scene_hash, section_ids, Codec, FormatError, Header, SceneHash,
-    SectionEntry, SectionKind, HEADER_LEN, MAX_RATIO, TABLE_ENTRY_LEN,
+    SectionEntry, SectionKind, HEADER_LEN, MAX_RATIO, PER_SUBFIELD, TABLE_ENTRY_LEN,
 };
 use crate::psf::{subfield_directions, Buf, GridFrame, Psf, PsfParams, SharedBytes, Subfield};
 
@@ -125,7 +125,7 @@ pub fn from_bytes(bytes: SharedBytes, opts: &OpenOptions) -> Result<BakedPsf, Fo
     let frames_entry = &sections[1];
     let frames: Buf<GridFrame> = load(&bytes, all, frames_entry)?;
     for (k, f) in frames.iter().enumerate() {
-        let e = &sections[2 + 3 * k];
+        let e = &sections[2 + PER_SUBFIELD * k];
         let needed = f.nu as u64 * f.nv as u64 * SectionKind::Tiles.item_size();
         if e.raw_length != needed {
             return Err(FormatError::invalid(
@@ -159,12 +159,13 @@ pub fn from_bytes(bytes: SharedBytes, opts: &OpenOptions) -> Result<BakedPsf, Fo
             let loaded: Vec<Result<Subfield, FormatError>> = (0..frames.len())
                 .into_par_iter()
                 .map(|k| {
-                    let at = 2 + 3 * k;
+                    let at = 2 + PER_SUBFIELD * k;
                     Ok(Subfield {
                         frame: frames[k],
                         tiles: load(&bytes, all, &sections[at])?,
                         slab_starts: load(&bytes, all, &sections[at + 1])?,
                         entries: load(&bytes, all, &sections[at + 2])?,
+                        blocks: load(&bytes, all, &sections[at + 3])?,
                     })
                 })
                 .collect();
@@ -212,14 +213,14 @@ fn validate_layout(header: &Header, all: &[u8]) -> Result<Vec<SectionEntry>, For
             header.subfield_count, header.triangle_count, header.level
         )));
     }
-    let nsec = 2 + 3 * nsub as usize;
+    let nsec = 2 + PER_SUBFIELD * nsub as usize;
     if header.section_count as usize != nsec {
         return Err(bad_header(format!(
             "{} sections, {nsub} subfields make {nsec}",
             header.section_count
         )));
     }
-    // Bounded: at most 2 + 3 * 514 rows.
+    // Bounded: at most 2 + 4 * 514 rows.
     let table_end = HEADER_LEN + TABLE_ENTRY_LEN * nsec;
     let Some(table) = all.get(HEADER_LEN..table_end) else {
         return Err(FormatError::Truncated {

@@ -10,7 +10,7 @@ use serde::Serialize;
 
 use super::{
     align_up, checksum, scene_hash, section_ids, Codec, FormatError, Header, SceneHash,
-    SectionEntry, SectionId, HEADER_LEN, MAX_RATIO, TABLE_ENTRY_LEN, VERSION,
+    SectionEntry, SectionId, HEADER_LEN, MAX_RATIO, PER_SUBFIELD, TABLE_ENTRY_LEN, VERSION,
 };
 use crate::psf::Psf;
 
@@ -69,13 +69,14 @@ fn encode(psf: &Psf, opts: &WriteOptions) -> Result<(Vec<u8>, WriteReport), Form
     let frames: Vec<crate::psf::GridFrame> = subfields.iter().map(|s| s.frame).collect();
     // Raw bytes of every section in file order: the in-memory arrays are the stored
     // little-endian layout (checked above), so they are cast, not serialised.
-    let mut raw: Vec<&[u8]> = Vec::with_capacity(2 + 3 * subfields.len());
+    let mut raw: Vec<&[u8]> = Vec::with_capacity(2 + PER_SUBFIELD * subfields.len());
     raw.push(bytemuck::cast_slice(psf.triangles()));
     raw.push(bytemuck::cast_slice(&frames));
     for s in subfields {
         raw.push(bytemuck::cast_slice(&s.tiles));
         raw.push(bytemuck::cast_slice(&s.slab_starts));
         raw.push(bytemuck::cast_slice(&s.entries));
+        raw.push(bytemuck::cast_slice(&s.blocks));
     }
     let ids: Vec<SectionId> = section_ids(nsub).collect();
     debug_assert_eq!(ids.len(), raw.len());
@@ -201,13 +202,16 @@ mod tests {
                 "tiles[0]",
                 "slab_starts[0]",
                 "entries[0]",
+                "blocks[0]",
                 "tiles[1]",
                 "slab_starts[1]",
-                "entries[1]"
+                "entries[1]",
+                "blocks[1]"
             ]
         );
         assert_eq!(SectionKind::from_code(3), Some(SectionKind::Tiles));
-        assert_eq!(SectionKind::from_code(6), None);
+        assert_eq!(SectionKind::from_code(6), Some(SectionKind::Blocks));
+        assert_eq!(SectionKind::from_code(7), None);
     }
 
     #[test]
@@ -215,6 +219,6 @@ mod tests {
         let n: Vec<usize> = (0..=crate::psf::MAX_LEVEL)
             .map(|l| crate::psf::subfield_directions(l).len())
             .collect();
-        assert_eq!(n, [4, 7, 25, 109, 469], "formats/psf-v1.md lists these");
+        assert_eq!(n, [4, 7, 25, 109, 469], "formats/psf-v2.md lists these");
     }
 }

@@ -18,6 +18,7 @@ use glam::{DVec3, Vec3, Vec4};
 use rayon::prelude::*;
 
 use super::batch::binned;
+use super::bsp::{depth_mask, Block, LANES, PADDING};
 use super::stats::{Counter, NoCount, RayStats};
 use super::traverse::{clipped_span, test_candidate, walk_tiles};
 use super::{
@@ -103,20 +104,6 @@ struct Entries {
     blocks: Vec<Block>,
 }
 
-#[derive(Clone, Copy, Debug)]
-struct Block {
-    zmin: [f32; LANES],
-    zmax: [f32; LANES],
-    tri: [u32; LANES],
-}
-
-/// A block of padding: depth ranges from +inf to -inf, which no interval meets.
-const PADDING: Block = Block {
-    zmin: [f32::INFINITY; LANES],
-    zmax: [f32::NEG_INFINITY; LANES],
-    tri: [0; LANES],
-};
-
 impl Entries {
     fn capacity(&self) -> usize {
         self.blocks.capacity() * LANES
@@ -156,20 +143,6 @@ fn morton3(x: u32, y: u32, z: u32) -> u32 {
         (v | (v << 2)) & 0x0924_9249
     }
     spread(x) | (spread(y) << 1) | (spread(z) << 2)
-}
-
-/// Entries filtered by depth at a time: one bit each in `depth_mask`.
-const LANES: usize = 8;
-
-/// Bit `j` set where entry `j` of a block overlaps `[lo, hi]`: two 4-wide compares and a
-/// move-mask each half.
-#[inline(always)]
-fn depth_mask(zmin: &[f32; LANES], zmax: &[f32; LANES], lo: Vec4, hi: Vec4) -> u32 {
-    let lower =
-        (Vec4::from_slice(&zmax[..4]).cmpge(lo) & Vec4::from_slice(&zmin[..4]).cmple(hi)).bitmask();
-    let upper =
-        (Vec4::from_slice(&zmax[4..]).cmpge(lo) & Vec4::from_slice(&zmin[4..]).cmple(hi)).bitmask();
-    lower | upper << 4
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -419,7 +392,7 @@ impl DynamicLayer {
             let (lo4, hi4) = (Vec4::splat(lo), Vec4::splat(hi));
             let blocks = &e.blocks[start / LANES..(start + len).div_ceil(LANES)];
             for b in blocks {
-                let mut mask = depth_mask(&b.zmin, &b.zmax, lo4, hi4);
+                let mut mask = depth_mask(b, lo4, hi4);
                 while mask != 0 {
                     let j = mask.trailing_zeros() as usize;
                     mask &= mask - 1;

@@ -21,7 +21,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use glam::Vec3;
 use rayon::prelude::*;
 
-pub use bsp::{Entry, TileHeader};
+pub use bsp::{Block, Entry, TileHeader};
 pub use directions::{subfield_directions, tetrahedron_directions, DirectionTable, MAX_LEVEL};
 pub use dynamic::{DynamicLayer, DynamicStats, Layered};
 pub use grid::GridFrame;
@@ -114,15 +114,18 @@ pub enum PsfError {
     Inconsistent { what: String, detail: String },
 }
 
-/// One subfield: its grid and, per tile, the BSP slabs listing triangle entries.
+/// One subfield: its grid and, per tile, the BSP slabs listing triangle entries, or the
+/// blocks of a flat tile.
 #[derive(Debug)]
 pub struct Subfield {
     pub frame: GridFrame,
     /// `nu * nv` headers, row-major (`v` rows of `u` tiles).
     pub tiles: Buf<TileHeader>,
-    /// Per tile, `slab_count + 1` offsets into `entries`.
+    /// Per BSP tile, `slab_count + 1` offsets into `entries`.
     pub slab_starts: Buf<u32>,
     pub entries: Buf<Entry>,
+    /// The flat tiles' entries.
+    pub blocks: Buf<Block>,
 }
 
 /// The static scene's parallel subfields: triangles plus one [`Subfield`] per direction.
@@ -292,6 +295,16 @@ impl Psf {
             }
             let nslab = s.slab_starts.len() as u64;
             for (ti, h) in s.tiles.iter().enumerate() {
+                if h.is_flat() {
+                    let n = h.blocks().len();
+                    if n == 0 || n * bsp::LANES > bsp::FLAT_MAX || h.blocks().end > s.blocks.len() {
+                        return Err(bad(
+                            what(),
+                            format!("flat tile {ti} header {h:?} is out of range"),
+                        ));
+                    }
+                    continue;
+                }
                 if h.slab_count == 0 {
                     continue;
                 }
@@ -324,6 +337,19 @@ impl Psf {
                 return Err(bad(
                     what(),
                     format!("entry {i} names triangle {} of {ntri}", e.tri),
+                ));
+            }
+            // Padding lanes name triangle 0, which exists whenever there are blocks (an
+            // empty scene has no subfields).
+            if let Some((i, t)) = s
+                .blocks
+                .iter()
+                .enumerate()
+                .find_map(|(i, b)| b.tri.iter().find(|&&t| t as u64 >= ntri).map(|t| (i, t)))
+            {
+                return Err(bad(
+                    what(),
+                    format!("block {i} names triangle {t} of {ntri}"),
                 ));
             }
         }
@@ -392,16 +418,23 @@ fn bake_subfield(frame: GridFrame, tris: &[[Vec3; 3]], margin: f32) -> Subfield 
     }
     let mut tiles = Vec::with_capacity(ntiles);
     let mut slab_starts = Vec::new();
-    let mut entries = Vec::with_capacity(by_tile.len());
+    let mut entries = Vec::new();
+    let mut blocks = Vec::new();
     for i in 0..ntiles {
         let list = &by_tile[start[i] as usize..start[i + 1] as usize];
-        tiles.push(bsp::build_tile(list, &mut slab_starts, &mut entries));
+        tiles.push(bsp::build_tile(
+            list,
+            &mut slab_starts,
+            &mut entries,
+            &mut blocks,
+        ));
     }
     Subfield {
         frame,
         tiles: tiles.into(),
         slab_starts: slab_starts.into(),
         entries: entries.into(),
+        blocks: blocks.into(),
     }
 }
 

@@ -122,11 +122,14 @@ impl Psf {
         for sf in self.subfields() {
             s.bytes += std::mem::size_of_val(&*sf.tiles)
                 + std::mem::size_of_val(&*sf.slab_starts)
-                + std::mem::size_of_val(&*sf.entries);
+                + std::mem::size_of_val(&*sf.entries)
+                + std::mem::size_of_val(&*sf.blocks);
             s.slab_entries += sf.entries.len();
             for h in sf.tiles.iter() {
                 s.tiles += 1;
-                let n = if h.slab_count == 0 {
+                let n = if h.is_flat() {
+                    sf.blocks[h.blocks()].iter().flat_map(|b| b.used()).count() as u64
+                } else if h.slab_count == 0 {
                     0
                 } else {
                     let st = &sf.slab_starts

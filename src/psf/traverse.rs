@@ -1,9 +1,12 @@
 //! Queries: pick the subfield of the closest direction (table lookup), clip the ray to
 //! the scene bounds, walk the tiles under its projection near to far (2D DDA, in f64 so
-//! far-away origins lose nothing), search each tile's BSP over the ray's depth interval
-//! there, and stop as soon as the best hit lies before the exit of the current tile.
+//! far-away origins lose nothing), search each tile's BSP (or scan a flat tile's blocks)
+//! over the ray's depth interval there, and stop as soon as the best hit lies before the
+//! exit of the current tile.
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec3, Vec4};
+
+use super::bsp::{depth_mask, LANES};
 
 use super::batch::binned;
 use super::stats::{Counter, NoCount, RayStats};
@@ -171,8 +174,13 @@ impl Psf {
         }
         let (o, d, t0, t1) = clipped_span(&self.clip, ray)?;
         let sf = &self.subfields[self.table.lookup(ray.dir)];
-        let (tiles, starts, entries, tris) =
-            (&*sf.tiles, &*sf.slab_starts, &*sf.entries, &*self.triangles);
+        let (tiles, starts, entries, blocks, tris) = (
+            &*sf.tiles,
+            &*sf.slab_starts,
+            &*sf.entries,
+            &*sf.blocks,
+            &*self.triangles,
+        );
         let margin = self.margin;
         // How far (in t) a computed hit may sit from where the line truly meets its
         // triangle: the early exit waits that much longer.
@@ -187,6 +195,33 @@ impl Psf {
             let h = tiles[tile];
             if h.slab_count == 0 {
                 return true;
+            }
+            if h.is_flat() {
+                // Every entry meeting the depth interval, eight at a time.
+                let t_far = best.map_or(t_exit, |b| t_exit.min(b.t as f64 + slack));
+                let (za, zb) = (oz + t_enter * dz, oz + t_far * dz);
+                let (lo, hi) = ((za.min(zb) as f32) - margin, (za.max(zb) as f32) + margin);
+                let (lo4, hi4) = (Vec4::splat(lo), Vec4::splat(hi));
+                let run = &blocks[h.blocks()];
+                count.scanned(run.len() * LANES);
+                for b in run {
+                    let mut mask = depth_mask(b, lo4, hi4);
+                    while mask != 0 {
+                        let j = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        count.candidate();
+                        if let Some(hit) = test_candidate(pre, tris, b.tri[j], ray, &best) {
+                            if ANY {
+                                best = Some(hit);
+                                return false;
+                            }
+                            if best.is_none_or(|b| hit.is_closer_than(&b)) {
+                                best = Some(hit);
+                            }
+                        }
+                    }
+                }
+                return !matches!(&best, Some(b) if b.t as f64 + slack <= t_exit);
             }
             // The ray's depth interval over this tile, cut at the best hit so far.
             let (za, zb) = (oz + t_enter * dz, oz + t_exit * dz);

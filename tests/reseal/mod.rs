@@ -1,4 +1,4 @@
-//! An independent implementation of `formats/psf-v1.md`'s checksums (written from the
+//! An independent implementation of `formats/psf-v2.md`'s checksums (written from the
 //! spec's byte tables, not from the library): `tests/psf_file.rs` uses it to push damaged
 //! files past the checksums to the structural checks, and so does the fuzz target
 //! `fuzz/fuzz_targets/psf_reader.rs`.
