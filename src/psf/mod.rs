@@ -254,7 +254,8 @@ impl Psf {
             }
         }
         let ntri = triangles.len() as u64;
-        for (k, s) in subfields.iter().enumerate() {
+        // Per subfield, in parallel; the first failure in subfield order is reported.
+        let check = |(k, s): (usize, &Subfield)| -> Result<(), PsfError> {
             let what = || format!("subfield[{k}]");
             let f = &s.frame;
             let nums = [f.d, f.u, f.v].iter().all(|v| v.is_finite())
@@ -341,18 +342,27 @@ impl Psf {
             }
             // Padding lanes name triangle 0, which exists whenever there are blocks (an
             // empty scene has no subfields).
-            if let Some((i, t)) = s
+            let top = s
                 .blocks
                 .iter()
-                .enumerate()
-                .find_map(|(i, b)| b.tri.iter().find(|&&t| t as u64 >= ntri).map(|t| (i, t)))
-            {
+                .map(|b| b.tri.iter().max().copied().unwrap_or(0))
+                .max();
+            if let Some((i, t)) = top.filter(|&t| t as u64 >= ntri).and_then(|_| {
+                s.blocks
+                    .iter()
+                    .enumerate()
+                    .find_map(|(i, b)| b.tri.iter().find(|&&t| t as u64 >= ntri).map(|t| (i, t)))
+            }) {
                 return Err(bad(
                     what(),
                     format!("block {i} names triangle {t} of {ntri}"),
                 ));
             }
-        }
+            Ok(())
+        };
+        let checked: Vec<Result<(), PsfError>> =
+            subfields.par_iter().enumerate().map(check).collect();
+        checked.into_iter().collect::<Result<(), PsfError>>()?;
         Ok(Psf {
             params,
             bounds,
