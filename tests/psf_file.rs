@@ -693,6 +693,11 @@ fn inspect_describes_the_file_and_serialises_to_json() {
     let stats = psf.stats();
     assert_eq!(ins.occupancy.tiles, stats.tiles as u64);
     assert_eq!(ins.occupancy.empty_tiles, stats.empty_tiles as u64);
+    let flat: u64 = ins.directions.iter().map(|d| d.flat_tiles).sum();
+    let flat_here = psf.subfields().iter().flat_map(|s| s.tiles.iter());
+    let flat_here = flat_here.filter(|h| h.is_flat()).count() as u64;
+    assert_eq!((flat, ins.occupancy.flat_tiles), (flat_here, flat_here));
+    assert!(flat > 0);
     let tiles: u64 = ins.directions.iter().map(|d| d.tiles).sum();
     let empty: u64 = ins.directions.iter().map(|d| d.empty_tiles).sum();
     assert_eq!(

@@ -54,12 +54,14 @@ pub struct DirectionInfo {
     pub nv: u32,
     pub tiles: u64,
     pub empty_tiles: u64,
+    /// Tiles of at most 32 triangles, stored as blocks of eight instead of a BSP.
+    pub flat_tiles: u64,
     /// Entries over all BSP slabs (a triangle is listed once per slab it overlaps).
     pub slab_entries: u64,
     /// Distinct triangles per tile.
     pub triangles_per_tile_mean: f64,
     pub triangles_per_tile_max: u64,
-    /// Its three sections together.
+    /// Its four sections together.
     pub stored_bytes: u64,
     pub raw_bytes: u64,
 }
@@ -69,6 +71,7 @@ pub struct DirectionInfo {
 pub struct Occupancy {
     pub tiles: u64,
     pub empty_tiles: u64,
+    pub flat_tiles: u64,
     pub slab_entries: u64,
     pub triangles_per_tile_mean: f64,
     pub triangles_per_tile_max: u64,
@@ -127,6 +130,7 @@ impl Inspection {
             .enumerate()
             .map(|(k, s)| {
                 let (mut empty, mut total, mut max) = (0u64, 0u64, 0u64);
+                let flat = s.tiles.iter().filter(|h| h.is_flat()).count() as u64;
                 for h in s.tiles.iter() {
                     let n = if h.is_flat() {
                         // In range: Psf::from_parts checked every flat tile's blocks.
@@ -158,6 +162,7 @@ impl Inspection {
                     nv: s.frame.nv,
                     tiles: s.tiles.len() as u64,
                     empty_tiles: empty,
+                    flat_tiles: flat,
                     slab_entries: s.entries.len() as u64,
                     triangles_per_tile_mean: total as f64 / s.tiles.len().max(1) as f64,
                     triangles_per_tile_max: max,
@@ -177,6 +182,7 @@ impl Inspection {
             occupancy: Occupancy {
                 tiles: st.tiles as u64,
                 empty_tiles: st.empty_tiles as u64,
+                flat_tiles: st.flat_tiles as u64,
                 slab_entries: st.slab_entries as u64,
                 triangles_per_tile_mean: st.entries_per_tile_mean,
                 triangles_per_tile_max: st.entries_per_tile_max,
@@ -235,13 +241,13 @@ impl fmt::Display for Inspection {
         writeln!(f, "directions:")?;
         writeln!(
             f,
-            "  {:>3} {:>26} {:>9} {:>7} {:>7} {:>10} {:>9} {:>6}",
-            "#", "direction", "grid", "tiles", "empty", "entries", "tri/tile", "max"
+            "  {:>3} {:>26} {:>9} {:>7} {:>7} {:>7} {:>10} {:>9} {:>6}",
+            "#", "direction", "grid", "tiles", "empty", "flat", "entries", "tri/tile", "max"
         )?;
         for d in &self.directions {
             writeln!(
                 f,
-                "  {:>3} {:>8.5},{:>8.5},{:>8.5} {:>4}x{:<4} {:>7} {:>7} {:>10} {:>9.2} {:>6}",
+                "  {:>3} {:>8.5},{:>8.5},{:>8.5} {:>4}x{:<4} {:>7} {:>7} {:>7} {:>10} {:>9.2} {:>6}",
                 d.subfield,
                 d.direction[0],
                 d.direction[1],
@@ -250,6 +256,7 @@ impl fmt::Display for Inspection {
                 d.nv,
                 d.tiles,
                 d.empty_tiles,
+                d.flat_tiles,
                 d.slab_entries,
                 d.triangles_per_tile_mean,
                 d.triangles_per_tile_max
@@ -258,9 +265,10 @@ impl fmt::Display for Inspection {
         let o = &self.occupancy;
         writeln!(
             f,
-            "occupancy: {} tiles, {} empty, {:.2} triangles per tile (max {}), {} slab entries",
+            "occupancy: {} tiles, {} empty, {} flat, {:.2} triangles per tile (max {}), {} slab entries",
             o.tiles,
             o.empty_tiles,
+            o.flat_tiles,
             o.triangles_per_tile_mean,
             o.triangles_per_tile_max,
             o.slab_entries

@@ -101,12 +101,14 @@ pub struct PsfStats {
     pub subfields: usize,
     pub tiles: usize,
     pub empty_tiles: usize,
+    /// Tiles stored as blocks of eight entries instead of a BSP.
+    pub flat_tiles: usize,
     /// Entries over all slabs (with the BSP's duplicates).
     pub slab_entries: usize,
     pub entries_per_tile_mean: f64,
     pub entries_per_tile_max: u64,
     pub entries_per_tile: Histogram,
-    /// Bytes of triangles, tile headers, slab offsets and entries.
+    /// Bytes of triangles, tile headers, slab offsets, entries and blocks.
     pub bytes: usize,
 }
 
@@ -127,6 +129,7 @@ impl Psf {
             s.slab_entries += sf.entries.len();
             for h in sf.tiles.iter() {
                 s.tiles += 1;
+                s.flat_tiles += h.is_flat() as usize;
                 let n = if h.is_flat() {
                     sf.blocks[h.blocks()].iter().flat_map(|b| b.used()).count() as u64
                 } else if h.slab_count == 0 {

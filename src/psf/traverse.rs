@@ -6,9 +6,8 @@
 
 use glam::{DVec3, Vec3, Vec4};
 
-use super::bsp::{depth_mask, LANES};
-
 use super::batch::binned;
+use super::bsp::{depth_mask, LANES};
 use super::stats::{Counter, NoCount, RayStats};
 use super::{GridFrame, Psf};
 use crate::geometry::{
