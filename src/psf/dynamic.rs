@@ -14,13 +14,13 @@
 //! outside the static scene is fine. Queries walk the static PSF first, then the dynamic
 //! grid of the same direction up to the static hit, scanning each tile's list.
 
-use glam::{DVec3, Vec3, Vec4};
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use super::batch::binned;
-use super::bsp::{depth_mask, Block, LANES, PADDING};
+use super::bsp::{Block, LANES, PADDING};
 use super::stats::{Counter, NoCount, RayStats};
-use super::traverse::{clipped_span, test_candidate, walk_tiles};
+use super::traverse::{block_window, clipped_span, scan_blocks, walk_tiles};
 use super::{
     check_triangles, margin_for, DirectionTable, Entry, GridFrame, Psf, PsfError, PsfParams,
 };
@@ -385,30 +385,11 @@ impl DynamicLayer {
             let (start, len) = (slot.start as usize, slot.count as usize);
             let e = &sf.entries;
             count.scanned(len);
-            // The ray's depth interval over this tile, cut at the best hit so far.
-            let t_far = best.map_or(t_exit, |b| t_exit.min(b.t as f64 + slack));
-            let (za, zb) = (oz + t_enter * dz, oz + t_far * dz);
-            let (lo, hi) = ((za.min(zb) as f32) - margin, (za.max(zb) as f32) + margin);
-            let (lo4, hi4) = (Vec4::splat(lo), Vec4::splat(hi));
+            let window = block_window(oz, dz, t_enter, t_exit, &best, slack, margin);
             let blocks = &e.blocks[start / LANES..(start + len).div_ceil(LANES)];
-            for b in blocks {
-                let mut mask = depth_mask(b, lo4, hi4);
-                while mask != 0 {
-                    let j = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    count.candidate();
-                    let tri = b.tri[j];
-                    if let Some(mut hit) = test_candidate(pre, tris, tri, ray, &best) {
-                        hit.tri = order[tri as usize];
-                        if ANY {
-                            best = Some(hit);
-                            return false;
-                        }
-                        if best.is_none_or(|b| hit.is_closer_than(&b)) {
-                            best = Some(hit);
-                        }
-                    }
-                }
+            let number = |t: u32| order[t as usize];
+            if !scan_blocks::<ANY, _, _>(blocks, window, pre, tris, ray, &mut best, count, number) {
+                return false;
             }
             !matches!(&best, Some(b) if b.t as f64 + slack <= t_exit)
         });

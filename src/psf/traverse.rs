@@ -7,7 +7,7 @@
 use glam::{DVec3, Vec3, Vec4};
 
 use super::batch::binned;
-use super::bsp::{depth_mask, LANES};
+use super::bsp::{depth_mask, Block, LANES};
 use super::stats::{Counter, NoCount, RayStats};
 use super::{GridFrame, Psf};
 use crate::geometry::{
@@ -124,6 +124,62 @@ pub(crate) fn test_candidate<T: Candidate>(
         .map(|(t, u, v)| Hit { t, tri, u, v })
 }
 
+/// The ray's depth interval over a tile, from `t_enter` to the tile's exit cut at the best
+/// hit so far, grown by the margin: two splats for [`depth_mask`]. `oz + t dz` is the
+/// ray's depth along the subfield's direction.
+#[inline(always)]
+pub(crate) fn block_window(
+    oz: f64,
+    dz: f64,
+    t_enter: f64,
+    t_exit: f64,
+    best: &Option<Hit>,
+    slack: f64,
+    margin: f32,
+) -> (Vec4, Vec4) {
+    let t_far = best.map_or(t_exit, |b| t_exit.min(b.t as f64 + slack));
+    let (za, zb) = (oz + t_enter * dz, oz + t_far * dz);
+    let (lo, hi) = ((za.min(zb) as f32) - margin, (za.max(zb) as f32) + margin);
+    (Vec4::splat(lo), Vec4::splat(hi))
+}
+
+/// Tests every entry of `blocks` whose depth range meets `window`, keeping the closest
+/// hit in `best` (a hit reports `number` of the entry's triangle). `false` when an
+/// any-hit query has found its hit and the walk should stop. Both layers' lists of
+/// blocks (flat static tiles, dynamic tiles) are scanned by it.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn scan_blocks<const ANY: bool, T: Candidate, C: Counter>(
+    blocks: &[Block],
+    (lo, hi): (Vec4, Vec4),
+    pre: &RayPre,
+    tris: &[T],
+    ray: &Ray,
+    best: &mut Option<Hit>,
+    count: &mut C,
+    number: impl Fn(u32) -> u32,
+) -> bool {
+    for b in blocks {
+        let mut mask = depth_mask(b, lo, hi);
+        while mask != 0 {
+            let j = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            count.candidate();
+            if let Some(mut hit) = test_candidate(pre, tris, b.tri[j], ray, best) {
+                hit.tri = number(hit.tri);
+                if ANY {
+                    *best = Some(hit);
+                    return false;
+                }
+                if best.is_none_or(|b| hit.is_closer_than(&b)) {
+                    *best = Some(hit);
+                }
+            }
+        }
+    }
+    true
+}
+
 #[inline]
 fn step(b: f64) -> i64 {
     if b > 0.0 {
@@ -197,28 +253,11 @@ impl Psf {
             }
             if h.is_flat() {
                 // Every entry meeting the depth interval, eight at a time.
-                let t_far = best.map_or(t_exit, |b| t_exit.min(b.t as f64 + slack));
-                let (za, zb) = (oz + t_enter * dz, oz + t_far * dz);
-                let (lo, hi) = ((za.min(zb) as f32) - margin, (za.max(zb) as f32) + margin);
-                let (lo4, hi4) = (Vec4::splat(lo), Vec4::splat(hi));
+                let window = block_window(oz, dz, t_enter, t_exit, &best, slack, margin);
                 let run = &blocks[h.blocks()];
                 count.scanned(run.len() * LANES);
-                for b in run {
-                    let mut mask = depth_mask(b, lo4, hi4);
-                    while mask != 0 {
-                        let j = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        count.candidate();
-                        if let Some(hit) = test_candidate(pre, tris, b.tri[j], ray, &best) {
-                            if ANY {
-                                best = Some(hit);
-                                return false;
-                            }
-                            if best.is_none_or(|b| hit.is_closer_than(&b)) {
-                                best = Some(hit);
-                            }
-                        }
-                    }
+                if !scan_blocks::<ANY, _, _>(run, window, pre, tris, ray, &mut best, count, |t| t) {
+                    return false;
                 }
                 return !matches!(&best, Some(b) if b.t as f64 + slack <= t_exit);
             }
