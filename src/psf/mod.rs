@@ -63,10 +63,11 @@ impl PsfParams {
     /// traced 9% faster than level 1 at 64 tiles (`benches/PERF.md` step 3), and level
     /// 3 8.7% faster than level 2 (PERF.md round 3, step 27; two threads, 640x480) for
     /// four times the bake time (0.06 → 0.25 s) and memory (14 → 60 MB raw, 7 → 33 MB
-    /// stored). Incoherent rays lose with more directions: on the 10k room level 3 traces
-    /// random rays 38% slower than level 2 (`SWEEP_TRIS=10000 cargo bench --bench
-    /// sweep`), camera rays 17% faster. At 100k the sweep put level 1 ahead on random
-    /// rays, and level 2 costs 3.4 times the bake time and memory there.
+    /// stored); with flat tiles (PERF.md step 48) level 3 is still 5% faster there.
+    /// Incoherent rays lose with more directions: on the 10k room level 3 traces random
+    /// rays 37% slower than level 2 (`SWEEP_TRIS=10000 cargo bench --bench sweep`),
+    /// camera rays 6% faster. At 100k the sweep put level 1 ahead on random rays, and
+    /// level 2 costs 3.4 times the bake time and memory there.
     pub fn for_triangles(n: usize) -> PsfParams {
         let want = (0.5 * (n as f64).sqrt()).max(1.0);
         let tiles = (2f64.powf(want.log2().round()) as u32).clamp(4, 256);
