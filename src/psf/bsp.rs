@@ -14,9 +14,9 @@
 //! its depth interval eight at a time ([`depth_mask`]) with no slab to find and no entry
 //! to skip. The slab machinery (the depth map, two slab lookups, a loop over slabs and
 //! the check against testing an entry twice) cost more than scanning a short list: on
-//! the museum-class scene flat tiles up to 32 entries traced 9% faster, and 17% faster
-//! on the 1M-triangle room, where every tile flat was slower (`benches/PERF.md`, step
-//! 48).
+//! the museum-class scene flat tiles up to 32 entries traced 7–8% faster, and 17%
+//! faster on the 1M-triangle room, where every tile flat was slower (`benches/PERF.md`,
+//! step 48).
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec4;
