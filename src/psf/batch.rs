@@ -1,16 +1,24 @@
-//! Batches of rays traced binned by subfield: rays are put in order of the subfield
-//! their direction picks (a stable counting sort, so neighbouring pixels stay together
-//! within a bin), traced in parallel in that order, and the results put back in the
-//! order of the rays. Rays of one subfield then walk one grid and one set of tile lists
-//! one after the other, instead of every ray of an incoherent batch (reflections,
-//! shadows towards several lights) touching a different subfield's data.
+//! Batches of rays traced binned by subfield. The batch is cut into runs of `RUN`
+//! consecutive rays, traced in parallel; within a run, rays are put in order of the
+//! subfield their direction picks (a stable counting sort, so neighbouring pixels stay
+//! together within a bin), traced in that order, and each result written straight to
+//! the ray's slot. Rays of one subfield then walk one grid and one set of tile lists one
+//! after the other, instead of every ray of an incoherent run (reflections, shadows
+//! towards several lights) touching a different subfield's data. Sorting runs instead of
+//! the whole batch keeps every step parallel: the whole-batch sort and the scatter of its
+//! results back into ray order were serial and took about a tenth of a batch on two
+//! threads (`benches/PERF.md`, step 49).
 
 use rayon::prelude::*;
 
 use crate::geometry::Ray;
 
-/// `out[i] = f(&rays[i])` for every ray, traced in order of `key(&rays[i])` (below
-/// `bins`).
+/// Rays sorted and traced together: enough that a run's rays of one subfield share its
+/// data, few enough that two threads share a batch evenly.
+const RUN: usize = 4096;
+
+/// `out[i] = f(&rays[i])` for every ray, each run of [`RUN`] rays traced in order of
+/// `key(&rays[i])` (below `bins`).
 pub(crate) fn binned<T: Send + Copy>(
     rays: &[Ray],
     out: &mut [T],
@@ -19,26 +27,29 @@ pub(crate) fn binned<T: Send + Copy>(
     f: impl Fn(&Ray) -> T + Sync,
 ) {
     assert_eq!(rays.len(), out.len(), "one output slot per ray");
-    let keys: Vec<u32> = rays.par_iter().map(|r| key(r) as u32).collect();
-    let mut start = vec![0u32; bins + 1];
-    for &k in &keys {
-        start[k as usize + 1] += 1;
-    }
-    for b in 0..bins {
-        start[b + 1] += start[b];
-    }
-    let mut order = vec![0u32; rays.len()];
-    for (i, &k) in keys.iter().enumerate() {
-        let s = &mut start[k as usize];
-        order[*s as usize] = i as u32;
-        *s += 1;
-    }
-    let results: Vec<T> = order
-        .par_iter()
-        .with_min_len(64)
-        .map(|&i| f(&rays[i as usize]))
-        .collect();
-    for (&i, r) in order.iter().zip(results) {
-        out[i as usize] = r;
-    }
+    rays.par_chunks(RUN)
+        .zip(out.par_chunks_mut(RUN))
+        .for_each(|(rays, out)| {
+            let mut keys = [0u16; RUN];
+            let mut start = vec![0u32; bins + 1];
+            for (k, r) in keys.iter_mut().zip(rays) {
+                // Bins are subfields: at most 469 (level 4), so a u16 holds them.
+                let b = key(r);
+                debug_assert!(b < bins && b <= u16::MAX as usize);
+                *k = b as u16;
+                start[*k as usize + 1] += 1;
+            }
+            for b in 0..bins {
+                start[b + 1] += start[b];
+            }
+            let mut order = [0u16; RUN];
+            for (i, &k) in keys[..rays.len()].iter().enumerate() {
+                let s = &mut start[k as usize];
+                order[*s as usize] = i as u16;
+                *s += 1;
+            }
+            for &i in &order[..rays.len()] {
+                out[i as usize] = f(&rays[i as usize]);
+            }
+        });
 }
