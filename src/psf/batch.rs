@@ -17,14 +17,14 @@ use crate::geometry::Ray;
 /// data, few enough that two threads share a batch evenly.
 const RUN: usize = 4096;
 
-/// `out[i] = f(&rays[i])` for every ray, each run of [`RUN`] rays traced in order of
-/// `key(&rays[i])` (below `bins`).
+/// `out[i] = f(&rays[i], key(&rays[i]))` for every ray, each run of [`RUN`] rays traced
+/// in order of the key (below `bins`).
 pub(crate) fn binned<T: Send + Copy>(
     rays: &[Ray],
     out: &mut [T],
     bins: usize,
     key: impl Fn(&Ray) -> usize + Sync,
-    f: impl Fn(&Ray) -> T + Sync,
+    f: impl Fn(&Ray, usize) -> T + Sync,
 ) {
     assert_eq!(rays.len(), out.len(), "one output slot per ray");
     rays.par_chunks(RUN)
@@ -49,7 +49,7 @@ pub(crate) fn binned<T: Send + Copy>(
                 *s += 1;
             }
             for &i in &order[..rays.len()] {
-                out[i as usize] = f(&rays[i as usize]);
+                out[i as usize] = f(&rays[i as usize], keys[i as usize] as usize);
             }
         });
 }

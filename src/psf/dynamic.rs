@@ -611,13 +611,19 @@ impl Psf {
 }
 
 impl Layered<'_> {
-    fn trace<const ANY: bool, C: Counter>(&self, ray: &Ray, count: &mut C) -> Option<Hit> {
+    /// `sub`: the static subfield, when a batch knows it already.
+    fn trace<const ANY: bool, C: Counter>(
+        &self,
+        ray: &Ray,
+        sub: Option<usize>,
+        count: &mut C,
+    ) -> Option<Hit> {
         if !ray.is_valid() {
             return None;
         }
         // One shear for both layers: the dynamic walk's ray differs in `t_max` alone.
         let pre = RayPre::new(ray.origin, ray.dir);
-        let s = self.psf.trace_pre::<ANY, C>(ray, &pre, count);
+        let s = self.psf.trace_pre::<ANY, C>(ray, &pre, sub, count);
         if ANY && s.is_some() {
             return s;
         }
@@ -644,23 +650,23 @@ impl Layered<'_> {
     /// The closest hit, also counting the work done (both layers) into `stats`.
     pub fn intersect_counted(&self, ray: &Ray, stats: &mut RayStats) -> Option<Hit> {
         stats.rays += 1;
-        self.trace::<false, _>(ray, stats)
+        self.trace::<false, _>(ray, None, stats)
     }
 
     /// Any hit, also counting the work done into `stats`.
     pub fn occluded_counted(&self, ray: &Ray, stats: &mut RayStats) -> bool {
         stats.rays += 1;
-        self.trace::<true, _>(ray, stats).is_some()
+        self.trace::<true, _>(ray, None, stats).is_some()
     }
 }
 
 impl Intersector for Layered<'_> {
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        self.trace::<false, _>(ray, &mut NoCount)
+        self.trace::<false, _>(ray, None, &mut NoCount)
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        self.trace::<true, _>(ray, &mut NoCount).is_some()
+        self.trace::<true, _>(ray, None, &mut NoCount).is_some()
     }
 
     /// Binned by the static PSF's subfield ([`binned`]).
@@ -671,7 +677,7 @@ impl Intersector for Layered<'_> {
             out,
             bins,
             |r| self.psf.bin_of(r),
-            |r| self.intersect(r),
+            |r, k| self.trace::<false, _>(r, Some(k), &mut NoCount),
         );
     }
 
@@ -682,7 +688,7 @@ impl Intersector for Layered<'_> {
             out,
             bins,
             |r| self.psf.bin_of(r),
-            |r| self.occluded(r),
+            |r, k| self.trace::<true, _>(r, Some(k), &mut NoCount).is_some(),
         );
     }
 }

@@ -213,22 +213,25 @@ impl Psf {
         if !ray.is_valid() {
             return None;
         }
-        self.trace_pre::<ANY, C>(ray, &RayPre::new(ray.origin, ray.dir), count)
+        self.trace_pre::<ANY, C>(ray, &RayPre::new(ray.origin, ray.dir), None, count)
     }
 
     /// [`trace`](Self::trace) of a valid ray with its [`RayPre`] given: the layered
-    /// query makes one for both layers (`benches/PERF.md`, step 31).
+    /// query makes one for both layers (`benches/PERF.md`, step 31). `sub` is the
+    /// subfield the ray's direction picks when the caller knows it already (a batch,
+    /// binned by it).
     pub(crate) fn trace_pre<const ANY: bool, C: Counter>(
         &self,
         ray: &Ray,
         pre: &RayPre,
+        sub: Option<usize>,
         count: &mut C,
     ) -> Option<Hit> {
         if self.subfields.is_empty() {
             return None;
         }
         let (o, d, t0, t1) = clipped_span(&self.clip, ray)?;
-        let sf = &self.subfields[self.table.lookup(ray.dir)];
+        let sf = &self.subfields[sub.unwrap_or_else(|| self.table.lookup(ray.dir))];
         let (tiles, starts, entries, blocks, tris) = (
             &*sf.tiles,
             &*sf.slab_starts,
@@ -335,16 +338,39 @@ impl Intersector for Psf {
     /// Binned by subfield ([`binned`]).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         let bins = self.subfields.len().max(1);
-        binned(rays, out, bins, |r| self.bin_of(r), |r| self.intersect(r));
+        binned(
+            rays,
+            out,
+            bins,
+            |r| self.bin_of(r),
+            |r, k| self.trace_bin::<false>(r, k),
+        );
     }
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
         let bins = self.subfields.len().max(1);
-        binned(rays, out, bins, |r| self.bin_of(r), |r| self.occluded(r));
+        binned(
+            rays,
+            out,
+            bins,
+            |r| self.bin_of(r),
+            |r, k| self.trace_bin::<true>(r, k).is_some(),
+        );
     }
 }
 
 impl Psf {
+    /// A batch's query of one ray, its subfield `sub` found by [`bin_of`](Self::bin_of)
+    /// (which is the direction lookup for every valid ray).
+    #[inline]
+    fn trace_bin<const ANY: bool>(&self, ray: &Ray, sub: usize) -> Option<Hit> {
+        if !ray.is_valid() {
+            return None;
+        }
+        let pre = RayPre::new(ray.origin, ray.dir);
+        self.trace_pre::<ANY, _>(ray, &pre, Some(sub), &mut NoCount)
+    }
+
     /// The subfield a ray's direction picks (0 for a direction without one).
     #[inline]
     pub(crate) fn bin_of(&self, ray: &Ray) -> usize {
