@@ -356,21 +356,24 @@ impl DynamicLayer {
         if !ray.is_valid() {
             return None;
         }
-        self.trace_pre::<ANY, C>(ray, &RayPre::new(ray.origin, ray.dir), count)
+        self.trace_pre::<ANY, C>(ray, &RayPre::new(ray.origin, ray.dir), None, count)
     }
 
-    /// [`trace`](Self::trace) of a valid ray with its [`RayPre`] given.
+    /// [`trace`](Self::trace) of a valid ray with its [`RayPre`] given. `sub`: a subfield
+    /// to walk instead of the one the ray's direction picks (any grid gives the same
+    /// hits, a grid further from the ray's direction a longer walk).
     fn trace_pre<const ANY: bool, C: Counter>(
         &self,
         ray: &Ray,
         pre: &RayPre,
+        sub: Option<usize>,
         count: &mut C,
     ) -> Option<Hit> {
         if self.tris.is_empty() {
             return None;
         }
         let (o, d, t0, t1) = clipped_span(&self.clip, ray)?;
-        let sf = &self.subfields[self.table.lookup(ray.dir)];
+        let sf = &self.subfields[sub.unwrap_or_else(|| self.table.lookup(ray.dir))];
         let (margin, gv, tris, order) = (self.margin, self.generation, &self.local, &self.order);
         let slack = (margin as f64 + 1e-6 * o.length()) / d.length();
         let fd: DVec3 = sf.frame.d.as_dvec3();
@@ -596,17 +599,34 @@ impl Intersector for DynamicLayer {
 }
 
 /// The static PSF and a dynamic layer queried together.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct Layered<'a> {
     psf: &'a Psf,
     dynamic: &'a DynamicLayer,
+    /// Per static subfield, the dynamic subfield of the closest direction: a batch,
+    /// which knows each ray's static subfield, walks that dynamic grid without a second
+    /// direction lookup (a doubled lookup had cost 4.7% of the trace, `benches/PERF.md`
+    /// step 51).
+    dyn_of: Vec<u8>,
 }
 
 impl Psf {
     /// Queries over this PSF and `dynamic` together; dynamic triangle `i` is reported
     /// as `self.triangles().len() + i`.
     pub fn with_dynamic<'a>(&'a self, dynamic: &'a DynamicLayer) -> Layered<'a> {
-        Layered { psf: self, dynamic }
+        // At most 7 dynamic subfields at level 1, 469 at level 4: a u16 would do for any
+        // level, a u8 holds the levels up to 3 (109); level 4 falls back to the lookup.
+        let dyn_of = if dynamic.subfields.len() <= u8::MAX as usize + 1 {
+            let dirs = self.subfields.iter().map(|s| s.frame.d);
+            dirs.map(|d| dynamic.table.lookup(d) as u8).collect()
+        } else {
+            Vec::new()
+        };
+        Layered {
+            psf: self,
+            dynamic,
+            dyn_of,
+        }
     }
 }
 
@@ -624,6 +644,7 @@ impl Layered<'_> {
         // One shear for both layers: the dynamic walk's ray differs in `t_max` alone.
         let pre = RayPre::new(ray.origin, ray.dir);
         let s = self.psf.trace_pre::<ANY, C>(ray, &pre, sub, count);
+        let dyn_sub = sub.and_then(|k| self.dyn_of.get(k)).map(|&k| k as usize);
         if ANY && s.is_some() {
             return s;
         }
@@ -636,7 +657,7 @@ impl Layered<'_> {
         let offset = self.psf.triangles().len() as u32;
         let d = self
             .dynamic
-            .trace_pre::<ANY, C>(&r, &pre, count)
+            .trace_pre::<ANY, C>(&r, &pre, dyn_sub, count)
             .map(|mut h| {
                 h.tri += offset;
                 h
