@@ -12,6 +12,7 @@ pub mod bsp;
 pub mod directions;
 pub mod dynamic;
 pub mod grid;
+mod point;
 mod stats;
 mod storage;
 mod traverse;

@@ -1,0 +1,629 @@
+//! Point subfields: tile grids by central projection around one point `C`, built for a
+//! batch of rays that pass through it, such as a pinhole camera's primary rays (which
+//! start at `C`) or the shadow rays towards a point light (which end just short of it).
+//!
+//! Such a ray is a line through `C`: seen from `C` it projects to a single point, so it
+//! visits one tile, whose list is sorted by depth and scanned near to far. This is the
+//! parallel subfield's tile-and-depth scheme with the beams made to meet at `C` instead
+//! of running parallel (the "light buffer" of Haines and Greenberg, 1986, and the
+//! perspective grids of Hunt and Mark, 2008). The grid is built per batch from the
+//! static and the moving triangles together, over the part of the view the batch's rays
+//! use, and only where the batch has more rays than the scene has triangles.
+//!
+//! # Why every hit is found
+//!
+//! The six faces of a cube around `C` each get a grid over the projection
+//! `p = (u / z, v / z)` of their frustum (`z` along the face's axis). A ray qualifies
+//! ([`aim`]) when its line passes within `rho_max` of `C` and its segment lies on one
+//! side of `C`'s foot on the line (up to `r / 2`); its reference direction `a` is `d` or
+//! `-d` accordingly, and picks its face and tile. Every point `X` of the segment is then
+//! either within `r` of `C` in each coordinate (the *near* region) or sees `C` at an
+//! angle of at most `rho_max / |X - C|` from `a`.
+//!
+//! * Triangles whose bounding box meets the near cube `C ± r` are listed apart and
+//!   tested by every ray.
+//! * Every other triangle `T` lies at `max-norm >= r` from `C`, so its part inside (or
+//!   within a small angle of) face `f`'s frustum has `z >= r / 2`. `T` clipped to
+//!   `z >= r / 2`, projected, gives a convex polygon whose bounding rectangle, grown by
+//!   `eps = 4 (margin + rho_max) / zmin` (the triangle grown by the rounding margin, and
+//!   the ray's angle off `a`, at the clipped part's least depth `zmin`; the projection
+//!   moves by at most `(1 + |p|^2) < 4` times an angle for `|p| <= 1`), is listed in
+//!   every tile it meets, with the clipped part's depth range `[zmin, zmax]`.
+//!
+//! A ray therefore meets no triangle outside its tile's list and the near list; within
+//! the list, one whose depth range misses the ray's own depths (plus twice the margin)
+//! over its interval cannot be hit. The candidates get the same exact test as in the
+//! parallel subfields, so hits (and ties) are those of brute force. Rays that do not
+//! qualify take the parallel subfields.
+
+use glam::{DMat3, DVec3, Vec3};
+use rayon::prelude::*;
+
+use crate::geometry::{intersect_pre, Aabb, Hit, Ray, RayPre, TriPre};
+
+/// Rays per tile the grid aims at: smaller tiles shorten the lists a ray scans and
+/// lengthen the build (a large triangle is listed in more tiles).
+const RAYS_PER_TILE: usize = 16;
+
+/// Rays sampled to find the centre and to judge whether enough rays pass through it.
+const SAMPLE: usize = 64;
+
+/// Pairs of sampled lines whose crossing is tried as the centre.
+const PAIRS: usize = 16;
+
+/// Rays traced together by one task.
+const CHUNK: usize = 1024;
+
+/// A triangle's entry in a tile: the depth range (along the face's axis) of its part
+/// beyond `r / 2`, and its number in the grid's own triangle array.
+#[derive(Clone, Copy, Debug)]
+struct PEntry {
+    zmin: f32,
+    zmax: f32,
+    tri: u32,
+}
+
+/// One cube face's grid over the rectangle `[u0, u0 + nu / inv] x [v0, v0 + nv / inv]`
+/// of the projection, tiles numbered from `first`; `nu == 0` when no ray uses the face.
+#[derive(Clone, Copy, Debug, Default)]
+struct Face {
+    u0: f64,
+    v0: f64,
+    inv: f64,
+    nu: usize,
+    nv: usize,
+    first: usize,
+}
+
+impl Face {
+    #[inline]
+    fn tile(&self, pu: f64, pv: f64) -> usize {
+        let i = (((pu - self.u0) * self.inv).max(0.0) as usize).min(self.nu - 1);
+        let j = (((pv - self.v0) * self.inv).max(0.0) as usize).min(self.nv - 1);
+        self.first + j * self.nu + i
+    }
+}
+
+/// A triangle listed in a rectangle of tiles of one face (face 6: the near list).
+#[derive(Clone, Copy, Debug)]
+struct Item {
+    face: u8,
+    i0: u32,
+    i1: u32,
+    j0: u32,
+    j1: u32,
+    zmin: f32,
+    zmax: f32,
+    tri: u32,
+}
+
+const NEAR: u8 = 6;
+
+/// The triangles a point grid is built over: the static PSF's, then the dynamic layer's
+/// in its own (Morton) order, and the hit number each one reports.
+pub(crate) struct Sources<'a> {
+    pub statics: &'a [[Vec3; 3]],
+    pub moving: &'a [[Vec3; 3]],
+    pub moving_pre: &'a [TriPre],
+    /// Hit number of moving triangle `k`, less `statics.len()`.
+    pub moving_number: &'a [u32],
+    /// The rounding allowance of the queries (the larger of the two layers').
+    pub margin: f32,
+    /// Bounds of both layers' triangles.
+    pub bounds: Aabb,
+}
+
+impl Sources<'_> {
+    fn len(&self) -> usize {
+        self.statics.len() + self.moving.len()
+    }
+
+    fn tri(&self, g: usize) -> &[Vec3; 3] {
+        if g < self.statics.len() {
+            &self.statics[g]
+        } else {
+            &self.moving[g - self.statics.len()]
+        }
+    }
+}
+
+/// A grid around one point, for one batch.
+pub(crate) struct PointGrid {
+    c: DVec3,
+    r: f64,
+    rho_max: f64,
+    /// How far a hit's depth may lie outside its entry's range, and the margin of the
+    /// early exit.
+    depth_margin: f64,
+    faces: [Face; 6],
+    starts: Vec<u32>,
+    entries: Vec<PEntry>,
+    near: Vec<u32>,
+    tris: Vec<TriPre>,
+    number: Vec<u32>,
+}
+
+/// `x` rounded to an `f32` no greater than it.
+#[inline]
+fn down(x: f64) -> f32 {
+    let y = x as f32;
+    if y as f64 <= x || x.is_nan() {
+        y
+    } else if y.is_infinite() {
+        f32::MAX
+    } else {
+        // At least one unit in the last place below `y`, which rounding to nearest put
+        // at most that far above `x`.
+        y - (y.abs() * f32::EPSILON).max(f32::MIN_POSITIVE)
+    }
+}
+
+/// `x` rounded to an `f32` no less than it.
+#[inline]
+fn up(x: f64) -> f32 {
+    let y = x as f32;
+    if y as f64 >= x || x.is_nan() {
+        y
+    } else if y.is_infinite() {
+        f32::MIN
+    } else {
+        y + (y.abs() * f32::EPSILON).max(f32::MIN_POSITIVE)
+    }
+}
+
+/// Face `f` (axis `f / 2`, negative when `f` is odd) coordinates `(u, v, z)` of `x`.
+#[inline]
+fn face_coords(f: usize, x: DVec3) -> (f64, f64, f64) {
+    let k = f / 2;
+    let a = x.to_array();
+    let z = if f % 2 == 0 { a[k] } else { -a[k] };
+    (a[(k + 1) % 3], a[(k + 2) % 3], z)
+}
+
+/// The face whose frustum holds direction `a`.
+#[inline]
+fn face_of(a: DVec3) -> usize {
+    let m = a.abs();
+    let k = if m.x >= m.y && m.x >= m.z {
+        0
+    } else if m.y >= m.z {
+        1
+    } else {
+        2
+    };
+    2 * k + (a[k] < 0.0) as usize
+}
+
+/// The face and projected point of a ray that qualifies for a grid around `c` (see the
+/// module's notes), or `None`.
+#[inline]
+fn aim(c: DVec3, r: f64, rho_max: f64, ray: &Ray) -> Option<(usize, f64, f64)> {
+    if !ray.is_valid() || ray.t_min > ray.t_max {
+        return None;
+    }
+    let o = ray.origin.as_dvec3() - c;
+    let d = ray.dir.as_dvec3();
+    let dd = d.length_squared();
+    let tc = -o.dot(d) / dd;
+    let foot = o + tc * d;
+    // NaN (a ray whose numbers overflow here) does not qualify.
+    if foot.length_squared().partial_cmp(&(rho_max * rho_max)) != Some(std::cmp::Ordering::Less) {
+        return None;
+    }
+    let half = 0.5 * r / dd.sqrt();
+    let a = if ray.t_min as f64 >= tc - half {
+        d
+    } else if ray.t_max as f64 <= tc + half {
+        -d
+    } else {
+        return None;
+    };
+    let f = face_of(a);
+    let (u, v, z) = face_coords(f, a);
+    Some((f, u / z, v / z))
+}
+
+/// The point that most of `sample` passes through (by `passes`), if most do: an origin
+/// they share (a camera's rays), else the crossing of two of their lines that most of
+/// them pass (tried over pairs, so that rays elsewhere cannot pull it away), refined by
+/// least squares over the lines that pass it.
+fn center(sample: &[&Ray], passes: impl Fn(DVec3, &Ray) -> bool) -> Option<DVec3> {
+    let votes = |c: DVec3| sample.iter().filter(|r| passes(c, r)).count();
+    let enough = |n: usize| n * 10 >= sample.len() * 9;
+    for r in sample.iter().take(3) {
+        let c = r.origin.as_dvec3();
+        if enough(votes(c)) {
+            return Some(c);
+        }
+    }
+    let line = |r: &Ray| (r.origin.as_dvec3(), r.dir.as_dvec3().normalize());
+    let mut best: Option<(usize, DVec3)> = None;
+    let n = sample.len();
+    for k in 0..PAIRS.min(n / 2) {
+        let ((o1, d1), (o2, d2)) = (line(sample[k]), line(sample[(k + n / 2) % n]));
+        // The midpoint of the two lines' closest points.
+        let w = o1 - o2;
+        let b = d1.dot(d2);
+        let den = 1.0 - b * b;
+        if den.is_nan() || den <= 1e-12 {
+            continue;
+        }
+        let (d, e) = (d1.dot(w), d2.dot(w));
+        let c = 0.5 * (o1 + d1 * ((b * e - d) / den) + o2 + d2 * ((e - b * d) / den));
+        let v = votes(c);
+        if c.is_finite() && best.is_none_or(|(bv, _)| v > bv) {
+            best = Some((v, c));
+        }
+    }
+    let (v, c) = best?;
+    // Least squares over the lines passing `c`: the sum of the projectors off their
+    // directions (each with eigenvalues 0, 1, 1), singular only for parallel lines.
+    let (mut a, mut rhs) = (DMat3::ZERO, DVec3::ZERO);
+    for r in sample.iter().filter(|r| passes(c, r)) {
+        let (o, d) = line(r);
+        let p = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        a += p;
+        rhs += p * o;
+    }
+    let refined = a.inverse() * rhs;
+    let c = if refined.is_finite() && votes(refined) >= v {
+        refined
+    } else {
+        c
+    };
+    enough(votes(c)).then_some(c)
+}
+
+impl PointGrid {
+    /// A grid for `rays` over `src`, when they pass through one point and are many
+    /// enough to pay for it (at least as many rays as triangles, and nine in ten of a
+    /// sample qualifying).
+    pub(crate) fn for_batch(rays: &[Ray], src: &Sources) -> Option<PointGrid> {
+        let ntri = src.len();
+        if ntri == 0 || rays.len() < 4 * SAMPLE || rays.len() < ntri || ntri >= u32::MAX as usize {
+            return None;
+        }
+        let margin = src.margin as f64;
+        // `margin` is 1e-5 of the scene's scale (`margin_for`); the near cube is a
+        // 256th of it, so its list is short and `eps` stays small beyond it.
+        let r = margin * 1e5 / 256.0;
+        // How closely a line must pass the centre: a ray aimed at it from `o` misses it
+        // by the rounding of its direction, some 1e-7 of the distance; allow a hundred
+        // times that for a point as far from the scene as it is.
+        let middle = src.bounds.center().as_dvec3();
+        let rho_of = |c: DVec3| margin.max(1e-5 * ((c - middle).length() + margin * 1e5));
+        let step = (rays.len() / SAMPLE).max(1);
+        let sample: Vec<&Ray> = rays.iter().step_by(step).filter(|r| r.is_valid()).collect();
+        let c = center(&sample, |c, ray| aim(c, r, rho_of(c), ray).is_some())?;
+        let rho_max = rho_of(c);
+        Self::build(c, r, rho_max, margin, rays, src)
+    }
+
+    fn build(
+        c: DVec3,
+        r: f64,
+        rho_max: f64,
+        margin: f64,
+        rays: &[Ray],
+        src: &Sources,
+    ) -> Option<PointGrid> {
+        // The rectangle each face's rays project into, their number, and the furthest
+        // origin from `c`.
+        type Bounds = ([(f64, f64, f64, f64, usize); 6], f64);
+        let none = (
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+            0,
+        );
+        let empty: Bounds = ([none; 6], 0.0);
+        let (bounds, reach) = rays
+            .par_chunks(CHUNK)
+            .map(|ch| {
+                let mut b = empty;
+                for ray in ch {
+                    if let Some((f, pu, pv)) = aim(c, r, rho_max, ray) {
+                        let e = &mut b.0[f];
+                        *e = (e.0.min(pu), e.1.min(pv), e.2.max(pu), e.3.max(pv), e.4 + 1);
+                        b.1 = b.1.max((ray.origin.as_dvec3() - c).length());
+                    }
+                }
+                b
+            })
+            .reduce(
+                || empty,
+                |mut a, b| {
+                    for (x, y) in a.0.iter_mut().zip(b.0) {
+                        *x = (
+                            x.0.min(y.0),
+                            x.1.min(y.1),
+                            x.2.max(y.2),
+                            x.3.max(y.3),
+                            x.4 + y.4,
+                        );
+                    }
+                    (a.0, a.1.max(b.1))
+                },
+            );
+        // The candidate test works relative to the ray's origin, so its rounding grows
+        // with the distance from the origin to the triangle (at most `reach` plus the
+        // scene's size, which `margin` is 1e-5 of): allow for 1e-6 of that, in the
+        // projection as in the depths.
+        let allowance = margin + rho_max + 1e-6 * (reach + margin * 1e5);
+        let mut faces = [Face::default(); 6];
+        let mut total = 0;
+        for (face, &(u0, v0, u1, v1, n)) in faces.iter_mut().zip(&bounds) {
+            if n == 0 {
+                continue;
+            }
+            let (w, h) = (u1 - u0, v1 - v0);
+            let tiles = (n / RAYS_PER_TILE).max(1) as f64;
+            let side = (w * h / tiles).sqrt().max(w.max(h) / 4096.0).max(1e-12);
+            let (nu, nv) = (
+                ((w / side).ceil() as usize).clamp(1, 4096),
+                ((h / side).ceil() as usize).clamp(1, 4096),
+            );
+            *face = Face {
+                u0,
+                v0,
+                inv: 1.0 / side,
+                nu,
+                nv,
+                first: total,
+            };
+            total += nu * nv;
+        }
+
+        // Each triangle's rectangles of tiles, face by face, in triangle order.
+        let h = 0.5 * r;
+        let items_of = |g: usize| {
+            let mut out = [None; 6];
+            let q = src.tri(g).map(|v| v.as_dvec3() - c);
+            let lo = q[0].min(q[1]).min(q[2]);
+            let hi = q[0].max(q[1]).max(q[2]);
+            if lo.cmple(DVec3::splat(r)).all() && hi.cmpge(DVec3::splat(-r)).all() {
+                out[0] = Some(Item {
+                    face: NEAR,
+                    i0: 0,
+                    i1: 0,
+                    j0: 0,
+                    j1: 0,
+                    zmin: 0.0,
+                    zmax: 0.0,
+                    tri: g as u32,
+                });
+                return out;
+            }
+            for (f, face) in faces.iter().enumerate() {
+                if face.nu == 0 {
+                    continue;
+                }
+                let p = q.map(|x| face_coords(f, x));
+                if p.iter().all(|x| x.2 < h) {
+                    continue;
+                }
+                // Clip to z >= h (at most four corners), project, bound.
+                let (mut pu0, mut pv0, mut pu1, mut pv1) = (
+                    f64::INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::NEG_INFINITY,
+                );
+                let (mut z0, mut z1) = (f64::INFINITY, f64::NEG_INFINITY);
+                let mut add = |(u, v, z): (f64, f64, f64)| {
+                    let (pu, pv) = (u / z, v / z);
+                    pu0 = pu0.min(pu);
+                    pv0 = pv0.min(pv);
+                    pu1 = pu1.max(pu);
+                    pv1 = pv1.max(pv);
+                    z0 = z0.min(z);
+                    z1 = z1.max(z);
+                };
+                for j in 0..3 {
+                    let (a, b) = (p[j], p[(j + 1) % 3]);
+                    if a.2 >= h {
+                        add(a);
+                    }
+                    if (a.2 >= h) != (b.2 >= h) {
+                        let t = (h - a.2) / (b.2 - a.2);
+                        add((a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1), h));
+                    }
+                }
+                let eps = 4.0 * allowance / z0 + 1e-9;
+                let (a0, a1) = (
+                    (pu0 - eps - face.u0) * face.inv,
+                    (pu1 + eps - face.u0) * face.inv,
+                );
+                let (b0, b1) = (
+                    (pv0 - eps - face.v0) * face.inv,
+                    (pv1 + eps - face.v0) * face.inv,
+                );
+                // NaN (a degenerate projection) fails these and lists nothing, so a
+                // triangle with a non-finite corner never gets here: the layers reject
+                // those.
+                if !(a1 >= 0.0 && b1 >= 0.0 && a0 < face.nu as f64 && b0 < face.nv as f64) {
+                    continue;
+                }
+                out[f] = Some(Item {
+                    face: f as u8,
+                    i0: a0.max(0.0) as u32,
+                    i1: (a1 as usize).min(face.nu - 1) as u32,
+                    j0: b0.max(0.0) as u32,
+                    j1: (b1 as usize).min(face.nv - 1) as u32,
+                    zmin: down(z0),
+                    zmax: up(z1),
+                    tri: g as u32,
+                });
+            }
+            out
+        };
+        let mut items: Vec<Item> = (0..src.len())
+            .into_par_iter()
+            .with_min_len(256)
+            .flat_map_iter(|g| items_of(g).into_iter().flatten())
+            .collect();
+        let near = items
+            .iter()
+            .filter(|i| i.face == NEAR)
+            .map(|i| i.tri)
+            .collect();
+        items.retain(|i| i.face != NEAR);
+        // A scene whose triangles each cover much of the view would list too many
+        // entries: the parallel subfields take such a batch.
+        let listed: u64 = items
+            .iter()
+            .map(|i| (i.i1 - i.i0 + 1) as u64 * (i.j1 - i.j0 + 1) as u64)
+            .sum();
+        if listed > 32 * rays.len() as u64 + 8 * src.len() as u64 {
+            return None;
+        }
+        // Near to far within every tile: write the entries in order of depth (a stable
+        // sort, so equal depths keep triangle order and the grid depends on its input
+        // alone).
+        items.par_sort_by(|a, b| a.zmin.total_cmp(&b.zmin));
+
+        let mut starts = vec![0u32; total + 1];
+        for it in &items {
+            let face = &faces[it.face as usize];
+            for j in it.j0 as usize..=it.j1 as usize {
+                let row = face.first + j * face.nu;
+                for s in &mut starts[row + it.i0 as usize + 1..=row + it.i1 as usize + 1] {
+                    *s += 1;
+                }
+            }
+        }
+        for k in 0..total {
+            starts[k + 1] += starts[k];
+        }
+        let mut cursor = starts[..total].to_vec();
+        let mut entries = vec![
+            PEntry {
+                zmin: 0.0,
+                zmax: 0.0,
+                tri: 0
+            };
+            starts[total] as usize
+        ];
+        for it in &items {
+            let face = &faces[it.face as usize];
+            let e = PEntry {
+                zmin: it.zmin,
+                zmax: it.zmax,
+                tri: it.tri,
+            };
+            for j in it.j0 as usize..=it.j1 as usize {
+                let row = face.first + j * face.nu;
+                for k in &mut cursor[row + it.i0 as usize..=row + it.i1 as usize] {
+                    entries[*k as usize] = e;
+                    *k += 1;
+                }
+            }
+        }
+
+        let nstat = src.statics.len();
+        let mut tris = Vec::with_capacity(src.len());
+        tris.par_extend(src.statics.par_iter().map(TriPre::new));
+        tris.extend_from_slice(src.moving_pre);
+        let mut number: Vec<u32> = (0..nstat as u32).collect();
+        number.extend(src.moving_number.iter().map(|&k| nstat as u32 + k));
+        Some(PointGrid {
+            c,
+            r,
+            rho_max,
+            depth_margin: 2.0 * allowance,
+            faces,
+            starts,
+            entries,
+            near,
+            tris,
+            number,
+        })
+    }
+
+    /// `out[i] = query(rays[i])`: through the grid where the ray qualifies, by
+    /// `fallback` elsewhere.
+    pub(crate) fn run<const ANY: bool, T: Send>(
+        &self,
+        rays: &[Ray],
+        out: &mut [T],
+        wrap: impl Fn(Option<Hit>) -> T + Sync,
+        fallback: impl Fn(&Ray) -> T + Sync,
+    ) {
+        assert_eq!(rays.len(), out.len(), "one output slot per ray");
+        rays.par_chunks(CHUNK)
+            .zip(out.par_chunks_mut(CHUNK))
+            .for_each(|(rays, out)| {
+                for (ray, o) in rays.iter().zip(out) {
+                    *o = match aim(self.c, self.r, self.rho_max, ray) {
+                        Some((f, pu, pv)) => wrap(self.trace::<ANY>(ray, f, pu, pv)),
+                        None => fallback(ray),
+                    };
+                }
+            });
+    }
+
+    #[inline]
+    fn test(&self, pre: &RayPre, g: u32, ray: &Ray, best: &Option<Hit>) -> Option<Hit> {
+        let t_max = best.map_or(ray.t_max, |b| b.t);
+        intersect_pre(pre, &self.tris[g as usize], ray.t_min, t_max).map(|(t, u, v)| Hit {
+            t,
+            tri: self.number[g as usize],
+            u,
+            v,
+        })
+    }
+
+    fn trace<const ANY: bool>(&self, ray: &Ray, f: usize, pu: f64, pv: f64) -> Option<Hit> {
+        let pre = RayPre::new(ray.origin, ray.dir);
+        let mut best: Option<Hit> = None;
+        for &g in &self.near {
+            if let Some(hit) = self.test(&pre, g, ray, &best) {
+                if ANY {
+                    return Some(hit);
+                }
+                if best.is_none_or(|b| hit.is_closer_than(&b)) {
+                    best = Some(hit);
+                }
+            }
+        }
+        let face = &self.faces[f];
+        if face.nu == 0 {
+            return best;
+        }
+        let tile = face.tile(pu, pv);
+        let o = ray.origin.as_dvec3();
+        let d = ray.dir.as_dvec3();
+        let (_, _, z0) = face_coords(f, o - self.c);
+        let (_, _, dz) = face_coords(f, d);
+        // How far (in t) a computed hit may sit from where the line truly meets its
+        // triangle, as in the parallel subfields' early exit.
+        let m = self.depth_margin;
+        let slack = m / d.length();
+        let t_min = ray.t_min as f64;
+        let window = |t_far: f64| {
+            let (za, zb) = (z0 + t_min * dz, z0 + t_far * dz);
+            (down(za.min(zb) - m), up(za.max(zb) + m))
+        };
+        let (mut lo, mut hi) = window(best.map_or(ray.t_max as f64, |b| b.t as f64 + slack));
+        let run = &self.entries[self.starts[tile] as usize..self.starts[tile + 1] as usize];
+        for e in run {
+            if e.zmin > hi {
+                break;
+            }
+            if e.zmax < lo {
+                continue;
+            }
+            if let Some(hit) = self.test(&pre, e.tri, ray, &best) {
+                if ANY {
+                    return Some(hit);
+                }
+                if best.is_none_or(|b| hit.is_closer_than(&b)) {
+                    best = Some(hit);
+                    (lo, hi) = window(hit.t as f64 + slack);
+                }
+            }
+        }
+        best
+    }
+}

@@ -1,0 +1,218 @@
+//! Batches of rays through one point (a camera's primary rays, shadow rays towards a
+//! point light) are traced through a grid by central projection around that point
+//! (`src/psf/point.rs`). They must agree with brute force exactly, like every other
+//! query: same closest hit (triangle, t, barycentrics), same any-hit answer. The scenes
+//! put triangles where that grid is delicate: around the point itself (the near list),
+//! across the planes between the cube faces, crossing the plane a face clips at, far
+//! from the point and behind it; the point lies inside the scene or far outside it; and
+//! some rays of a batch miss the point and must take the parallel subfields.
+//!
+//! proptest prints the failing `Case` (seed included) and shrinks it.
+
+use glam::Vec3;
+use proptest::prelude::*;
+use subfield::geometry::{BruteForce, Intersector, Ray};
+use subfield::synth::{self, Rng};
+use subfield::{DynamicLayer, Psf, PsfParams};
+
+#[derive(Clone, Debug)]
+struct Case {
+    seed: u64,
+    params: PsfParams,
+    statics: usize,
+    moving: usize,
+    /// 0: the point inside the scene; 1: just outside; 2: far away.
+    where_: usize,
+    /// Rays that miss the point, in percent (a batch with many of them takes the
+    /// parallel subfields altogether).
+    stray: usize,
+}
+
+const LO: Vec3 = Vec3::splat(0.0);
+const HI: Vec3 = Vec3::splat(8.0);
+
+fn tri_at(rng: &mut Rng, c: Vec3, s: f32) -> [Vec3; 3] {
+    [c + rng.unit() * s, c + rng.unit() * s, c + rng.unit() * s]
+}
+
+/// Triangles around `c` that exercise the grid: tiny ones within the near cube, ones
+/// through `c`, large ones across the faces' boundaries around `c`, and a soup.
+fn scene(rng: &mut Rng, n: usize, c: Vec3) -> Vec<[Vec3; 3]> {
+    let size = rng.range(0.1, 3.0);
+    let mut tris = synth::soup(rng, n, LO, HI, size);
+    for _ in 0..rng.below(4) {
+        let s = rng.range(1e-4, 0.05);
+        tris.push(tri_at(rng, c, s));
+    }
+    for _ in 0..rng.below(3) {
+        let a = c + rng.unit() * rng.range(0.5, 4.0);
+        let (f, b) = (rng.f32(), rng.unit() * rng.range(0.5, 4.0));
+        tris.push([a, c - (a - c) * f, c + b]);
+    }
+    for _ in 0..rng.below(6) {
+        let m = c + rng.unit() * rng.range(0.05, 3.0);
+        let s = rng.range(0.5, 6.0);
+        tris.push(tri_at(rng, m, s));
+    }
+    tris
+}
+
+/// A batch through `c`: from it (like primary rays) or towards it (like shadow rays
+/// ending short of a light, or at it), with `stray` percent of other rays. A quarter
+/// pass through a vertex or an edge of one of `tris`: hits on the boundaries between
+/// triangles and on the rims of their projections.
+fn rays(
+    rng: &mut Rng,
+    n: usize,
+    c: Vec3,
+    stray: usize,
+    from: bool,
+    tris: &[[Vec3; 3]],
+) -> Vec<Ray> {
+    (0..n)
+        .map(|_| {
+            let p = if !tris.is_empty() && rng.below(4) == 0 {
+                let t = tris[rng.below(tris.len())];
+                let a = rng.below(3);
+                if rng.below(2) == 0 {
+                    t[a]
+                } else {
+                    t[a].lerp(t[(a + 1) % 3], rng.f32())
+                }
+            } else {
+                rng.in_box(LO - 1.0, HI + 1.0)
+            };
+            if rng.below(100) < stray {
+                return Ray::new(p, rng.unit());
+            }
+            if from {
+                let d = if rng.below(4) == 0 { rng.unit() } else { p - c };
+                match rng.below(3) {
+                    0 => Ray::new(c, d),
+                    1 => Ray::segment(c, d, 0.0, rng.range(0.1, 2.0)),
+                    _ => Ray::segment(c, d, 1e-3, f32::INFINITY),
+                }
+            } else {
+                let l = c - p;
+                let dist = l.length();
+                let d = l / dist;
+                let end = match rng.below(4) {
+                    0 => dist,
+                    1 => dist * 0.5,
+                    _ => dist * (1.0 - 1e-4),
+                };
+                Ray::segment(p, d, 0.0, end)
+            }
+        })
+        .collect()
+}
+
+fn check(k: &Case) -> Result<(), TestCaseError> {
+    let mut rng = Rng::new(k.seed);
+    let c = match k.where_ {
+        0 => rng.in_box(LO + 1.0, HI - 1.0),
+        1 => HI + rng.unit().abs() * rng.range(0.5, 3.0),
+        _ => Vec3::splat(4.0) + rng.unit() * rng.range(100.0, 5000.0),
+    };
+    let stat = scene(&mut rng, k.statics, c);
+    let psf = Psf::build(&stat, &k.params).expect("bake");
+    let mut layer = DynamicLayer::new(&psf);
+    let moving = scene(&mut rng, k.moving, c);
+    layer.update(&moving).expect("update");
+    let all: Vec<[Vec3; 3]> = stat.iter().chain(&moving).copied().collect();
+    let brute = BruteForce::new(&all);
+    let both = psf.with_dynamic(&layer);
+    let n = (4 * all.len()).max(600);
+    for from in [true, false] {
+        let rs = rays(&mut rng, n, c, k.stray, from, &all);
+        if k.stray == 0 && !all.is_empty() {
+            prop_assert!(
+                both.point_grid_for(&rs),
+                "a batch through one point should take a point grid (seed {})",
+                k.seed
+            );
+        }
+        let (mut got, mut want) = (vec![None; n], vec![None; n]);
+        both.intersect_batch(&rs, &mut got);
+        brute.intersect_batch(&rs, &mut want);
+        let (mut og, mut ow) = (vec![false; n], vec![false; n]);
+        both.occluded_batch(&rs, &mut og);
+        brute.occluded_batch(&rs, &mut ow);
+        for i in 0..n {
+            prop_assert_eq!(
+                got[i],
+                want[i],
+                "closest hit differs: ray {} {:?}, from the point {}, seed {}",
+                i,
+                rs[i],
+                from,
+                k.seed
+            );
+            prop_assert_eq!(
+                og[i],
+                ow[i],
+                "any hit differs: ray {} {:?}, from the point {}, seed {}",
+                i,
+                rs[i],
+                from,
+                k.seed
+            );
+        }
+    }
+    Ok(())
+}
+
+fn cases() -> impl Strategy<Value = Case> {
+    (
+        any::<u64>(),
+        0u32..=2,
+        1u32..=48,
+        0usize..200,
+        0usize..200,
+        0usize..3,
+        prop_oneof![Just(0usize), Just(3), 0usize..100],
+    )
+        .prop_map(
+            |(seed, level, tiles, statics, moving, where_, stray)| Case {
+                seed,
+                params: PsfParams { level, tiles },
+                statics,
+                moving,
+                where_,
+                stray,
+            },
+        )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    #[test]
+    fn point_grids_agree_with_brute_force(k in cases()) {
+        check(&k)?;
+    }
+}
+
+/// The point grid must be what these batches take: a camera's rays (one origin) and
+/// shadow rays ending short of a light (lines through it, found by least squares).
+#[test]
+fn camera_and_light_batches_take_the_point_grid() {
+    let mut rng = Rng::new(7);
+    let stat = synth::box_faces(LO, HI);
+    let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+    let mut layer = DynamicLayer::new(&psf);
+    layer
+        .update(&synth::soup(&mut rng, 100, LO, HI, 0.5))
+        .expect("update");
+    let both = psf.with_dynamic(&layer);
+    let c = Vec3::new(4.0, 3.0, 5.0);
+    assert!(both.point_grid_for(&rays(&mut rng, 1000, c, 0, true, &[])));
+    assert!(both.point_grid_for(&rays(&mut rng, 1000, c, 0, false, &[])));
+    // Reflections go every way from everywhere: no point, no grid.
+    let scattered: Vec<Ray> = (0..1000)
+        .map(|_| Ray::new(rng.in_box(LO, HI), rng.unit()))
+        .collect();
+    assert!(!both.point_grid_for(&scattered));
+    // Fewer rays than triangles: not worth a grid.
+    assert!(!both.point_grid_for(&rays(&mut rng, 100, c, 0, true, &[])));
+}
