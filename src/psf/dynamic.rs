@@ -19,7 +19,7 @@ use rayon::prelude::*;
 
 use super::batch::binned;
 use super::bsp::{Block, LANES, PADDING};
-use super::point::{PointGrid, Sources};
+use super::point::{Plan, Sources};
 use super::stats::{Counter, NoCount, RayStats};
 use super::traverse::{block_window, clipped_span, scan_blocks, walk_tiles};
 use super::{
@@ -676,10 +676,10 @@ impl Layered<'_> {
     /// enough, and the batch has at least as many rays as the scene has triangles.
     /// Either way the hits are the same.
     pub fn point_grid_for(&self, rays: &[Ray]) -> bool {
-        PointGrid::for_batch(rays, &self.sources()).is_some()
+        Plan::for_batch(rays, &self.sources()).is_some()
     }
 
-    /// Both layers' triangles, for a [`PointGrid`].
+    /// Both layers' triangles, for a point grid.
     fn sources(&self) -> Sources<'_> {
         let d = self.dynamic;
         Sources {
@@ -721,11 +721,11 @@ impl Intersector for Layered<'_> {
         self.trace::<true, _>(ray, None, &mut NoCount).is_some()
     }
 
-    /// Through a [`PointGrid`] when the rays pass through one point (a camera's
+    /// Through a point grid when the rays pass through one point (a camera's
     /// primary rays, shadow rays towards a point light) and are many enough; otherwise
     /// binned by the static PSF's subfield ([`binned`]).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
-        if let Some(g) = PointGrid::for_batch(rays, &self.sources()) {
+        if let Some(g) = Plan::for_batch(rays, &self.sources()) {
             let fallback = |r: &Ray| self.trace::<false, _>(r, None, &mut NoCount);
             return g.run::<false, _>(rays, out, |h| h, fallback);
         }
@@ -740,7 +740,7 @@ impl Intersector for Layered<'_> {
     }
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
-        if let Some(g) = PointGrid::for_batch(rays, &self.sources()) {
+        if let Some(g) = Plan::for_batch(rays, &self.sources()) {
             let fallback = |r: &Ray| self.trace::<true, _>(r, None, &mut NoCount).is_some();
             return g.run::<true, _>(rays, out, |h| h.is_some(), fallback);
         }

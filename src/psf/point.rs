@@ -48,7 +48,7 @@ const RAYS_PER_TILE: usize = 16;
 /// Rays sampled to find the centre and to judge whether enough rays pass through it.
 const SAMPLE: usize = 64;
 
-/// Pairs of sampled lines whose crossing is tried as the centre.
+/// Sampled lines whose crossing with their neighbour's is tried as the centre.
 const PAIRS: usize = 16;
 
 /// Rays traced together by one task.
@@ -130,8 +130,6 @@ impl Sources<'_> {
 /// A grid around one point, for one batch.
 pub(crate) struct PointGrid {
     c: DVec3,
-    r: f64,
-    rho_max: f64,
     /// How far a hit's depth may lie outside its entry's range, and the margin of the
     /// early exit.
     depth_margin: f64,
@@ -194,93 +192,143 @@ fn face_of(a: DVec3) -> usize {
     2 * k + (a[k] < 0.0) as usize
 }
 
-/// The face and projected point of a ray that qualifies for a grid around `c` (see the
-/// module's notes), or `None`.
-#[inline]
-fn aim(c: DVec3, r: f64, rho_max: f64, ray: &Ray) -> Option<(usize, f64, f64)> {
+/// Whether a ray qualifies for a grid around `c` (see the module's notes), and if so
+/// its reference direction: `Some(true)` for `d`, `Some(false)` for `-d`. No division.
+#[inline(always)]
+fn passes(c: DVec3, r: f64, rho_max: f64, ray: &Ray) -> Option<bool> {
     if !ray.is_valid() || ray.t_min > ray.t_max {
         return None;
     }
     let o = ray.origin.as_dvec3() - c;
     let d = ray.dir.as_dvec3();
     let dd = d.length_squared();
-    let tc = -o.dot(d) / dd;
-    let foot = o + tc * d;
-    // NaN (a ray whose numbers overflow here) does not qualify.
-    if foot.length_squared().partial_cmp(&(rho_max * rho_max)) != Some(std::cmp::Ordering::Less) {
+    // The line misses `c` by |o x d| / |d|; NaN (numbers that overflow here) fails.
+    if o.cross(d)
+        .length_squared()
+        .partial_cmp(&(rho_max * rho_max * dd))
+        != Some(std::cmp::Ordering::Less)
+    {
         return None;
     }
-    let half = 0.5 * r / dd.sqrt();
-    let a = if ray.t_min as f64 >= tc - half {
-        d
-    } else if ray.t_max as f64 <= tc + half {
-        -d
+    // `c`'s foot on the line is at `tc = -o.d / dd`; `half` is `r / 2` in `t`, times dd.
+    let (tc, half) = (-o.dot(d), 0.5 * r * dd.sqrt());
+    if ray.t_min as f64 * dd >= tc - half {
+        Some(true)
+    } else if ray.t_max as f64 * dd <= tc + half {
+        Some(false)
     } else {
-        return None;
-    };
-    let f = face_of(a);
-    let (u, v, z) = face_coords(f, a);
-    Some((f, u / z, v / z))
+        None
+    }
 }
 
-/// The point that most of `sample` passes through (by `passes`), if most do: an origin
-/// they share (a camera's rays), else the crossing of two of their lines that most of
-/// them pass (tried over pairs, so that rays elsewhere cannot pull it away), refined by
-/// least squares over the lines that pass it.
-fn center(sample: &[&Ray], passes: impl Fn(DVec3, &Ray) -> bool) -> Option<DVec3> {
-    let votes = |c: DVec3| sample.iter().filter(|r| passes(c, r)).count();
-    let enough = |n: usize| n * 10 >= sample.len() * 9;
-    for r in sample.iter().take(3) {
-        let c = r.origin.as_dvec3();
-        if enough(votes(c)) {
-            return Some(c);
+/// The face and projected point of reference direction `a` (`dir`, negated unless
+/// `forward`), the point rounded to `f32` (which [`EPS_P`] allows for).
+#[inline(always)]
+fn project(dir: Vec3, forward: bool) -> (u8, [f32; 2]) {
+    let a = if forward { dir } else { -dir }.as_dvec3();
+    let f = face_of(a);
+    let (u, v, z) = face_coords(f, a);
+    let inv = 1.0 / z;
+    (f as u8, [(u * inv) as f32, (v * inv) as f32])
+}
+
+/// The rounding of a ray's projected point (`|p| <= 1`) to `f32`, with room to spare.
+const EPS_P: f64 = 2e-7;
+
+/// `passes` and `project` together, for tests and sampling.
+#[inline]
+fn aim(c: DVec3, r: f64, rho_max: f64, ray: &Ray) -> Option<(u8, [f32; 2])> {
+    passes(c, r, rho_max, ray).map(|fw| project(ray.dir, fw))
+}
+
+/// The point most of `sample` passes through (by `passes`), with the number that do: an
+/// origin they share (a camera's rays), else the crossing of a sampled ray's line with
+/// its neighbour's in the batch (`partner`; neighbouring pixels mostly meet the same
+/// surface, so their reflections pass the same mirror image of the camera) that most of
+/// the sample passes, refined by least squares over the lines that pass it. Trying
+/// crossings one by one keeps rays elsewhere from pulling the point away.
+fn center(
+    sample: &[(&Ray, Option<&Ray>)],
+    passes: impl Fn(DVec3, &Ray) -> bool,
+) -> Option<(DVec3, usize)> {
+    let votes = |c: DVec3| sample.iter().filter(|r| passes(c, r.0)).count();
+    let mut best: Option<(DVec3, usize)> = None;
+    let consider = |best: &mut Option<(DVec3, usize)>, c: DVec3| {
+        if c.is_finite() {
+            let v = votes(c);
+            if best.is_none_or(|(_, bv)| v > bv) {
+                *best = Some((c, v));
+            }
         }
+    };
+    for (r, _) in sample.iter().take(3) {
+        consider(&mut best, r.origin.as_dvec3());
+    }
+    if best.is_some_and(|(_, v)| v * 10 >= sample.len() * 9) {
+        return best;
     }
     let line = |r: &Ray| (r.origin.as_dvec3(), r.dir.as_dvec3().normalize());
-    let mut best: Option<(usize, DVec3)> = None;
-    let n = sample.len();
-    for k in 0..PAIRS.min(n / 2) {
-        let ((o1, d1), (o2, d2)) = (line(sample[k]), line(sample[(k + n / 2) % n]));
+    let step = (sample.len() / PAIRS).max(1);
+    for (a, b) in sample.iter().step_by(step) {
+        let Some(b) = b else { continue };
+        let ((o1, d1), (o2, d2)) = (line(a), line(b));
         // The midpoint of the two lines' closest points.
         let w = o1 - o2;
-        let b = d1.dot(d2);
-        let den = 1.0 - b * b;
+        let k = d1.dot(d2);
+        let den = 1.0 - k * k;
         if den.is_nan() || den <= 1e-12 {
             continue;
         }
         let (d, e) = (d1.dot(w), d2.dot(w));
-        let c = 0.5 * (o1 + d1 * ((b * e - d) / den) + o2 + d2 * ((e - b * d) / den));
-        let v = votes(c);
-        if c.is_finite() && best.is_none_or(|(bv, _)| v > bv) {
-            best = Some((v, c));
-        }
+        consider(
+            &mut best,
+            0.5 * (o1 + d1 * ((k * e - d) / den) + o2 + d2 * ((e - k * d) / den)),
+        );
     }
-    let (v, c) = best?;
+    let (c, v) = best?;
     // Least squares over the lines passing `c`: the sum of the projectors off their
     // directions (each with eigenvalues 0, 1, 1), singular only for parallel lines.
     let (mut a, mut rhs) = (DMat3::ZERO, DVec3::ZERO);
-    for r in sample.iter().filter(|r| passes(c, r)) {
+    for (r, _) in sample.iter().filter(|r| passes(c, r.0)) {
         let (o, d) = line(r);
         let p = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
         a += p;
         rhs += p * o;
     }
     let refined = a.inverse() * rhs;
-    let c = if refined.is_finite() && votes(refined) >= v {
-        refined
-    } else {
-        c
-    };
-    enough(votes(c)).then_some(c)
+    if refined.is_finite() {
+        let rv = votes(refined);
+        if rv >= v {
+            return Some((refined, rv));
+        }
+    }
+    Some((c, v))
 }
 
-impl PointGrid {
-    /// A grid for `rays` over `src`, when they pass through one point and are many
-    /// enough to pay for it (at least as many rays as triangles, and nine in ten of a
-    /// sample qualifying).
-    pub(crate) fn for_batch(rays: &[Ray], src: &Sources) -> Option<PointGrid> {
+/// A batch traced through a point grid: the grid, and which rays pass its centre.
+///
+/// One grid a batch: a camera's rays, or the shadow rays towards one light. Reflections
+/// off planes pass the camera's mirror images, a point per plane, and grids for the
+/// largest such groups were tried (`benches/PERF.md`, step 54): building them cost what
+/// they saved.
+pub(crate) struct Plan {
+    grid: PointGrid,
+    /// Per ray passing the centre, its face; [`NO_GRID`] for the others.
+    face: Vec<u8>,
+    /// Per ray passing the centre, its projected point on its face.
+    at: Vec<[f32; 2]>,
+}
+
+const NO_GRID: u8 = u8::MAX;
+
+impl Plan {
+    /// A grid for `rays` over `src` when nine in ten of a sample pass one point and
+    /// the batch has at least as many rays as the scene has triangles (so that building
+    /// the grid pays); `None` otherwise.
+    pub(crate) fn for_batch(rays: &[Ray], src: &Sources) -> Option<Plan> {
         let ntri = src.len();
-        if ntri == 0 || rays.len() < 4 * SAMPLE || rays.len() < ntri || ntri >= u32::MAX as usize {
+        let n = rays.len();
+        if ntri == 0 || n < ntri.max(4 * SAMPLE) || ntri >= u32::MAX as usize {
             return None;
         }
         let margin = src.margin as f64;
@@ -292,19 +340,65 @@ impl PointGrid {
         // times that for a point as far from the scene as it is.
         let middle = src.bounds.center().as_dvec3();
         let rho_of = |c: DVec3| margin.max(1e-5 * ((c - middle).length() + margin * 1e5));
-        let step = (rays.len() / SAMPLE).max(1);
-        let sample: Vec<&Ray> = rays.iter().step_by(step).filter(|r| r.is_valid()).collect();
-        let c = center(&sample, |c, ray| aim(c, r, rho_of(c), ray).is_some())?;
+        let valid = |i: usize| rays[i].is_valid();
+        let sample: Vec<(&Ray, Option<&Ray>)> = (0..n)
+            .step_by((n / SAMPLE).max(1))
+            .filter(|&i| valid(i))
+            .map(|i| (&rays[i], (i + 1 < n && valid(i + 1)).then(|| &rays[i + 1])))
+            .collect();
+        let (c, v) = center(&sample, |c, ray| aim(c, r, rho_of(c), ray).is_some())?;
+        if v * 10 < sample.len() * 9 {
+            return None;
+        }
         let rho_max = rho_of(c);
-        Self::build(c, r, rho_max, margin, rays, src)
+        let (mut face, mut at) = (vec![NO_GRID; n], vec![[0f32; 2]; n]);
+        rays.par_iter()
+            .zip(face.par_iter_mut().zip(at.par_iter_mut()))
+            .with_min_len(CHUNK)
+            .for_each(|(ray, (f, p))| {
+                if let Some(a) = aim(c, r, rho_max, ray) {
+                    (*f, *p) = a;
+                }
+            });
+        let grid = PointGrid::build(c, r, rho_max, margin, rays, (&face, &at), src)?;
+        Some(Plan { grid, face, at })
     }
 
+    /// `out[i] = query(rays[i])`: through the grid where the ray passes its centre, by
+    /// `fallback` elsewhere.
+    pub(crate) fn run<const ANY: bool, T: Send>(
+        &self,
+        rays: &[Ray],
+        out: &mut [T],
+        wrap: impl Fn(Option<Hit>) -> T + Sync,
+        fallback: impl Fn(&Ray) -> T + Sync,
+    ) {
+        assert_eq!(rays.len(), out.len(), "one output slot per ray");
+        rays.par_chunks(CHUNK)
+            .zip(out.par_chunks_mut(CHUNK))
+            .zip(self.face.par_chunks(CHUNK).zip(self.at.par_chunks(CHUNK)))
+            .for_each(|((rays, out), (face, at))| {
+                for (((ray, o), &f), p) in rays.iter().zip(out).zip(face).zip(at) {
+                    *o = if f == NO_GRID {
+                        fallback(ray)
+                    } else {
+                        wrap(self.grid.trace::<ANY>(ray, f as usize, p))
+                    };
+                }
+            });
+    }
+}
+
+impl PointGrid {
+    /// The grid around `c` for the rays passing it (`face` other than [`NO_GRID`]),
+    /// `None` when it would list too many entries.
     fn build(
         c: DVec3,
         r: f64,
         rho_max: f64,
         margin: f64,
         rays: &[Ray],
+        (face, at): (&[u8], &[[f32; 2]]),
         src: &Sources,
     ) -> Option<PointGrid> {
         // The rectangle each face's rays project into, their number, and the furthest
@@ -320,11 +414,13 @@ impl PointGrid {
         let empty: Bounds = ([none; 6], 0.0);
         let (bounds, reach) = rays
             .par_chunks(CHUNK)
-            .map(|ch| {
+            .zip(face.par_chunks(CHUNK).zip(at.par_chunks(CHUNK)))
+            .map(|(ch, (fs, at))| {
                 let mut b = empty;
-                for ray in ch {
-                    if let Some((f, pu, pv)) = aim(c, r, rho_max, ray) {
-                        let e = &mut b.0[f];
+                for ((ray, &f), p) in ch.iter().zip(fs).zip(at) {
+                    if f != NO_GRID {
+                        let (pu, pv) = (p[0] as f64, p[1] as f64);
+                        let e = &mut b.0[f as usize];
                         *e = (e.0.min(pu), e.1.min(pv), e.2.max(pu), e.3.max(pv), e.4 + 1);
                         b.1 = b.1.max((ray.origin.as_dvec3() - c).length());
                     }
@@ -430,7 +526,7 @@ impl PointGrid {
                         add((a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1), h));
                     }
                 }
-                let eps = 4.0 * allowance / z0 + 1e-9;
+                let eps = 4.0 * allowance / z0 + EPS_P;
                 let (a0, a1) = (
                     (pu0 - eps - face.u0) * face.inv,
                     (pu1 + eps - face.u0) * face.inv,
@@ -475,7 +571,7 @@ impl PointGrid {
             .iter()
             .map(|i| (i.i1 - i.i0 + 1) as u64 * (i.j1 - i.j0 + 1) as u64)
             .sum();
-        if listed > 32 * rays.len() as u64 + 8 * src.len() as u64 {
+        if listed > 32 * bounds.iter().map(|b| b.4 as u64).sum::<u64>() + 8 * src.len() as u64 {
             return None;
         }
         // Near to far within every tile: write the entries in order of depth (a stable
@@ -529,8 +625,6 @@ impl PointGrid {
         number.extend(src.moving_number.iter().map(|&k| nstat as u32 + k));
         Some(PointGrid {
             c,
-            r,
-            rho_max,
             depth_margin: 2.0 * allowance,
             faces,
             starts,
@@ -539,28 +633,6 @@ impl PointGrid {
             tris,
             number,
         })
-    }
-
-    /// `out[i] = query(rays[i])`: through the grid where the ray qualifies, by
-    /// `fallback` elsewhere.
-    pub(crate) fn run<const ANY: bool, T: Send>(
-        &self,
-        rays: &[Ray],
-        out: &mut [T],
-        wrap: impl Fn(Option<Hit>) -> T + Sync,
-        fallback: impl Fn(&Ray) -> T + Sync,
-    ) {
-        assert_eq!(rays.len(), out.len(), "one output slot per ray");
-        rays.par_chunks(CHUNK)
-            .zip(out.par_chunks_mut(CHUNK))
-            .for_each(|(rays, out)| {
-                for (ray, o) in rays.iter().zip(out) {
-                    *o = match aim(self.c, self.r, self.rho_max, ray) {
-                        Some((f, pu, pv)) => wrap(self.trace::<ANY>(ray, f, pu, pv)),
-                        None => fallback(ray),
-                    };
-                }
-            });
     }
 
     #[inline]
@@ -574,7 +646,7 @@ impl PointGrid {
         })
     }
 
-    fn trace<const ANY: bool>(&self, ray: &Ray, f: usize, pu: f64, pv: f64) -> Option<Hit> {
+    fn trace<const ANY: bool>(&self, ray: &Ray, f: usize, p: &[f32; 2]) -> Option<Hit> {
         let pre = RayPre::new(ray.origin, ray.dir);
         let mut best: Option<Hit> = None;
         for &g in &self.near {
@@ -591,7 +663,7 @@ impl PointGrid {
         if face.nu == 0 {
             return best;
         }
-        let tile = face.tile(pu, pv);
+        let tile = face.tile(p[0] as f64, p[1] as f64);
         let o = ray.origin.as_dvec3();
         let d = ray.dir.as_dvec3();
         let (_, _, z0) = face_coords(f, o - self.c);
