@@ -76,11 +76,13 @@ struct Face {
 }
 
 impl Face {
+    /// The tile holding point `p`, `None` outside the grid (or for a face without one).
     #[inline]
-    fn tile(&self, pu: f64, pv: f64) -> usize {
-        let i = (((pu - self.u0) * self.inv).max(0.0) as usize).min(self.nu - 1);
-        let j = (((pv - self.v0) * self.inv).max(0.0) as usize).min(self.nv - 1);
-        self.first + j * self.nu + i
+    fn tile(&self, p: [f32; 2]) -> Option<usize> {
+        let x = (p[0] as f64 - self.u0) * self.inv;
+        let y = (p[1] as f64 - self.v0) * self.inv;
+        let inside = x >= 0.0 && y >= 0.0 && x < self.nu as f64 && y < self.nv as f64;
+        inside.then(|| self.first + y as usize * self.nu + x as usize)
     }
 }
 
@@ -305,6 +307,10 @@ fn center(
     Some((c, v))
 }
 
+/// Per cube face, the rectangle its rays' points span (`u0, v0, u1, v1`) and their
+/// number; and the greatest squared distance of a ray's origin from the centre.
+type Bounds = ([(f64, f64, f64, f64, usize); 6], f64);
+
 /// A batch traced through a point grid: the grid, and which rays pass its centre.
 ///
 /// One grid a batch: a camera's rays, or the shadow rays towards one light. Reflections
@@ -313,13 +319,18 @@ fn center(
 /// they saved.
 pub(crate) struct Plan {
     grid: PointGrid,
-    /// Per ray passing the centre, its face; [`NO_GRID`] for the others.
-    face: Vec<u8>,
-    /// Per ray passing the centre, its projected point on its face.
-    at: Vec<[f32; 2]>,
+    /// The centre, the near cube's half size and how closely a line must pass `c` to
+    /// qualify ([`aim`]).
+    c: DVec3,
+    r: f64,
+    rho_max: f64,
+    /// The greatest squared distance of an origin from `c` the grid allows for.
+    reach2: f64,
 }
 
-const NO_GRID: u8 = u8::MAX;
+/// The batch's rays sampled to find the rectangles its rays project into: one in this
+/// many.
+const SPREAD: usize = 8;
 
 impl Plan {
     /// A grid for `rays` over `src` when nine in ten of a sample pass one point and
@@ -351,59 +362,9 @@ impl Plan {
             return None;
         }
         let rho_max = rho_of(c);
-        let (mut face, mut at) = (vec![NO_GRID; n], vec![[0f32; 2]; n]);
-        rays.par_iter()
-            .zip(face.par_iter_mut().zip(at.par_iter_mut()))
-            .with_min_len(CHUNK)
-            .for_each(|(ray, (f, p))| {
-                if let Some(a) = aim(c, r, rho_max, ray) {
-                    (*f, *p) = a;
-                }
-            });
-        let grid = PointGrid::build(c, r, rho_max, margin, rays, (&face, &at), src)?;
-        Some(Plan { grid, face, at })
-    }
-
-    /// `out[i] = query(rays[i])`: through the grid where the ray passes its centre, by
-    /// `fallback` elsewhere.
-    pub(crate) fn run<const ANY: bool, T: Send>(
-        &self,
-        rays: &[Ray],
-        out: &mut [T],
-        wrap: impl Fn(Option<Hit>) -> T + Sync,
-        fallback: impl Fn(&Ray) -> T + Sync,
-    ) {
-        assert_eq!(rays.len(), out.len(), "one output slot per ray");
-        rays.par_chunks(CHUNK)
-            .zip(out.par_chunks_mut(CHUNK))
-            .zip(self.face.par_chunks(CHUNK).zip(self.at.par_chunks(CHUNK)))
-            .for_each(|((rays, out), (face, at))| {
-                for (((ray, o), &f), p) in rays.iter().zip(out).zip(face).zip(at) {
-                    *o = if f == NO_GRID {
-                        fallback(ray)
-                    } else {
-                        wrap(self.grid.trace::<ANY>(ray, f as usize, p))
-                    };
-                }
-            });
-    }
-}
-
-impl PointGrid {
-    /// The grid around `c` for the rays passing it (`face` other than [`NO_GRID`]),
-    /// `None` when it would list too many entries.
-    fn build(
-        c: DVec3,
-        r: f64,
-        rho_max: f64,
-        margin: f64,
-        rays: &[Ray],
-        (face, at): (&[u8], &[[f32; 2]]),
-        src: &Sources,
-    ) -> Option<PointGrid> {
-        // The rectangle each face's rays project into, their number, and the furthest
-        // origin from `c`.
-        type Bounds = ([(f64, f64, f64, f64, usize); 6], f64);
+        // Per face, the rectangle that every `SPREAD`th ray projects into, grown by a
+        // fiftieth, and their number; and the furthest origin from `c`, with half again
+        // to spare. A ray outside these takes the parallel subfields.
         let none = (
             f64::INFINITY,
             f64::INFINITY,
@@ -412,17 +373,23 @@ impl PointGrid {
             0,
         );
         let empty: Bounds = ([none; 6], 0.0);
-        let (bounds, reach) = rays
-            .par_chunks(CHUNK)
-            .zip(face.par_chunks(CHUNK).zip(at.par_chunks(CHUNK)))
-            .map(|(ch, (fs, at))| {
+        let (mut bounds, reach2) = (0..n.div_ceil(SPREAD * CHUNK))
+            .into_par_iter()
+            .map(|k| {
                 let mut b = empty;
-                for ((ray, &f), p) in ch.iter().zip(fs).zip(at) {
-                    if f != NO_GRID {
-                        let (pu, pv) = (p[0] as f64, p[1] as f64);
+                let end = ((k + 1) * SPREAD * CHUNK).min(n);
+                for ray in rays[k * SPREAD * CHUNK..end].iter().step_by(SPREAD) {
+                    if let Some((f, q)) = aim(c, r, rho_max, ray) {
+                        let (pu, pv) = (q[0] as f64, q[1] as f64);
                         let e = &mut b.0[f as usize];
-                        *e = (e.0.min(pu), e.1.min(pv), e.2.max(pu), e.3.max(pv), e.4 + 1);
-                        b.1 = b.1.max((ray.origin.as_dvec3() - c).length());
+                        *e = (
+                            e.0.min(pu),
+                            e.1.min(pv),
+                            e.2.max(pu),
+                            e.3.max(pv),
+                            e.4 + SPREAD,
+                        );
+                        b.1 = b.1.max((ray.origin.as_dvec3() - c).length_squared());
                     }
                 }
                 b
@@ -442,11 +409,65 @@ impl PointGrid {
                     (a.0, a.1.max(b.1))
                 },
             );
+        for b in bounds.iter_mut().filter(|b| b.4 > 0) {
+            let grow = 0.02 * (b.2 - b.0).max(b.3 - b.1) + 1e-6;
+            *b = (b.0 - grow, b.1 - grow, b.2 + grow, b.3 + grow, b.4);
+        }
+        let reach2 = 2.25 * reach2 + margin * margin;
+        let grid = PointGrid::build(c, r, rho_max, margin, (bounds, reach2), src)?;
+        Some(Plan {
+            grid,
+            c,
+            r,
+            rho_max,
+            reach2,
+        })
+    }
+
+    /// `out[i] = query(rays[i])`: through the grid where the ray passes its centre, by
+    /// `fallback` elsewhere.
+    pub(crate) fn run<const ANY: bool, T: Send>(
+        &self,
+        rays: &[Ray],
+        out: &mut [T],
+        wrap: impl Fn(Option<Hit>) -> T + Sync,
+        fallback: impl Fn(&Ray) -> T + Sync,
+    ) {
+        assert_eq!(rays.len(), out.len(), "one output slot per ray");
+        rays.par_chunks(CHUNK)
+            .zip(out.par_chunks_mut(CHUNK))
+            .for_each(|(rays, out)| {
+                for (ray, o) in rays.iter().zip(out) {
+                    let tile = aim(self.c, self.r, self.rho_max, ray).and_then(|(f, p)| {
+                        let near = (ray.origin.as_dvec3() - self.c).length_squared() <= self.reach2;
+                        let tile = self.grid.faces[f as usize].tile(p);
+                        near.then_some(tile).flatten().map(|t| (f as usize, t))
+                    });
+                    *o = match tile {
+                        Some((f, t)) => wrap(self.grid.trace::<ANY>(ray, f, t)),
+                        None => fallback(ray),
+                    };
+                }
+            });
+    }
+}
+
+impl PointGrid {
+    /// The grid around `c` for rays that pass it and project into `bounds`; `None`
+    /// when it would list too many entries.
+    fn build(
+        c: DVec3,
+        r: f64,
+        rho_max: f64,
+        margin: f64,
+        (bounds, reach2): Bounds,
+        src: &Sources,
+    ) -> Option<PointGrid> {
         // The candidate test works relative to the ray's origin, so its rounding grows
         // with the distance from the origin to the triangle (at most `reach` plus the
         // scene's size, which `margin` is 1e-5 of): allow for 1e-6 of that, in the
         // projection as in the depths.
-        let allowance = margin + rho_max + 1e-6 * (reach + margin * 1e5);
+        let allowance = margin + rho_max + 1e-6 * (reach2.sqrt() + margin * 1e5);
         let mut faces = [Face::default(); 6];
         let mut total = 0;
         for (face, &(u0, v0, u1, v1, n)) in faces.iter_mut().zip(&bounds) {
@@ -554,11 +575,16 @@ impl PointGrid {
             }
             out
         };
-        let mut items: Vec<Item> = (0..src.len())
+        let chunks: Vec<Vec<Item>> = (0..src.len().div_ceil(CHUNK))
             .into_par_iter()
-            .with_min_len(256)
-            .flat_map_iter(|g| items_of(g).into_iter().flatten())
+            .map(|k| {
+                let range = k * CHUNK..((k + 1) * CHUNK).min(src.len());
+                range
+                    .flat_map(|g| items_of(g).into_iter().flatten())
+                    .collect()
+            })
             .collect();
+        let mut items = chunks.concat();
         let near = items
             .iter()
             .filter(|i| i.face == NEAR)
@@ -574,53 +600,97 @@ impl PointGrid {
         if listed > 32 * bounds.iter().map(|b| b.4 as u64).sum::<u64>() + 8 * src.len() as u64 {
             return None;
         }
-        // Near to far within every tile: write the entries in order of depth (a stable
-        // sort, so equal depths keep triangle order and the grid depends on its input
-        // alone).
-        items.par_sort_by(|a, b| a.zmin.total_cmp(&b.zmin));
-
-        let mut starts = vec![0u32; total + 1];
-        for it in &items {
-            let face = &faces[it.face as usize];
-            for j in it.j0 as usize..=it.j1 as usize {
-                let row = face.first + j * face.nu;
-                for s in &mut starts[row + it.i0 as usize + 1..=row + it.i1 as usize + 1] {
-                    *s += 1;
+        // Near to far within every tile: write the entries in order of depth. Depths
+        // are positive (at least `r / 2`), so their bits order them; ties go to the
+        // earlier item, so the grid depends on its input alone.
+        let nstat = src.statics.len();
+        let (order, tris) = rayon::join(
+            || {
+                let mut keys: Vec<u64> = items
+                    .iter()
+                    .enumerate()
+                    .map(|(k, it)| (it.zmin.to_bits() as u64) << 32 | k as u64)
+                    .collect();
+                keys.par_sort_unstable();
+                keys
+            },
+            || {
+                let mut tris = Vec::with_capacity(src.len());
+                tris.extend(src.statics.iter().map(TriPre::new));
+                tris.extend_from_slice(src.moving_pre);
+                tris
+            },
+        );
+        // Tiles in ranges, one job a range: each goes through all the items in order
+        // and counts (then writes) the entries of its own tiles.
+        let jobs = (4 * rayon::current_num_threads()).clamp(1, total.max(1));
+        let cut = |k: usize| k * total / jobs;
+        let each_tile = |lo: usize, hi: usize, visit: &mut dyn FnMut(usize, &Item)| {
+            for &k in &order {
+                let it = &items[k as u32 as usize];
+                let face = &faces[it.face as usize];
+                let first = face.first + it.j0 as usize * face.nu + it.i0 as usize;
+                let last = face.first + it.j1 as usize * face.nu + it.i1 as usize;
+                if last < lo || first >= hi {
+                    continue;
+                }
+                for j in it.j0 as usize..=it.j1 as usize {
+                    let row = face.first + j * face.nu;
+                    let a = (row + it.i0 as usize).max(lo);
+                    let b = (row + it.i1 as usize + 1).min(hi);
+                    for t in a..b {
+                        visit(t, it);
+                    }
                 }
             }
+        };
+        let mut starts = vec![0u32; total + 1];
+        {
+            let mut parts: Vec<(usize, &mut [u32])> = Vec::with_capacity(jobs);
+            let mut rest = &mut starts[1..];
+            for k in 0..jobs {
+                let (head, tail) = rest.split_at_mut(cut(k + 1) - cut(k));
+                parts.push((cut(k), head));
+                rest = tail;
+            }
+            parts.into_par_iter().for_each(|(lo, counts)| {
+                let hi = lo + counts.len();
+                each_tile(lo, hi, &mut |t, _| counts[t - lo] += 1);
+            });
         }
         for k in 0..total {
             starts[k + 1] += starts[k];
         }
-        let mut cursor = starts[..total].to_vec();
-        let mut entries = vec![
-            PEntry {
-                zmin: 0.0,
-                zmax: 0.0,
-                tri: 0
-            };
-            starts[total] as usize
-        ];
-        for it in &items {
-            let face = &faces[it.face as usize];
-            let e = PEntry {
-                zmin: it.zmin,
-                zmax: it.zmax,
-                tri: it.tri,
-            };
-            for j in it.j0 as usize..=it.j1 as usize {
-                let row = face.first + j * face.nu;
-                for k in &mut cursor[row + it.i0 as usize..=row + it.i1 as usize] {
-                    entries[*k as usize] = e;
-                    *k += 1;
-                }
+        let blank = PEntry {
+            zmin: 0.0,
+            zmax: 0.0,
+            tri: 0,
+        };
+        let mut entries = vec![blank; starts[total] as usize];
+        {
+            let mut parts: Vec<(usize, usize, &mut [PEntry])> = Vec::with_capacity(jobs);
+            let mut rest = &mut entries[..];
+            for k in 0..jobs {
+                let len = (starts[cut(k + 1)] - starts[cut(k)]) as usize;
+                let (head, tail) = rest.split_at_mut(len);
+                parts.push((cut(k), cut(k + 1), head));
+                rest = tail;
             }
+            let starts = &starts;
+            parts.into_par_iter().for_each(|(lo, hi, out)| {
+                let base = starts[lo] as usize;
+                let mut cursor: Vec<u32> = starts[lo..hi].to_vec();
+                each_tile(lo, hi, &mut |t, it| {
+                    let k = &mut cursor[t - lo];
+                    out[*k as usize - base] = PEntry {
+                        zmin: it.zmin,
+                        zmax: it.zmax,
+                        tri: it.tri,
+                    };
+                    *k += 1;
+                });
+            });
         }
-
-        let nstat = src.statics.len();
-        let mut tris = Vec::with_capacity(src.len());
-        tris.par_extend(src.statics.par_iter().map(TriPre::new));
-        tris.extend_from_slice(src.moving_pre);
         let mut number: Vec<u32> = (0..nstat as u32).collect();
         number.extend(src.moving_number.iter().map(|&k| nstat as u32 + k));
         Some(PointGrid {
@@ -646,7 +716,7 @@ impl PointGrid {
         })
     }
 
-    fn trace<const ANY: bool>(&self, ray: &Ray, f: usize, p: &[f32; 2]) -> Option<Hit> {
+    fn trace<const ANY: bool>(&self, ray: &Ray, f: usize, tile: usize) -> Option<Hit> {
         let pre = RayPre::new(ray.origin, ray.dir);
         let mut best: Option<Hit> = None;
         for &g in &self.near {
@@ -659,11 +729,6 @@ impl PointGrid {
                 }
             }
         }
-        let face = &self.faces[f];
-        if face.nu == 0 {
-            return best;
-        }
-        let tile = face.tile(p[0] as f64, p[1] as f64);
         let o = ray.origin.as_dvec3();
         let d = ray.dir.as_dvec3();
         let (_, _, z0) = face_coords(f, o - self.c);
