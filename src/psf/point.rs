@@ -315,8 +315,8 @@ type Bounds = ([(f64, f64, f64, f64, usize); 6], f64);
 ///
 /// One grid a batch: a camera's rays, or the shadow rays towards one light. Reflections
 /// off planes pass the camera's mirror images, a point per plane, and grids for the
-/// largest such groups were tried (`benches/PERF.md`, step 54): building them cost what
-/// they saved.
+/// largest such groups were tried (`benches/PERF.md`, step 54: building them cost what
+/// they saved; step 57 again with cheaper builds: no gain).
 pub(crate) struct Plan {
     grid: PointGrid,
     /// The centre, the near cube's half size and how closely a line must pass `c` to
@@ -604,7 +604,7 @@ impl PointGrid {
         // are positive (at least `r / 2`), so their bits order them; ties go to the
         // earlier item, so the grid depends on its input alone.
         let nstat = src.statics.len();
-        let (order, tris) = rayon::join(
+        let (items, tris) = rayon::join(
             || {
                 let mut keys: Vec<u64> = items
                     .iter()
@@ -612,7 +612,9 @@ impl PointGrid {
                     .map(|(k, it)| (it.zmin.to_bits() as u64) << 32 | k as u64)
                     .collect();
                 keys.par_sort_unstable();
-                keys
+                keys.iter()
+                    .map(|&k| items[k as u32 as usize])
+                    .collect::<Vec<Item>>()
             },
             || {
                 let mut tris = Vec::with_capacity(src.len());
@@ -623,11 +625,10 @@ impl PointGrid {
         );
         // Tiles in ranges, one job a range: each goes through all the items in order
         // and counts (then writes) the entries of its own tiles.
-        let jobs = (4 * rayon::current_num_threads()).clamp(1, total.max(1));
+        let jobs = (2 * rayon::current_num_threads()).clamp(1, total.max(1));
         let cut = |k: usize| k * total / jobs;
         let each_tile = |lo: usize, hi: usize, visit: &mut dyn FnMut(usize, &Item)| {
-            for &k in &order {
-                let it = &items[k as u32 as usize];
+            for it in &items {
                 let face = &faces[it.face as usize];
                 let first = face.first + it.j0 as usize * face.nu + it.i0 as usize;
                 let last = face.first + it.j1 as usize * face.nu + it.i1 as usize;
