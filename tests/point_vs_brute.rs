@@ -132,6 +132,28 @@ fn check(k: &Case) -> Result<(), TestCaseError> {
                 k.seed
             );
         }
+        // The static PSF alone takes point grids too.
+        let (mut got, mut want) = (vec![None; n], vec![None; n]);
+        psf.intersect_batch(&rs, &mut got);
+        BruteForce::new(&stat).intersect_batch(&rs, &mut want);
+        prop_assert_eq!(
+            &got,
+            &want,
+            "static PSF alone, from the point {}, seed {}",
+            from,
+            k.seed
+        );
+        let (mut og, mut ow) = (vec![false; n], vec![false; n]);
+        psf.occluded_batch(&rs, &mut og);
+        BruteForce::new(&stat).occluded_batch(&rs, &mut ow);
+        prop_assert_eq!(
+            &og,
+            &ow,
+            "static PSF alone, from the point {}, seed {}",
+            from,
+            k.seed
+        );
+
         let (mut got, mut want) = (vec![None; n], vec![None; n]);
         both.intersect_batch(&rs, &mut got);
         brute.intersect_batch(&rs, &mut want);

@@ -8,6 +8,7 @@ use glam::{DVec3, Vec3, Vec4};
 
 use super::batch::binned;
 use super::bsp::{depth_mask, Block, LANES};
+use super::point::{Plan, Sources};
 use super::stats::{Counter, NoCount, RayStats};
 use super::{GridFrame, Psf};
 use crate::geometry::{
@@ -335,8 +336,13 @@ impl Intersector for Psf {
         self.trace::<true, _>(ray, &mut NoCount).is_some()
     }
 
-    /// Binned by subfield ([`binned`]).
+    /// Through a point grid when the rays pass through one point and are many enough
+    /// ([`Psf::point_grid_for`]); otherwise binned by subfield ([`binned`]).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        if let Some(g) = Plan::for_batch(rays, &self.point_sources()) {
+            let fallback = |r: &Ray| self.trace::<false, _>(r, &mut NoCount);
+            return g.run::<false, _>(rays, out, |h| h, fallback);
+        }
         let bins = self.subfields.len().max(1);
         binned(
             rays,
@@ -348,6 +354,10 @@ impl Intersector for Psf {
     }
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
+        if let Some(g) = Plan::for_batch(rays, &self.point_sources()) {
+            let fallback = |r: &Ray| self.trace::<true, _>(r, &mut NoCount).is_some();
+            return g.run::<true, _>(rays, out, |h| h.is_some(), fallback);
+        }
         let bins = self.subfields.len().max(1);
         binned(
             rays,
@@ -360,6 +370,26 @@ impl Intersector for Psf {
 }
 
 impl Psf {
+    /// Whether [`intersect_batch`](Intersector::intersect_batch) and
+    /// [`occluded_batch`](Intersector::occluded_batch) trace `rays` through a point grid
+    /// (see [`Layered::point_grid_for`](super::Layered::point_grid_for)). Either way the
+    /// hits are the same.
+    pub fn point_grid_for(&self, rays: &[Ray]) -> bool {
+        Plan::for_batch(rays, &self.point_sources()).is_some()
+    }
+
+    /// This PSF's triangles, for a point grid.
+    fn point_sources(&self) -> Sources<'_> {
+        Sources {
+            statics: &self.triangles,
+            moving: &[],
+            moving_pre: &[],
+            moving_number: &[],
+            margin: self.margin,
+            bounds: self.bounds,
+        }
+    }
+
     /// A batch's query of one ray, its subfield `sub` found by [`bin_of`](Self::bin_of)
     /// (which is the direction lookup for every valid ray).
     #[inline]
