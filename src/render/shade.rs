@@ -375,7 +375,7 @@ impl<'a> ShadeContext<'a> {
         } else {
             0.0
         };
-        for l in &self.lights {
+        for (li, l) in self.lights.iter().enumerate() {
             let (to_light, dist, irradiance) = match l.kind {
                 LightKind::Directional => (-l.direction, f32::INFINITY, l.power),
                 LightKind::Point | LightKind::Spot { .. } => {
@@ -423,7 +423,7 @@ impl<'a> ShadeContext<'a> {
             } else {
                 Ray::new(origin, to_light)
             };
-            out.shadow(shadow, item.sample, c);
+            out.shadow(shadow, li, item.sample, c);
         }
 
         if item.depth >= max_depth {
@@ -531,6 +531,8 @@ struct BlockOut {
     cover: Vec<(u32, f32)>,
     shadow_rays: Vec<Ray>,
     shadow_add: Vec<(u32, Vec3)>,
+    /// The light each shadow ray goes to.
+    shadow_light: Vec<u16>,
     next_rays: Vec<Ray>,
     next_items: Vec<Item>,
 }
@@ -546,14 +548,52 @@ impl BlockOut {
             self.cover.push((sample, c));
         }
     }
-    fn shadow(&mut self, ray: Ray, sample: u32, c: Vec3) {
+    fn shadow(&mut self, ray: Ray, light: usize, sample: u32, c: Vec3) {
         self.shadow_rays.push(ray);
         self.shadow_add.push((sample, c));
+        self.shadow_light.push(light.min(u16::MAX as usize) as u16);
     }
     fn next(&mut self, ray: Ray, item: Item) {
         self.next_rays.push(ray);
         self.next_items.push(item);
     }
+}
+
+/// `occluded_batch` of `rays`, one batch per light (`light[i]` is ray `i`'s): the
+/// shadow rays towards one point light all pass through it, and such a batch is traced
+/// through a point grid around it (`subfield::psf`'s point grids), which a batch mixing
+/// several lights would not get. The answers are the same either way.
+fn occluded_by_light<T: Intersector>(tracer: &T, rays: &[Ray], light: &[u16]) -> Vec<bool> {
+    let mut blocked = vec![false; rays.len()];
+    let lights = light.iter().max().map_or(0, |&l| l as usize + 1);
+    if lights <= 1 {
+        tracer.occluded_batch(rays, &mut blocked);
+        return blocked;
+    }
+    // The rays in order of their light (a stable counting sort), a batch a light.
+    let mut start = vec![0usize; lights + 1];
+    for &l in light {
+        start[l as usize + 1] += 1;
+    }
+    for l in 0..lights {
+        start[l + 1] += start[l];
+    }
+    let mut index = vec![0usize; rays.len()];
+    let mut at = start.clone();
+    for (i, &l) in light.iter().enumerate() {
+        index[at[l as usize]] = i;
+        at[l as usize] += 1;
+    }
+    let sorted: Vec<Ray> = index.iter().map(|&i| rays[i]).collect();
+    let mut out = vec![false; rays.len()];
+    for l in 0..lights {
+        let (a, b) = (start[l], start[l + 1]);
+        tracer.occluded_batch(&sorted[a..b], &mut out[a..b]);
+    }
+    for (&i, b) in index.iter().zip(out) {
+        blocked[i] = b;
+    }
+    blocked
 }
 
 /// A 64-bit mix of the inputs (SplitMix64 finaliser over a running combination).
@@ -675,6 +715,7 @@ pub fn render_frame<T: Intersector>(
                 .collect();
             let mut shadow_rays = Vec::new();
             let mut shadow_add = Vec::new();
+            let mut shadow_light = Vec::new();
             rays.clear();
             items.clear();
             for o in outs {
@@ -686,6 +727,7 @@ pub fn render_frame<T: Intersector>(
                 }
                 shadow_rays.extend(o.shadow_rays);
                 shadow_add.extend(o.shadow_add);
+                shadow_light.extend(o.shadow_light);
                 rays.extend(o.next_rays);
                 items.extend(o.next_items);
             }
@@ -694,8 +736,7 @@ pub fn render_frame<T: Intersector>(
             work.shade += clock.elapsed();
 
             let clock = Instant::now();
-            let mut blocked = vec![false; shadow_rays.len()];
-            tracer.occluded_batch(&shadow_rays, &mut blocked);
+            let blocked = occluded_by_light(tracer, &shadow_rays, &shadow_light);
             work.trace += clock.elapsed();
 
             let clock = Instant::now();
