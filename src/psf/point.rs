@@ -25,14 +25,17 @@
 //! * Every other triangle `T` lies at `max-norm >= r` from `C`, so its part inside (or
 //!   within a small angle of) face `f`'s frustum has `z >= r / 2`. `T` clipped to
 //!   `z >= r / 2`, projected, gives a convex polygon whose bounding rectangle, grown by
-//!   `eps = 4 (margin + rho_max) / zmin` (the triangle grown by the rounding margin, and
-//!   the ray's angle off `a`, at the clipped part's least depth `zmin`; the projection
-//!   moves by at most `(1 + |p|^2) < 4` times an angle for `|p| <= 1`), is listed in
-//!   every tile it meets, with the clipped part's depth range `[zmin, zmax]`.
+//!   `eps = 4 allowance / zmin + EPS_P` (`allowance`: the rounding margin the triangle is
+//!   grown by, `rho_max`, and 1e-6 of the furthest a ray's origin or the scene reaches
+//!   from `C`, for the candidate test's own rounding; at the clipped part's least depth
+//!   `zmin` the projection moves by at most `(1 + |p|^2) < 4` times an angle, or `4 /
+//!   zmin` times a displacement, for `|p| <= 1`; `EPS_P` for the ray's point rounded to
+//!   `f32`), is listed in every tile it meets, with the clipped part's depth range
+//!   `[zmin, zmax]` rounded outwards.
 //!
 //! A ray therefore meets no triangle outside its tile's list and the near list; within
-//! the list, one whose depth range misses the ray's own depths (plus twice the margin)
-//! over its interval cannot be hit. The candidates get the same exact test as in the
+//! the list, one whose depth range misses the ray's own depths (plus twice the
+//! allowance) over its interval cannot be hit. The candidates get the same exact test as in the
 //! parallel subfields, so hits (and ties) are those of brute force. Rays that do not
 //! qualify take the parallel subfields.
 
@@ -245,10 +248,10 @@ fn aim(c: DVec3, r: f64, rho_max: f64, ray: &Ray) -> Option<(u8, [f32; 2])> {
 
 /// The point most of `sample` passes through (by `passes`), with the number that do: an
 /// origin they share (a camera's rays), else the crossing of a sampled ray's line with
-/// its neighbour's in the batch (`partner`; neighbouring pixels mostly meet the same
-/// surface, so their reflections pass the same mirror image of the camera) that most of
-/// the sample passes, refined by least squares over the lines that pass it. Trying
-/// crossings one by one keeps rays elsewhere from pulling the point away.
+/// its neighbour's in the batch (the second of each pair; both of a light's shadow rays
+/// pass the light) that most of the sample passes, refined by least squares over the
+/// lines that pass it. Trying crossings one by one keeps rays elsewhere from pulling the
+/// point away.
 fn center(
     sample: &[(&Ray, Option<&Ray>)],
     passes: impl Fn(DVec3, &Ray) -> bool,
@@ -311,7 +314,8 @@ fn center(
 /// number; and the greatest squared distance of a ray's origin from the centre.
 type Bounds = ([(f64, f64, f64, f64, usize); 6], f64);
 
-/// A batch traced through a point grid: the grid, and which rays pass its centre.
+/// A batch traced through a point grid: the grid, and what a ray must satisfy to take
+/// it.
 ///
 /// One grid a batch: a camera's rays, or the shadow rays towards one light. Reflections
 /// off planes pass the camera's mirror images, a point per plane, and grids for the
@@ -763,5 +767,72 @@ impl PointGrid {
             }
         }
         best
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::Rng;
+
+    #[test]
+    fn rounding_goes_outwards() {
+        let mut rng = Rng::new(3);
+        for _ in 0..10_000 {
+            let x = (rng.f32() as f64 - 0.5) * 10f64.powi(rng.below(20) as i32 - 10);
+            assert!((down(x) as f64) <= x && (up(x) as f64) >= x, "{x}");
+            // No further than two units in the last place.
+            assert!(((x - down(x) as f64).abs()) <= 2.0 * (x.abs() * 1.2e-7).max(1e-38));
+        }
+        assert_eq!(down(1e300), f32::MAX);
+        assert_eq!(up(-1e300), f32::MIN);
+    }
+
+    #[test]
+    fn rays_qualify_only_on_one_side_of_the_centre() {
+        let c = DVec3::new(1.0, 2.0, 3.0);
+        let cf = c.as_vec3();
+        let (r, rho) = (0.1, 1e-4);
+        // From the centre: forwards.
+        let from = Ray::new(cf, Vec3::new(0.3, -1.0, 0.2));
+        assert_eq!(passes(c, r, rho, &from), Some(true));
+        // Towards it, ending short of it: backwards, its face the one it comes from.
+        let o = Vec3::new(5.0, 2.0, 3.0);
+        let to = Ray::segment(o, (cf - o).normalize(), 0.0, 3.999);
+        assert_eq!(passes(c, r, rho, &to), Some(false));
+        assert_eq!(aim(c, r, rho, &to).map(|a| a.0), Some(0));
+        // Through it, both sides: no.
+        let through = Ray::segment(o, (cf - o).normalize(), 0.0, 8.0);
+        assert_eq!(passes(c, r, rho, &through), None);
+        // Missing it by more than `rho`: no.
+        let off = Ray::new(cf + Vec3::new(0.0, 0.0, 1e-3), Vec3::X);
+        assert_eq!(passes(c, r, rho, &off), None);
+        // Not a ray at all.
+        assert_eq!(passes(c, r, rho, &Ray::new(cf, Vec3::ZERO)), None);
+    }
+
+    #[test]
+    fn the_centre_of_shadow_rays_is_found_among_strays() {
+        let mut rng = Rng::new(11);
+        let light = Vec3::new(2.0, 7.5, -1.0);
+        let rays: Vec<Ray> = (0..4000)
+            .map(|i| {
+                let o = rng.in_box(Vec3::splat(-5.0), Vec3::splat(5.0));
+                if i % 5 == 0 {
+                    Ray::new(o, rng.unit())
+                } else {
+                    let l = light - o;
+                    Ray::segment(o, l / l.length(), 0.0, l.length() * (1.0 - 1e-4))
+                }
+            })
+            .collect();
+        let step = rays.len() / SAMPLE;
+        let sample: Vec<(&Ray, Option<&Ray>)> = (0..rays.len())
+            .step_by(step)
+            .map(|i| (&rays[i], rays.get(i + 1)))
+            .collect();
+        let (c, v) = center(&sample, |c, ray| aim(c, 0.05, 1e-4, ray).is_some()).unwrap();
+        assert!((c - light.as_dvec3()).length() < 1e-4, "{c:?}");
+        assert!(v * 10 >= sample.len() * 7, "{v} of {}", sample.len());
     }
 }
