@@ -175,12 +175,14 @@ impl DynamicLayer {
     }
 
     /// An empty layer sized for `n` moving triangles: the tile count of
-    /// [`PsfParams::for_triangles`], level 1 always. A higher level shortens the walk
-    /// but multiplies the update: on the museum-class scene level 2 made the update
-    /// three times as long (4.6 → 13.9 ms for 16,384 triangles) for no faster tracing.
+    /// [`PsfParams::for_triangles`], level 0 always (four directions). A higher level
+    /// shortens the walk but multiplies the update. Since camera and shadow rays take
+    /// point grids, only the other rays walk this layer: level 0 updated 30–35% faster
+    /// than level 1 on the museum scenes (1k to 100k moving triangles, and with the 1M
+    /// room), for frames within −2% to +4% (`benches/PERF.md`, step 62).
     pub fn for_triangles(n: usize) -> DynamicLayer {
         Self::with_params(PsfParams {
-            level: 1,
+            level: 0,
             ..PsfParams::for_triangles(n)
         })
         .expect("for_triangles gives valid parameters")
