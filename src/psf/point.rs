@@ -8,7 +8,7 @@
 //! of running parallel (the "light buffer" of Haines and Greenberg, 1986, and the
 //! perspective grids of Hunt and Mark, 2008). The grid is built per batch from the
 //! static and the moving triangles together, over the part of the view the batch's rays
-//! use, and only where the batch has more rays than the scene has triangles.
+//! use, and only where the batch has rays enough to pay for the build.
 //!
 //! # Why every hit is found
 //!
@@ -338,12 +338,13 @@ const SPREAD: usize = 8;
 
 impl Plan {
     /// A grid for `rays` over `src` when nine in ten of a sample pass one point and
-    /// the batch has at least as many rays as the scene has triangles (so that building
-    /// the grid pays); `None` otherwise.
+    /// the batch has rays enough to pay for the build (a ray for every twelve triangles
+    /// and cube faces the rays use);
+    /// `None` otherwise.
     pub(crate) fn for_batch(rays: &[Ray], src: &Sources) -> Option<Plan> {
         let ntri = src.len();
         let n = rays.len();
-        if ntri == 0 || n < ntri.max(4 * SAMPLE) || ntri >= u32::MAX as usize {
+        if ntri == 0 || 12 * n < ntri || n < 4 * SAMPLE || ntri >= u32::MAX as usize {
             return None;
         }
         let margin = src.margin as f64;
@@ -413,6 +414,15 @@ impl Plan {
                     (a.0, a.1.max(b.1))
                 },
             );
+        // The build costs about 30 ns a triangle and face used (two threads), a ray
+        // taken off the parallel subfields saves some 0.4–0.6 µs: build for at least a
+        // twelfth as many rays as triangles times faces. A camera's rays use one to
+        // three faces, a light's six: on the 1M-triangle room a camera grid paid and a
+        // light's did not (`benches/PERF.md`, step 64).
+        let faces = bounds.iter().filter(|b| b.4 > 0).count();
+        if 12 * n < ntri * faces {
+            return None;
+        }
         for b in bounds.iter_mut().filter(|b| b.4 > 0) {
             let grow = 0.02 * (b.2 - b.0).max(b.3 - b.1) + 1e-6;
             *b = (b.0 - grow, b.1 - grow, b.2 + grow, b.3 + grow, b.4);
