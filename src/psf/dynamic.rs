@@ -675,8 +675,9 @@ impl Layered<'_> {
     /// [`occluded_batch`](Intersector::occluded_batch) trace `rays` through a point grid
     /// (a grid by central projection around the one point the rays pass through, built
     /// for the batch): when they pass through one point, nine in ten of a sample closely
-    /// enough, and the batch has at least as many rays as the scene has triangles.
-    /// Either way the hits are the same.
+    /// enough, and the batch has rays enough to pay for the build (at least a twelfth as
+    /// many as triangles times the cube faces the rays use). Either way the hits are
+    /// the same.
     pub fn point_grid_for(&self, rays: &[Ray]) -> bool {
         Plan::for_batch(rays, &self.sources()).is_some()
     }
