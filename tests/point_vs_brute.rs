@@ -235,6 +235,6 @@ fn camera_and_light_batches_take_the_point_grid() {
         .map(|_| Ray::new(rng.in_box(LO, HI), rng.unit()))
         .collect();
     assert!(!both.point_grid_for(&scattered));
-    // Fewer rays than triangles: not worth a grid.
+    // Too small a batch (under 256 rays) to pay for a grid.
     assert!(!both.point_grid_for(&rays(&mut rng, 100, c, 0, true, &[])));
 }
