@@ -97,7 +97,14 @@ fn update(frames: usize, dyn_params: &[PsfParams]) {
             peer[0] / ours[0]
         );
     }
-    println!("(ratio: obvhs fastest rebuild time / subfield update time with the parameters the renderer uses, DynamicLayer::for_triangles(n): level 1, 32 tiles at 1k, 64 at 16k, 128 at 100k; > 1 means subfield is faster)");
+    let auto = |n: usize| *DynamicLayer::for_triangles(n).params();
+    println!(
+        "(ratio: obvhs fastest rebuild time / subfield update time with the parameters the renderer uses, DynamicLayer::for_triangles(n): level {}, {} tiles at 1k, {} at 16k, {} at 100k; > 1 means subfield is faster)",
+        auto(1_000).level,
+        auto(1_000).tiles,
+        auto(16_384).tiles,
+        auto(100_000).tiles
+    );
 }
 
 /// Per-frame figures of one side.
@@ -300,7 +307,7 @@ fn main() {
                     tiles: 256,
                 },
                 PsfParams {
-                    level: 0,
+                    level: 1,
                     tiles: 64,
                 },
             ],
@@ -310,7 +317,7 @@ fn main() {
         for p in [
             None,
             Some(PsfParams {
-                level: 0,
+                level: 1,
                 tiles: 64,
             }),
         ] {
