@@ -611,7 +611,10 @@ impl PointGrid {
             .iter()
             .map(|i| (i.i1 - i.i0 + 1) as u64 * (i.j1 - i.j0 + 1) as u64)
             .sum();
-        if listed > 32 * bounds.iter().map(|b| b.4 as u64).sum::<u64>() + 8 * src.len() as u64 {
+        // Entries are counted in u32: a grid of more is not built either.
+        if listed > 32 * bounds.iter().map(|b| b.4 as u64).sum::<u64>() + 8 * src.len() as u64
+            || listed >= u32::MAX as u64
+        {
             return None;
         }
         // Near to far within every tile: write the entries in order of depth. Depths
