@@ -85,6 +85,14 @@ fn rays(
             if rng.below(100) < stray {
                 return Ray::new(p, rng.unit());
             }
+            // Now and then a ray that is no ray (NaN, a zero direction, an empty
+            // interval): no hit, through a grid or not.
+            match rng.below(200) {
+                0 => return Ray::new(Vec3::new(f32::NAN, 0.0, 0.0), rng.unit()),
+                1 => return Ray::new(c, Vec3::ZERO),
+                2 => return Ray::segment(c, p - c, 2.0, 1.0),
+                _ => {}
+            }
             if from {
                 let d = if rng.below(4) == 0 { rng.unit() } else { p - c };
                 match rng.below(3) {
