@@ -726,7 +726,7 @@ impl Intersector for Layered<'_> {
 
     /// Through a point grid when the rays pass through one point (a camera's
     /// primary rays, shadow rays towards a point light) and are many enough; otherwise
-    /// binned by the static PSF's subfield ([`binned`]).
+    /// binned by the static PSF's subfield (`psf::batch`).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         if let Some(g) = Plan::for_batch(rays, &self.sources()) {
             let fallback = |r: &Ray| self.trace::<false, _>(r, None, &mut NoCount);

@@ -337,7 +337,7 @@ impl Intersector for Psf {
     }
 
     /// Through a point grid when the rays pass through one point and are many enough
-    /// ([`Psf::point_grid_for`]); otherwise binned by subfield ([`binned`]).
+    /// ([`Psf::point_grid_for`]); otherwise binned by subfield (`psf::batch`).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         if let Some(g) = Plan::for_batch(rays, &self.point_sources()) {
             let fallback = |r: &Ray| self.trace::<false, _>(r, &mut NoCount);

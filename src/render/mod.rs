@@ -15,7 +15,7 @@
 //! Flow: [`plan`] checks every option against the scene without writing anything
 //! (range, shard, pattern, camera, plot format); [`render_sequence`] then opens or bakes
 //! the static part, checks the output folders are writable, and for each frame poses
-//! the scene, updates the dynamic layer, traces and shades ([`shade`]) in parallel and
+//! the scene, updates the dynamic layer, traces and shades (`render::shade`) in parallel and
 //! hands the finished frame to a writer thread over a channel of capacity 1, so one
 //! frame is written while the next is traced and memory stays flat.
 
