@@ -19,7 +19,7 @@ use rayon::prelude::*;
 
 use super::batch::binned;
 use super::bsp::{Block, LANES, PADDING};
-use super::point::{Plan, Sources};
+use super::point::{trace_batch, Plan, Sources};
 use super::stats::{Counter, NoCount, RayStats};
 use super::traverse::{block_window, clipped_span, scan_blocks, walk_tiles};
 use super::{
@@ -677,7 +677,7 @@ impl Layered<'_> {
     /// for the batch): when they pass through one point, nine in ten of a sample closely
     /// enough, and the batch has rays enough to pay for the build (at least a twelfth as
     /// many as triangles times the cube faces the rays use). Either way the hits are
-    /// the same.
+    /// the same. It builds the grid to find out, as a batch would.
     pub fn point_grid_for(&self, rays: &[Ray]) -> bool {
         Plan::for_batch(rays, &self.sources()).is_some()
     }
@@ -728,9 +728,9 @@ impl Intersector for Layered<'_> {
     /// primary rays, shadow rays towards a point light) and are many enough; otherwise
     /// binned by the static PSF's subfield (`psf::batch`).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
-        if let Some(g) = Plan::for_batch(rays, &self.sources()) {
-            let fallback = |r: &Ray| self.trace::<false, _>(r, None, &mut NoCount);
-            return g.run::<false, _>(rays, out, |h| h, fallback);
+        let fallback = |r: &Ray| self.trace::<false, _>(r, None, &mut NoCount);
+        if trace_batch::<false, _>(rays, out, &self.sources(), |h| h, fallback) {
+            return;
         }
         let bins = self.psf.subfields().len().max(1);
         binned(
@@ -743,9 +743,9 @@ impl Intersector for Layered<'_> {
     }
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
-        if let Some(g) = Plan::for_batch(rays, &self.sources()) {
-            let fallback = |r: &Ray| self.trace::<true, _>(r, None, &mut NoCount).is_some();
-            return g.run::<true, _>(rays, out, |h| h.is_some(), fallback);
+        let fallback = |r: &Ray| self.trace::<true, _>(r, None, &mut NoCount).is_some();
+        if trace_batch::<true, _>(rays, out, &self.sources(), |h| h.is_some(), fallback) {
+            return;
         }
         let bins = self.psf.subfields().len().max(1);
         binned(

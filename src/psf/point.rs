@@ -323,9 +323,8 @@ type Bounds = ([(f64, f64, f64, f64, usize); 6], f64);
 /// they saved; step 57 again with cheaper builds: no gain).
 pub(crate) struct Plan {
     grid: PointGrid,
-    /// The centre, the near cube's half size and how closely a line must pass `c` to
+    /// The near cube's half size and how closely a line must pass the grid's centre to
     /// qualify ([`aim`]).
-    c: DVec3,
     r: f64,
     rho_max: f64,
     /// The greatest squared distance of an origin from `c` the grid allows for.
@@ -335,6 +334,25 @@ pub(crate) struct Plan {
 /// The batch's rays sampled to find the rectangles its rays project into: one in this
 /// many.
 const SPREAD: usize = 8;
+
+/// `out[i] = query(rays[i])` through a point grid when the batch takes one
+/// ([`Plan::for_batch`]), `wrap` turning a grid's answer into `T` and `fallback` answering
+/// the rays the grid does not take; `false` (and nothing written) when it takes none.
+pub(crate) fn trace_batch<const ANY: bool, T: Send>(
+    rays: &[Ray],
+    out: &mut [T],
+    src: &Sources,
+    wrap: impl Fn(Option<Hit>) -> T + Sync,
+    fallback: impl Fn(&Ray) -> T + Sync,
+) -> bool {
+    match Plan::for_batch(rays, src) {
+        Some(plan) => {
+            plan.run::<ANY, T>(rays, out, wrap, fallback);
+            true
+        }
+        None => false,
+    }
+}
 
 impl Plan {
     /// A grid for `rays` over `src` when nine in ten of a sample pass one point and
@@ -431,7 +449,6 @@ impl Plan {
         let grid = PointGrid::build(c, r, rho_max, margin, (bounds, reach2), src)?;
         Some(Plan {
             grid,
-            c,
             r,
             rho_max,
             reach2,
@@ -452,8 +469,9 @@ impl Plan {
             .zip(out.par_chunks_mut(CHUNK))
             .for_each(|(rays, out)| {
                 for (ray, o) in rays.iter().zip(out) {
-                    let tile = aim(self.c, self.r, self.rho_max, ray).and_then(|(f, p)| {
-                        let near = (ray.origin.as_dvec3() - self.c).length_squared() <= self.reach2;
+                    let c = self.grid.c;
+                    let tile = aim(c, self.r, self.rho_max, ray).and_then(|(f, p)| {
+                        let near = (ray.origin.as_dvec3() - c).length_squared() <= self.reach2;
                         let tile = self.grid.faces[f as usize].tile(p);
                         near.then_some(tile).flatten().map(|t| (f as usize, t))
                     });

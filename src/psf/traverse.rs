@@ -8,7 +8,7 @@ use glam::{DVec3, Vec3, Vec4};
 
 use super::batch::binned;
 use super::bsp::{depth_mask, Block, LANES};
-use super::point::{Plan, Sources};
+use super::point::{trace_batch, Plan, Sources};
 use super::stats::{Counter, NoCount, RayStats};
 use super::{GridFrame, Psf};
 use crate::geometry::{
@@ -339,9 +339,9 @@ impl Intersector for Psf {
     /// Through a point grid when the rays pass through one point and are many enough
     /// ([`Psf::point_grid_for`]); otherwise binned by subfield (`psf::batch`).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
-        if let Some(g) = Plan::for_batch(rays, &self.point_sources()) {
-            let fallback = |r: &Ray| self.trace::<false, _>(r, &mut NoCount);
-            return g.run::<false, _>(rays, out, |h| h, fallback);
+        let fallback = |r: &Ray| self.trace::<false, _>(r, &mut NoCount);
+        if trace_batch::<false, _>(rays, out, &self.point_sources(), |h| h, fallback) {
+            return;
         }
         let bins = self.subfields.len().max(1);
         binned(
@@ -354,9 +354,10 @@ impl Intersector for Psf {
     }
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
-        if let Some(g) = Plan::for_batch(rays, &self.point_sources()) {
-            let fallback = |r: &Ray| self.trace::<true, _>(r, &mut NoCount).is_some();
-            return g.run::<true, _>(rays, out, |h| h.is_some(), fallback);
+        let fallback = |r: &Ray| self.trace::<true, _>(r, &mut NoCount).is_some();
+        let sources = self.point_sources();
+        if trace_batch::<true, _>(rays, out, &sources, |h| h.is_some(), fallback) {
+            return;
         }
         let bins = self.subfields.len().max(1);
         binned(
