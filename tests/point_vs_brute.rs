@@ -131,8 +131,10 @@ fn check(k: &Case) -> Result<(), TestCaseError> {
     let brute = BruteForce::new(&all);
     let both = psf.with_dynamic(&layer);
     let n = (4 * all.len()).max(600);
+    let mut batches = Vec::new();
     for from in [true, false] {
         let rs = rays(&mut rng, n, c, k.stray, from, &all);
+        batches.push((from, rs.clone()));
         if k.stray == 0 && !all.is_empty() {
             prop_assert!(
                 both.point_grid_for(&rs),
@@ -188,6 +190,23 @@ fn check(k: &Case) -> Result<(), TestCaseError> {
                 k.seed
             );
         }
+    }
+    // The next frame: the static part of each grid is kept in the PSF (its point is the
+    // same), the moving part built anew over the moved triangles.
+    let moved = scene(&mut rng, k.moving, c);
+    layer.update(&moved).expect("update");
+    let all: Vec<[Vec3; 3]> = stat.iter().chain(&moved).copied().collect();
+    let brute = BruteForce::new(&all);
+    let both = psf.with_dynamic(&layer);
+    for (from, rs) in &batches {
+        let (mut got, mut want) = (vec![None; n], vec![None; n]);
+        both.intersect_batch(rs, &mut got);
+        brute.intersect_batch(rs, &mut want);
+        let (mut og, mut ow) = (vec![false; n], vec![false; n]);
+        both.occluded_batch(rs, &mut og);
+        brute.occluded_batch(rs, &mut ow);
+        prop_assert_eq!(got, want, "next frame, from the point {}, seed {}", from, k.seed);
+        prop_assert_eq!(og, ow, "next frame, from the point {}, seed {}", from, k.seed);
     }
     Ok(())
 }
@@ -245,4 +264,86 @@ fn camera_and_light_batches_take_the_point_grid() {
     assert!(!both.point_grid_for(&scattered));
     // Too small a batch (under 256 rays) to pay for a grid.
     assert!(!both.point_grid_for(&rays(&mut rng, 100, c, 0, true, &[])));
+}
+
+/// Rays from `c` within `spread` of `axis` (a camera's view, wider or narrower).
+fn view(rng: &mut Rng, n: usize, c: Vec3, axis: Vec3, spread: f32) -> Vec<Ray> {
+    (0..n)
+        .map(|_| Ray::new(c, (axis + rng.unit() * spread).normalize()))
+        .collect()
+}
+
+fn assert_agrees(got: &dyn Intersector, want: &dyn Intersector, rs: &[Ray], what: &str) {
+    let n = rs.len();
+    let (mut a, mut b) = (vec![None; n], vec![None; n]);
+    got.intersect_batch(rs, &mut a);
+    want.intersect_batch(rs, &mut b);
+    assert_eq!(a, b, "closest hits differ: {what}");
+    let (mut a, mut b) = (vec![false; n], vec![false; n]);
+    got.occluded_batch(rs, &mut a);
+    want.occluded_batch(rs, &mut b);
+    assert_eq!(a, b, "any hits differ: {what}");
+}
+
+/// A camera that stays put over frames while its view changes: the static grid kept
+/// from the first frame serves the views within it and is built again, wider, for one
+/// beyond it. Every frame agrees with brute force, and takes a grid.
+#[test]
+fn kept_grids_serve_later_frames() {
+    let mut rng = Rng::new(23);
+    let mut stat = synth::box_faces(LO, HI);
+    stat.extend(synth::soup(&mut rng, 3000, LO, HI, 0.3));
+    let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+    let mut layer = DynamicLayer::new(&psf);
+    let c = Vec3::new(4.0, 3.0, 5.0);
+    let light = Vec3::new(2.0, 7.0, 2.0);
+    // Narrow, wider (beyond the kept rectangles), narrow again, another way.
+    let views = [(Vec3::X, 0.3), (Vec3::X, 0.9), (Vec3::X, 0.2), (Vec3::NEG_Z, 0.5)];
+    for (frame, &(axis, spread)) in views.iter().enumerate() {
+        let moving = synth::soup(&mut rng, 100, LO + 1.0, HI - 1.0, 0.6);
+        layer.update(&moving).expect("update");
+        let all: Vec<[Vec3; 3]> = stat.iter().chain(&moving).copied().collect();
+        let brute = BruteForce::new(&all);
+        let both = psf.with_dynamic(&layer);
+        let primary = view(&mut rng, 4000, c, axis, spread);
+        assert!(both.point_grid_for(&primary), "frame {frame}");
+        assert_agrees(&both, &brute, &primary, &format!("camera, frame {frame}"));
+        let shadow: Vec<Ray> = (0..4000)
+            .map(|_| {
+                let o = rng.in_box(LO, HI);
+                let l = light - o;
+                Ray::segment(o, l / l.length(), 1e-3, l.length() * (1.0 - 1e-4))
+            })
+            .collect();
+        assert_agrees(&both, &brute, &shadow, &format!("light, frame {frame}"));
+        assert_agrees(&psf, &BruteForce::new(&stat), &primary, &format!("static, frame {frame}"));
+    }
+}
+
+/// A batch too small to pay for a grid over all the static triangles takes none the
+/// first time; its point seen again, the static grid is built (and kept), and the hits
+/// are brute force's either way.
+#[test]
+fn a_point_seen_again_gets_a_grid() {
+    let mut rng = Rng::new(29);
+    let mut stat = synth::box_faces(LO, HI);
+    stat.extend(synth::soup(&mut rng, 20_000, LO, HI, 0.2));
+    let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+    let brute = BruteForce::new(&stat);
+    let light = Vec3::new(4.0, 4.0, 4.0);
+    // Shadow rays from all around: all six faces, 800 rays for 20,000 triangles.
+    let rs: Vec<Ray> = (0..800)
+        .map(|_| {
+            let o = rng.in_box(LO, HI);
+            let l = light - o;
+            Ray::segment(o, l / l.length(), 0.0, l.length() * (1.0 - 1e-4))
+        })
+        .collect();
+    assert!(!psf.point_grid_for(&rs), "one batch does not pay for the grid");
+    assert!(psf.point_grid_for(&rs), "a point seen again gets a grid");
+    assert_agrees(&psf, &brute, &rs, "the light's kept grid");
+    // Rays that do not pass the light do not take it.
+    let other: Vec<Ray> = rs.iter().map(|r| Ray::new(r.origin, rng.unit())).collect();
+    assert!(!psf.point_grid_for(&other));
+    assert_agrees(&psf, &brute, &other, "rays away from the light");
 }

@@ -673,11 +673,13 @@ impl Layered<'_> {
 
     /// Whether [`intersect_batch`](Intersector::intersect_batch) and
     /// [`occluded_batch`](Intersector::occluded_batch) trace `rays` through a point grid
-    /// (a grid by central projection around the one point the rays pass through, built
-    /// for the batch): when they pass through one point, nine in ten of a sample closely
-    /// enough, and the batch has rays enough to pay for the build (at least a twelfth as
-    /// many as triangles times the cube faces the rays use). Either way the hits are
-    /// the same. It builds the grid to find out, as a batch would.
+    /// (a grid by central projection around the one point the rays pass through): when
+    /// they pass through one point, nine in ten of a sample closely enough, and the batch
+    /// has rays enough to pay for what it must build (at least a twelfth as many as
+    /// triangles times the cube faces the rays use; only the moving triangles count once
+    /// the static PSF keeps a grid around that point, which it does for a point seen in
+    /// an earlier batch). Either way the hits are the same. It builds the grids to find
+    /// out, and keeps and remembers what a batch would.
     pub fn point_grid_for(&self, rays: &[Ray]) -> bool {
         Plan::for_batch(rays, &self.sources()).is_some()
     }
@@ -699,6 +701,7 @@ impl Layered<'_> {
             } else {
                 self.psf.bounds().union(&d.clip)
             },
+            cache: self.psf.point_cache(),
         }
     }
 

@@ -30,6 +30,7 @@ pub use stats::{Histogram, PsfStats, RayStats};
 pub use storage::{Buf, SharedBytes};
 
 use crate::geometry::Aabb;
+use point::PointCache;
 
 /// How a PSF is built. The defaults (level 1, 128 tiles) come from `cargo bench --bench
 /// sweep` on a 100k-triangle room: the best random-ray speed, near-best camera-ray
@@ -141,6 +142,8 @@ pub struct Psf {
     triangles: Buf<[Vec3; 3]>,
     subfields: Vec<Subfield>,
     table: DirectionTable,
+    /// Point grids over `triangles` kept from batch to batch (`point.rs`).
+    points: PointCache,
 }
 
 /// Refuses more triangles than a `u32` can number, and non-finite coordinates (naming
@@ -215,6 +218,7 @@ impl Psf {
             triangles: Buf::Owned(tris.to_vec()),
             subfields,
             table: DirectionTable::new(&dirs),
+            points: PointCache::default(),
         })
     }
 
@@ -373,7 +377,13 @@ impl Psf {
             triangles,
             subfields,
             table: DirectionTable::new(&dirs),
+            points: PointCache::default(),
         })
+    }
+
+    /// The point grids kept for this PSF's triangles.
+    pub(crate) fn point_cache(&self) -> &PointCache {
+        &self.points
     }
 
     pub fn params(&self) -> &PsfParams {

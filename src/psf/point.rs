@@ -6,9 +6,18 @@
 //! visits one tile, whose list is sorted by depth and scanned near to far. This is the
 //! parallel subfield's tile-and-depth scheme with the beams made to meet at `C` instead
 //! of running parallel (the "light buffer" of Haines and Greenberg, 1986, and the
-//! perspective grids of Hunt and Mark, 2008). The grid is built per batch from the
-//! static and the moving triangles together, over the part of the view the batch's rays
-//! use, and only where the batch has rays enough to pay for the build.
+//! perspective grids of Hunt and Mark, 2008). The grids cover the part of the view the
+//! batch's rays use, and are built only where the batch has rays enough to pay for them.
+//!
+//! A camera or a light usually stays put from frame to frame, and the static triangles
+//! do not move: their grid around such a point is kept in the static PSF ([`PointCache`])
+//! and each batch builds a grid over the moving triangles only; a ray scans its tile in
+//! both, the two lists merged by depth. Where the static triangles are few beside the
+//! batch's rays the second tile costs more than the build saves, and the batch builds one
+//! grid over all the triangles instead ([`SPLIT`]). Every grid lists its triangles by the
+//! rules below, whatever batch it was built for, and a kept grid serves a batch only
+//! with its own point and numbers (the rays qualify by them) and only where its margin
+//! covers the batch's: so the hits do not depend on which grids were kept.
 //!
 //! # Why every hit is found
 //!
@@ -39,6 +48,9 @@
 //! parallel subfields, so hits (and ties) are those of brute force. Rays that do not
 //! qualify take the parallel subfields.
 
+use std::borrow::Cow;
+use std::sync::{Arc, Mutex};
+
 use glam::{DMat3, DVec3, Vec3};
 use rayon::prelude::*;
 
@@ -47,6 +59,10 @@ use crate::geometry::{intersect_pre, Aabb, Hit, Ray, RayPre, TriPre};
 /// Rays per tile the grid aims at: smaller tiles shorten the lists a ray scans and
 /// lengthen the build (a large triangle is listed in more tiles).
 const RAYS_PER_TILE: usize = 16;
+
+/// A kept static grid has at least a tile for this many of its triangles (and
+/// faces), however few rays built it: its build is paid once.
+const TRIS_PER_TILE: usize = 4;
 
 /// Rays sampled to find the centre and to judge whether enough rays pass through it.
 const SAMPLE: usize = 64;
@@ -105,7 +121,8 @@ struct Item {
 const NEAR: u8 = 6;
 
 /// The triangles a point grid is built over: the static PSF's, then the dynamic layer's
-/// in its own (Morton) order, and the hit number each one reports.
+/// in its own (Morton) order, and the hit number each one reports; and the static
+/// PSF's cache of grids.
 pub(crate) struct Sources<'a> {
     pub statics: &'a [[Vec3; 3]],
     pub moving: &'a [[Vec3; 3]],
@@ -116,36 +133,97 @@ pub(crate) struct Sources<'a> {
     pub margin: f32,
     /// Bounds of both layers' triangles.
     pub bounds: Aabb,
+    /// The static PSF's grids over `statics`, kept from batch to batch.
+    pub cache: &'a PointCache,
 }
 
-impl Sources<'_> {
-    fn len(&self) -> usize {
-        self.statics.len() + self.moving.len()
-    }
+/// Grids over a PSF's static triangles kept from batch to batch, so that a camera or a
+/// light that stays put has the static part of its grid built once; a batch then builds
+/// a grid over the moving triangles only and scans both. At most [`KEPT`] grids, the
+/// least recently used dropped first, and one copy of the static triangles in the
+/// test's form (48 bytes a triangle), made with the first grid.
+#[derive(Default)]
+pub(crate) struct PointCache {
+    state: Mutex<CacheState>,
+}
 
-    fn tri(&self, g: usize) -> &[Vec3; 3] {
-        if g < self.statics.len() {
-            &self.statics[g]
-        } else {
-            &self.moving[g - self.statics.len()]
-        }
+/// Static grids kept at most.
+const KEPT: usize = 8;
+
+/// A static part that one batch does not pay for is built for a point seen before
+/// only when this many batches would pay for it: a point seen twice and never again
+/// costs at most this many batches' worth.
+const REUSE: usize = 16;
+
+#[derive(Default)]
+struct CacheState {
+    pre: Option<Arc<[TriPre]>>,
+    /// Grids with the stamp of their last use.
+    grids: Vec<(u64, Arc<StaticGrid>)>,
+    stamp: u64,
+    /// Points of recent batches that took no grid: a batch through one of them again
+    /// predicts more, so its static part is built even when one batch would not pay.
+    seen: Vec<Around>,
+}
+
+impl std::fmt::Debug for PointCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let grids = self.state.lock().map_or(0, |s| s.grids.len());
+        f.debug_struct("PointCache").field("grids", &grids).finish()
     }
 }
 
-/// A grid around one point, for one batch.
-pub(crate) struct PointGrid {
+impl PointCache {
+    fn lock(&self) -> std::sync::MutexGuard<'_, CacheState> {
+        // A panic elsewhere while the lock was held leaves a consistent state: every
+        // change below is a single push, removal or assignment.
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// A grid's point and the numbers fixed with it: the near cube's half size `r`, how
+/// closely a line must pass `c` to qualify (`rho_max`), the furthest squared distance
+/// of a ray's origin from `c` allowed for (`reach2`), and the rounding margin.
+#[derive(Clone, Copy, Debug)]
+struct Around {
     c: DVec3,
-    /// How far a hit's depth may lie outside its entry's range, and the margin of the
-    /// early exit.
-    depth_margin: f64,
+    r: f64,
+    rho_max: f64,
+    reach2: f64,
+    margin: f64,
+}
+
+impl Around {
+    /// How far a ray's computed hit may lie from its entry: the rounding margin the
+    /// triangles are grown by, `rho_max`, and 1e-6 of the furthest a ray's origin or the
+    /// scene reaches from `c`, for the candidate test's own rounding (it works relative
+    /// to the ray's origin).
+    fn allowance(&self) -> f64 {
+        self.margin + self.rho_max + 1e-6 * (self.reach2.sqrt() + self.margin * 1e5)
+    }
+
+    /// The ray's face and projected point when it qualifies ([`aim`]).
+    #[inline]
+    fn aim(&self, ray: &Ray) -> Option<(u8, [f32; 2])> {
+        aim(self.c, self.r, self.rho_max, ray)
+    }
+}
+
+/// A grid over the static triangles, the point it was built around and the rectangles
+/// of its faces.
+struct StaticGrid {
+    at: Around,
+    rects: Rects,
+    grid: PointGrid,
+}
+
+/// A grid around one point over one set of triangles, numbered `0..n` in that set.
+pub(crate) struct PointGrid {
     faces: [Face; 6],
     starts: Vec<u32>,
     entries: Vec<PEntry>,
     near: Vec<u32>,
-    tris: Vec<TriPre>,
-    number: Vec<u32>,
 }
-
 /// `x` rounded to an `f32` no greater than it.
 #[inline]
 fn down(x: f64) -> f32 {
@@ -309,27 +387,73 @@ fn center(
     }
     Some((c, v))
 }
-
 /// Per cube face, the rectangle its rays' points span (`u0, v0, u1, v1`) and their
-/// number; and the greatest squared distance of a ray's origin from the centre.
-type Bounds = ([(f64, f64, f64, f64, usize); 6], f64);
+/// number.
+type Rects = [(f64, f64, f64, f64, usize); 6];
 
-/// A batch traced through a point grid: the grid, and what a ray must satisfy to take
-/// it.
+const NO_RECT: (f64, f64, f64, f64, usize) = (
+    f64::INFINITY,
+    f64::INFINITY,
+    f64::NEG_INFINITY,
+    f64::NEG_INFINITY,
+    0,
+);
+
+/// The rectangles grown by a fiftieth of their size.
+fn grown(mut rects: Rects) -> Rects {
+    for b in rects.iter_mut().filter(|b| b.4 > 0) {
+        let grow = 0.02 * (b.2 - b.0).max(b.3 - b.1) + 1e-6;
+        *b = (b.0 - grow, b.1 - grow, b.2 + grow, b.3 + grow, b.4);
+    }
+    rects
+}
+
+/// The static triangles in the test's form, made once and kept in the cache.
+fn static_pre(src: &Sources) -> Arc<[TriPre]> {
+    if let Some(p) = &src.cache.lock().pre {
+        if p.len() == src.statics.len() {
+            return p.clone();
+        }
+    }
+    let p: Arc<[TriPre]> = src.statics.par_iter().map(TriPre::new).collect();
+    src.cache.lock().pre = Some(p.clone());
+    p
+}
+
+/// A batch traced through point grids around one point: the static triangles' (kept
+/// in the cache) and, where the scene has moving triangles, theirs (built for the
+/// batch).
 ///
-/// One grid a batch: a camera's rays, or the shadow rays towards one light. Reflections
+/// One point a batch: a camera's rays, or the shadow rays towards one light. Reflections
 /// off planes pass the camera's mirror images, a point per plane, and grids for the
 /// largest such groups were tried (`benches/PERF.md`, step 54: building them cost what
 /// they saved; step 57 again with cheaper builds: no gain).
-pub(crate) struct Plan {
-    grid: PointGrid,
-    /// The near cube's half size and how closely a line must pass the grid's centre to
-    /// qualify ([`aim`]).
-    r: f64,
-    rho_max: f64,
-    /// The greatest squared distance of an origin from `c` the grid allows for.
-    reach2: f64,
+pub(crate) struct Plan<'a> {
+    at: Around,
+    /// The static triangles' grid, when kept apart from the batch's.
+    fixed: Option<Arc<StaticGrid>>,
+    pre: Arc<[TriPre]>,
+    /// The grid built for the batch: over the moving triangles beside `fixed`, over
+    /// all of them without it.
+    batch: Option<BatchGrid<'a>>,
+    /// How far a hit's depth may lie outside its entry's range, and the margin of the
+    /// early exit.
+    depth_margin: f64,
 }
+
+/// A grid built for one batch, its triangles in the test's form and their hit numbers.
+struct BatchGrid<'a> {
+    grid: PointGrid,
+    tris: Cow<'a, [TriPre]>,
+    number: Vec<u32>,
+}
+
+/// Two grids (the static part kept, the moving part built) cost each ray a second
+/// tile and a merged scan; one grid over all triangles costs building the static part
+/// again. The static part is kept apart when it has at least a sixth as many
+/// triangles times faces as the batch has rays, or the scene has nothing moving
+/// (`benches/PERF.md`, step 68).
+const SPLIT: usize = 6;
 
 /// The batch's rays sampled to find the rectangles its rays project into: one in this
 /// many.
@@ -354,108 +478,264 @@ pub(crate) fn trace_batch<const ANY: bool, T: Send>(
     }
 }
 
-impl Plan {
-    /// A grid for `rays` over `src` when nine in ten of a sample pass one point and
-    /// the batch has rays enough to pay for the build (a ray for every twelve triangles
-    /// and cube faces the rays use);
-    /// `None` otherwise.
-    pub(crate) fn for_batch(rays: &[Ray], src: &Sources) -> Option<Plan> {
-        let ntri = src.len();
+/// Per face, the rectangle that every `SPREAD`th qualifying ray of `rays` projects
+/// into, and their number; and the greatest squared distance of their origins from
+/// `at.c`.
+fn spread(rays: &[Ray], at: &Around) -> (Rects, f64) {
+    let n = rays.len();
+    let empty: (Rects, f64) = ([NO_RECT; 6], 0.0);
+    (0..n.div_ceil(SPREAD * CHUNK))
+        .into_par_iter()
+        .map(|k| {
+            let mut b = empty;
+            let end = ((k + 1) * SPREAD * CHUNK).min(n);
+            for ray in rays[k * SPREAD * CHUNK..end].iter().step_by(SPREAD) {
+                if let Some((f, q)) = at.aim(ray) {
+                    let (pu, pv) = (q[0] as f64, q[1] as f64);
+                    let e = &mut b.0[f as usize];
+                    *e = (
+                        e.0.min(pu),
+                        e.1.min(pv),
+                        e.2.max(pu),
+                        e.3.max(pv),
+                        e.4 + SPREAD,
+                    );
+                    b.1 = b.1.max((ray.origin.as_dvec3() - at.c).length_squared());
+                }
+            }
+            b
+        })
+        .reduce(
+            || empty,
+            |mut a, b| {
+                for (x, y) in a.0.iter_mut().zip(b.0) {
+                    *x = union(*x, y);
+                }
+                (a.0, a.1.max(b.1))
+            },
+        )
+}
+
+fn union(
+    x: (f64, f64, f64, f64, usize),
+    y: (f64, f64, f64, f64, usize),
+) -> (f64, f64, f64, f64, usize) {
+    (
+        x.0.min(y.0),
+        x.1.min(y.1),
+        x.2.max(y.2),
+        x.3.max(y.3),
+        x.4 + y.4,
+    )
+}
+
+impl<'a> Plan<'a> {
+    /// Grids for `rays` over `src` when nine in ten of a sample pass one point and the
+    /// batch has rays enough to pay for what must be built; `None` otherwise.
+    ///
+    /// The build costs about 30 ns a triangle and cube face used (two threads), a ray
+    /// taken off the parallel subfields saves some 0.4–0.6 µs: a batch pays for a grid
+    /// over at least a twelfth as many rays as triangles times faces. A camera's rays
+    /// use one to three faces, a light's six (`benches/PERF.md`, step 64). The static
+    /// part is built when the batch pays for all of it, or when its point was seen in a
+    /// recent batch (a camera or light that stays put); once kept, a batch pays only for
+    /// the moving triangles' grid.
+    pub(crate) fn for_batch(rays: &[Ray], src: &'a Sources<'a>) -> Option<Plan<'a>> {
+        let ntri = src.statics.len() + src.moving.len();
         let n = rays.len();
-        if ntri == 0 || 12 * n < ntri || n < 4 * SAMPLE || ntri >= u32::MAX as usize {
+        if ntri == 0 || n < 4 * SAMPLE || ntri >= u32::MAX as usize {
             return None;
         }
         let margin = src.margin as f64;
-        // `margin` is 1e-5 of the scene's scale (`margin_for`); the near cube is a
-        // 256th of it, so its list is short and `eps` stays small beyond it.
-        let r = margin * 1e5 / 256.0;
-        // How closely a line must pass the centre: a ray aimed at it from `o` misses it
-        // by the rounding of its direction, some 1e-7 of the distance; allow a hundred
-        // times that for a point as far from the scene as it is.
-        let middle = src.bounds.center().as_dvec3();
-        let rho_of = |c: DVec3| margin.max(1e-5 * ((c - middle).length() + margin * 1e5));
         let valid = |i: usize| rays[i].is_valid();
         let sample: Vec<(&Ray, Option<&Ray>)> = (0..n)
             .step_by((n / SAMPLE).max(1))
             .filter(|&i| valid(i))
             .map(|i| (&rays[i], (i + 1 < n && valid(i + 1)).then(|| &rays[i + 1])))
             .collect();
-        let (c, v) = center(&sample, |c, ray| aim(c, r, rho_of(c), ray).is_some())?;
-        if v * 10 < sample.len() * 9 {
+        if sample.is_empty() {
             return None;
         }
-        let rho_max = rho_of(c);
-        // Per face, the rectangle that every `SPREAD`th ray projects into, grown by a
-        // fiftieth, and their number; and the furthest origin from `c`, with half again
-        // to spare. A ray outside these takes the parallel subfields.
-        let none = (
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-            0,
-        );
-        let empty: Bounds = ([none; 6], 0.0);
-        let (mut bounds, reach2) = (0..n.div_ceil(SPREAD * CHUNK))
-            .into_par_iter()
-            .map(|k| {
-                let mut b = empty;
-                let end = ((k + 1) * SPREAD * CHUNK).min(n);
-                for ray in rays[k * SPREAD * CHUNK..end].iter().step_by(SPREAD) {
-                    if let Some((f, q)) = aim(c, r, rho_max, ray) {
-                        let (pu, pv) = (q[0] as f64, q[1] as f64);
-                        let e = &mut b.0[f as usize];
-                        *e = (
-                            e.0.min(pu),
-                            e.1.min(pv),
-                            e.2.max(pu),
-                            e.3.max(pv),
-                            e.4 + SPREAD,
-                        );
-                        b.1 = b.1.max((ray.origin.as_dvec3() - c).length_squared());
+        let most = |v: usize| v * 10 >= sample.len() * 9;
+        let passes_at = |at: &Around| most(sample.iter().filter(|r| at.aim(r.0).is_some()).count());
+
+        // A kept grid whose point the batch passes, its margin no less than the queries'.
+        let (kept, seen) = {
+            let mut st = src.cache.lock();
+            st.stamp += 1;
+            let stamp = st.stamp;
+            let mut kept = None;
+            for (used, g) in st.grids.iter_mut().rev() {
+                if g.at.margin >= margin && passes_at(&g.at) {
+                    *used = stamp;
+                    kept = Some(g.clone());
+                    break;
+                }
+            }
+            let seen = kept.is_none()
+                && st
+                    .seen
+                    .iter()
+                    .any(|at| at.margin >= margin && passes_at(at));
+            (kept, seen)
+        };
+
+        let at = match &kept {
+            Some(g) => g.at,
+            None => {
+                // `margin` is 1e-5 of the scene's scale (`margin_for`); the near cube is
+                // a 256th of it, so its list is short and `eps` stays small beyond it.
+                let r = margin * 1e5 / 256.0;
+                // How closely a line must pass the centre: a ray aimed at it from `o`
+                // misses it by the rounding of its direction, some 1e-7 of the
+                // distance; allow a hundred times that for a point as far from the
+                // scene as it is.
+                let middle = src.bounds.center().as_dvec3();
+                let rho_of = |c: DVec3| margin.max(1e-5 * ((c - middle).length() + margin * 1e5));
+                let (c, v) = center(&sample, |c, ray| aim(c, r, rho_of(c), ray).is_some())?;
+                if !most(v) {
+                    return None;
+                }
+                Around {
+                    c,
+                    r,
+                    rho_max: rho_of(c),
+                    reach2: 0.0,
+                    margin,
+                }
+            }
+        };
+        let (rects, far2) = spread(rays, &at);
+        let faces = rects.iter().filter(|b| b.4 > 0).count();
+        let nmov = src.moving.len();
+        // The kept grid serves when the batch's rectangles and origins lie within its
+        // own; otherwise it is built again over both.
+        let fits = kept.as_ref().is_some_and(|g| {
+            far2 <= g.at.reach2
+                && rects.iter().zip(&g.rects).all(|(a, b)| {
+                    a.4 == 0 || (b.4 > 0 && a.0 >= b.0 && a.1 >= b.1 && a.2 <= b.2 && a.3 <= b.3)
+                })
+        });
+        let nstat = src.statics.len();
+        if nmov > 0 && SPLIT * nstat * faces < n {
+            // One grid over all triangles, as the batch alone pays for.
+            if 12 * n < ntri * faces {
+                return None;
+            }
+            let mut at = at;
+            at.reach2 = 2.25 * far2 + margin * margin;
+            let pre = static_pre(src);
+            let grid = PointGrid::build(
+                &at,
+                &grown(rects),
+                ntri,
+                |g| {
+                    if g < nstat {
+                        src.statics[g]
+                    } else {
+                        src.moving[g - nstat]
+                    }
+                },
+                0,
+            )?;
+            let mut tris = Vec::with_capacity(ntri);
+            tris.extend_from_slice(&pre);
+            tris.extend_from_slice(src.moving_pre);
+            let number = (0..nstat as u32)
+                .chain(src.moving_number.iter().map(|&k| nstat as u32 + k))
+                .collect();
+            return Some(Plan {
+                at,
+                fixed: None,
+                pre,
+                batch: Some(BatchGrid {
+                    grid,
+                    tris: Cow::Owned(tris),
+                    number,
+                }),
+                depth_margin: 2.0 * at.allowance(),
+            });
+        }
+        let fixed = if fits {
+            if 12 * n < nmov * faces {
+                return None;
+            }
+            kept?
+        } else {
+            let again = (kept.is_some() || seen)
+                && 12 * n >= nmov * faces
+                && 12 * n * REUSE >= ntri * faces;
+            if 12 * n < ntri * faces && !again {
+                let mut st = src.cache.lock();
+                st.seen.retain(|s| s.c != at.c);
+                st.seen.push(at);
+                if st.seen.len() > KEPT {
+                    st.seen.remove(0);
+                }
+                return None;
+            }
+            // The furthest origin from `c` with half again to spare, and the rectangles
+            // grown by a fiftieth: a ray outside these takes the parallel subfields.
+            let (mut at, mut all) = (at, grown(rects));
+            at.reach2 = 2.25 * far2 + margin * margin;
+            if let Some(g) = &kept {
+                at.reach2 = at.reach2.max(g.at.reach2);
+                for (a, b) in all.iter_mut().zip(&g.rects) {
+                    if b.4 > 0 {
+                        *a = if a.4 > 0 { union(*a, *b) } else { *b };
                     }
                 }
-                b
+            }
+            let faces = all.iter().filter(|b| b.4 > 0).count().max(1);
+            let min_tiles = nstat / (TRIS_PER_TILE * faces);
+            let grid = PointGrid::build(&at, &all, nstat, |g| src.statics[g], min_tiles)?;
+            let fresh = Arc::new(StaticGrid {
+                at,
+                rects: all,
+                grid,
+            });
+            let mut st = src.cache.lock();
+            st.stamp += 1;
+            let stamp = st.stamp;
+            st.seen.retain(|s| (s.c - at.c).length() > at.r);
+            if let Some(g) = &kept {
+                st.grids.retain(|(_, x)| !Arc::ptr_eq(x, g));
+            }
+            st.grids.push((stamp, fresh.clone()));
+            if st.grids.len() > KEPT {
+                let oldest = (0..st.grids.len())
+                    .min_by_key(|&i| st.grids[i].0)
+                    .unwrap_or(0);
+                st.grids.remove(oldest);
+            }
+            fresh
+        };
+        let pre = static_pre(src);
+        let at = fixed.at;
+        let batch = if nmov == 0 {
+            None
+        } else {
+            let grid = PointGrid::build(&at, &grown(rects), nmov, |g| src.moving[g], 0)?;
+            Some(BatchGrid {
+                grid,
+                tris: Cow::Borrowed(src.moving_pre),
+                number: src
+                    .moving_number
+                    .iter()
+                    .map(|&k| nstat as u32 + k)
+                    .collect(),
             })
-            .reduce(
-                || empty,
-                |mut a, b| {
-                    for (x, y) in a.0.iter_mut().zip(b.0) {
-                        *x = (
-                            x.0.min(y.0),
-                            x.1.min(y.1),
-                            x.2.max(y.2),
-                            x.3.max(y.3),
-                            x.4 + y.4,
-                        );
-                    }
-                    (a.0, a.1.max(b.1))
-                },
-            );
-        // The build costs about 30 ns a triangle and face used (two threads), a ray
-        // taken off the parallel subfields saves some 0.4–0.6 µs: build for at least a
-        // twelfth as many rays as triangles times faces. A camera's rays use one to
-        // three faces, a light's six: on the 1M-triangle room a camera grid paid and a
-        // light's did not (`benches/PERF.md`, step 64).
-        let faces = bounds.iter().filter(|b| b.4 > 0).count();
-        if 12 * n < ntri * faces {
-            return None;
-        }
-        for b in bounds.iter_mut().filter(|b| b.4 > 0) {
-            let grow = 0.02 * (b.2 - b.0).max(b.3 - b.1) + 1e-6;
-            *b = (b.0 - grow, b.1 - grow, b.2 + grow, b.3 + grow, b.4);
-        }
-        let reach2 = 2.25 * reach2 + margin * margin;
-        let grid = PointGrid::build(c, r, rho_max, margin, (bounds, reach2), src)?;
+        };
         Some(Plan {
-            grid,
-            r,
-            rho_max,
-            reach2,
+            at,
+            fixed: Some(fixed),
+            pre,
+            batch,
+            depth_margin: 2.0 * at.allowance(),
         })
     }
 
-    /// `out[i] = query(rays[i])`: through the grid where the ray passes its centre, by
+    /// `out[i] = query(rays[i])`: through the grids where the ray passes their point, by
     /// `fallback` elsewhere.
     pub(crate) fn run<const ANY: bool, T: Send>(
         &self,
@@ -465,49 +745,249 @@ impl Plan {
         fallback: impl Fn(&Ray) -> T + Sync,
     ) {
         assert_eq!(rays.len(), out.len(), "one output slot per ray");
+        // One loop for each arrangement of grids, so that none pays for the others'
+        // branches.
+        let stat = |pre: &RayPre, g: u32, ray: &Ray, best: &Option<Hit>| {
+            self.test_static(pre, g, ray, best)
+        };
+        match (&self.fixed, &self.batch) {
+            (Some(s), None) => self.each(rays, out, &fallback, &|ray, f, p| {
+                let t = s.grid.faces[f].tile(p)?;
+                Some(wrap(self.trace_one::<ANY>(ray, f, &s.grid, t, stat)))
+            }),
+            (None, Some(m)) => self.each(rays, out, &fallback, &|ray, f, p| {
+                let t = m.grid.faces[f].tile(p)?;
+                let test = |pre: &RayPre, g: u32, ray: &Ray, best: &Option<Hit>| {
+                    Self::test_batch(m, pre, g, ray, best)
+                };
+                Some(wrap(self.trace_one::<ANY>(ray, f, &m.grid, t, test)))
+            }),
+            (Some(s), Some(m)) => self.each(rays, out, &fallback, &|ray, f, p| {
+                let a = s.grid.faces[f].tile(p)?;
+                let b = m.grid.faces[f].tile(p)?;
+                Some(wrap(self.trace_two::<ANY>(ray, f, s, a, m, b)))
+            }),
+            (None, None) => self.each(rays, out, &fallback, &|_, _, _| None),
+        }
+    }
+
+    /// `out[i]` = `query(ray, face, point)` for the rays that qualify, `fallback(ray)`
+    /// for the others and where `query` says `None`.
+    fn each<T: Send>(
+        &self,
+        rays: &[Ray],
+        out: &mut [T],
+        fallback: &(impl Fn(&Ray) -> T + Sync),
+        query: &(impl Fn(&Ray, usize, [f32; 2]) -> Option<T> + Sync + ?Sized),
+    ) {
         rays.par_chunks(CHUNK)
             .zip(out.par_chunks_mut(CHUNK))
             .for_each(|(rays, out)| {
                 for (ray, o) in rays.iter().zip(out) {
-                    let c = self.grid.c;
-                    let tile = aim(c, self.r, self.rho_max, ray).and_then(|(f, p)| {
-                        let near = (ray.origin.as_dvec3() - c).length_squared() <= self.reach2;
-                        let tile = self.grid.faces[f as usize].tile(p);
-                        near.then_some(tile).flatten().map(|t| (f as usize, t))
+                    let got = self.at.aim(ray).and_then(|(f, p)| {
+                        let near =
+                            (ray.origin.as_dvec3() - self.at.c).length_squared() <= self.at.reach2;
+                        near.then(|| query(ray, f as usize, p)).flatten()
                     });
-                    *o = match tile {
-                        Some((f, t)) => wrap(self.grid.trace::<ANY>(ray, f, t)),
-                        None => fallback(ray),
-                    };
+                    *o = got.unwrap_or_else(|| fallback(ray));
                 }
             });
+    }
+
+    /// Static triangle `g`'s hit, if closer than `best`.
+    #[inline]
+    fn test_static(&self, pre: &RayPre, g: u32, ray: &Ray, best: &Option<Hit>) -> Option<Hit> {
+        let t_max = best.map_or(ray.t_max, |b| b.t);
+        intersect_pre(pre, &self.pre[g as usize], ray.t_min, t_max).map(|(t, u, v)| Hit {
+            t,
+            tri: g,
+            u,
+            v,
+        })
+    }
+
+    /// The hit of triangle `g` of the batch's grid, if closer than `best`.
+    #[inline]
+    fn test_batch(
+        m: &BatchGrid,
+        pre: &RayPre,
+        g: u32,
+        ray: &Ray,
+        best: &Option<Hit>,
+    ) -> Option<Hit> {
+        let t_max = best.map_or(ray.t_max, |b| b.t);
+        intersect_pre(pre, &m.tris[g as usize], ray.t_min, t_max).map(|(t, u, v)| Hit {
+            t,
+            tri: m.number[g as usize],
+            u,
+            v,
+        })
+    }
+
+    /// The depth window of a ray on face `f` up to `t_far`, as a function of `t_far`, and
+    /// the margin in `t` of the early exit.
+    #[inline]
+    fn window(&self, ray: &Ray, f: usize) -> (impl Fn(f64) -> (f32, f32), f64) {
+        let o = ray.origin.as_dvec3();
+        let d = ray.dir.as_dvec3();
+        let (_, _, z0) = face_coords(f, o - self.at.c);
+        let (_, _, dz) = face_coords(f, d);
+        // How far (in t) a computed hit may sit from where the line truly meets its
+        // triangle, as in the parallel subfields' early exit.
+        let m = self.depth_margin;
+        let t_min = ray.t_min as f64;
+        let window = move |t_far: f64| {
+            let (za, zb) = (z0 + t_min * dz, z0 + t_far * dz);
+            (down(za.min(zb) - m), up(za.max(zb) + m))
+        };
+        (window, m / d.length())
+    }
+
+    /// The ray's hit among `grid`'s near list and tile `tile` (tested by `test`),
+    /// scanned near to far.
+    #[inline]
+    fn trace_one<const ANY: bool>(
+        &self,
+        ray: &Ray,
+        f: usize,
+        grid: &PointGrid,
+        tile: usize,
+        test: impl Fn(&RayPre, u32, &Ray, &Option<Hit>) -> Option<Hit>,
+    ) -> Option<Hit> {
+        let pre = RayPre::new(ray.origin, ray.dir);
+        let mut best: Option<Hit> = None;
+        for &g in &grid.near {
+            if let Some(hit) = test(&pre, g, ray, &best) {
+                if ANY {
+                    return Some(hit);
+                }
+                if best.is_none_or(|b| hit.is_closer_than(&b)) {
+                    best = Some(hit);
+                }
+            }
+        }
+        let (window, slack) = self.window(ray, f);
+        let (mut lo, mut hi) = window(best.map_or(ray.t_max as f64, |b| b.t as f64 + slack));
+        for e in grid.run(tile) {
+            if e.zmin > hi {
+                break;
+            }
+            if e.zmax < lo {
+                continue;
+            }
+            if let Some(hit) = test(&pre, e.tri, ray, &best) {
+                if ANY {
+                    return Some(hit);
+                }
+                if best.is_none_or(|b| hit.is_closer_than(&b)) {
+                    best = Some(hit);
+                    (lo, hi) = window(hit.t as f64 + slack);
+                }
+            }
+        }
+        best
+    }
+
+    /// The ray's hit among the near lists and tile `a` of the static grid and `b` of
+    /// the batch's, the two tiles' lists merged by depth and scanned near to far: the
+    /// scan stops at the first entry beyond the window, whichever list it is in.
+    fn trace_two<const ANY: bool>(
+        &self,
+        ray: &Ray,
+        f: usize,
+        s: &StaticGrid,
+        a: usize,
+        m: &BatchGrid,
+        b: usize,
+    ) -> Option<Hit> {
+        let pre = RayPre::new(ray.origin, ray.dir);
+        let mut best: Option<Hit> = None;
+        let near = s.grid.near.iter().map(|&g| (true, g));
+        for (stat, g) in near.chain(m.grid.near.iter().map(|&g| (false, g))) {
+            let hit = if stat {
+                self.test_static(&pre, g, ray, &best)
+            } else {
+                Self::test_batch(m, &pre, g, ray, &best)
+            };
+            if let Some(hit) = hit {
+                if ANY {
+                    return Some(hit);
+                }
+                if best.is_none_or(|b| hit.is_closer_than(&b)) {
+                    best = Some(hit);
+                }
+            }
+        }
+        let (window, slack) = self.window(ray, f);
+        let (mut lo, mut hi) = window(best.map_or(ray.t_max as f64, |b| b.t as f64 + slack));
+        let (ra, rb) = (s.grid.run(a), m.grid.run(b));
+        let (mut i, mut j) = (0, 0);
+        loop {
+            let from_a = match (ra.get(i), rb.get(j)) {
+                (Some(x), Some(y)) => x.zmin <= y.zmin,
+                (Some(_), None) => true,
+                (None, Some(_)) => false,
+                (None, None) => break,
+            };
+            let e = if from_a {
+                i += 1;
+                &ra[i - 1]
+            } else {
+                j += 1;
+                &rb[j - 1]
+            };
+            if e.zmin > hi {
+                break;
+            }
+            if e.zmax < lo {
+                continue;
+            }
+            let hit = if from_a {
+                self.test_static(&pre, e.tri, ray, &best)
+            } else {
+                Self::test_batch(m, &pre, e.tri, ray, &best)
+            };
+            if let Some(hit) = hit {
+                if ANY {
+                    return Some(hit);
+                }
+                if best.is_none_or(|b| hit.is_closer_than(&b)) {
+                    best = Some(hit);
+                    (lo, hi) = window(hit.t as f64 + slack);
+                }
+            }
+        }
+        best
     }
 }
 
 impl PointGrid {
-    /// The grid around `c` for rays that pass it and project into `bounds`; `None`
-    /// when it would list too many entries.
+    /// Tile `t`'s entries, near to far.
+    #[inline]
+    fn run(&self, t: usize) -> &[PEntry] {
+        &self.entries[self.starts[t] as usize..self.starts[t + 1] as usize]
+    }
+
+    /// The grid around `at.c` over `count` triangles (`tri(g)`, numbered `g`) for rays
+    /// that qualify by `at` and project into `rects`; `None` when it would list too
+    /// many entries.
     fn build(
-        c: DVec3,
-        r: f64,
-        rho_max: f64,
-        margin: f64,
-        (bounds, reach2): Bounds,
-        src: &Sources,
+        at: &Around,
+        rects: &Rects,
+        count: usize,
+        tri: impl Fn(usize) -> [Vec3; 3] + Sync,
+        min_tiles: usize,
     ) -> Option<PointGrid> {
-        // The candidate test works relative to the ray's origin, so its rounding grows
-        // with the distance from the origin to the triangle (at most `reach` plus the
-        // scene's size, which `margin` is 1e-5 of): allow for 1e-6 of that, in the
-        // projection as in the depths.
-        let allowance = margin + rho_max + 1e-6 * (reach2.sqrt() + margin * 1e5);
+        let (c, r) = (at.c, at.r);
+        let allowance = at.allowance();
         let mut faces = [Face::default(); 6];
         let mut total = 0;
-        for (face, &(u0, v0, u1, v1, n)) in faces.iter_mut().zip(&bounds) {
+        for (face, &(u0, v0, u1, v1, n)) in faces.iter_mut().zip(rects) {
             if n == 0 {
                 continue;
             }
             let (w, h) = (u1 - u0, v1 - v0);
-            let tiles = (n / RAYS_PER_TILE).max(1) as f64;
+            let tiles = (n / RAYS_PER_TILE).max(min_tiles).max(1) as f64;
             let side = (w * h / tiles).sqrt().max(w.max(h) / 4096.0).max(1e-12);
             let (nu, nv) = (
                 ((w / side).ceil() as usize).clamp(1, 4096),
@@ -528,7 +1008,7 @@ impl PointGrid {
         let h = 0.5 * r;
         let items_of = |g: usize| {
             let mut out = [None; 6];
-            let q = src.tri(g).map(|v| v.as_dvec3() - c);
+            let q = tri(g).map(|v| v.as_dvec3() - c);
             let lo = q[0].min(q[1]).min(q[2]);
             let hi = q[0].max(q[1]).max(q[2]);
             if lo.cmple(DVec3::splat(r)).all() && hi.cmpge(DVec3::splat(-r)).all() {
@@ -607,10 +1087,10 @@ impl PointGrid {
             }
             out
         };
-        let chunks: Vec<Vec<Item>> = (0..src.len().div_ceil(CHUNK))
+        let chunks: Vec<Vec<Item>> = (0..count.div_ceil(CHUNK))
             .into_par_iter()
             .map(|k| {
-                let range = k * CHUNK..((k + 1) * CHUNK).min(src.len());
+                let range = k * CHUNK..((k + 1) * CHUNK).min(count);
                 range
                     .flat_map(|g| items_of(g).into_iter().flatten())
                     .collect()
@@ -630,7 +1110,7 @@ impl PointGrid {
             .map(|i| (i.i1 - i.i0 + 1) as u64 * (i.j1 - i.j0 + 1) as u64)
             .sum();
         // Entries are counted in u32: a grid of more is not built either.
-        if listed > 32 * bounds.iter().map(|b| b.4 as u64).sum::<u64>() + 8 * src.len() as u64
+        if listed > 32 * rects.iter().map(|b| b.4 as u64).sum::<u64>() + 8 * count as u64
             || listed >= u32::MAX as u64
         {
             return None;
@@ -638,26 +1118,17 @@ impl PointGrid {
         // Near to far within every tile: write the entries in order of depth. Depths
         // are positive (at least `r / 2`), so their bits order them; ties go to the
         // earlier item, so the grid depends on its input alone.
-        let nstat = src.statics.len();
-        let (items, tris) = rayon::join(
-            || {
-                let mut keys: Vec<u64> = items
-                    .iter()
-                    .enumerate()
-                    .map(|(k, it)| (it.zmin.to_bits() as u64) << 32 | k as u64)
-                    .collect();
-                keys.par_sort_unstable();
-                keys.iter()
-                    .map(|&k| items[k as u32 as usize])
-                    .collect::<Vec<Item>>()
-            },
-            || {
-                let mut tris = Vec::with_capacity(src.len());
-                tris.extend(src.statics.iter().map(TriPre::new));
-                tris.extend_from_slice(src.moving_pre);
-                tris
-            },
-        );
+        let items = {
+            let mut keys: Vec<u64> = items
+                .iter()
+                .enumerate()
+                .map(|(k, it)| (it.zmin.to_bits() as u64) << 32 | k as u64)
+                .collect();
+            keys.par_sort_unstable();
+            keys.iter()
+                .map(|&k| items[k as u32 as usize])
+                .collect::<Vec<Item>>()
+        };
         // Tiles in ranges, one job a range: each goes through all the items in order
         // and counts (then writes) the entries of its own tiles.
         let jobs = (2 * rayon::current_num_threads()).clamp(1, total.max(1));
@@ -727,77 +1198,12 @@ impl PointGrid {
                 });
             });
         }
-        let mut number: Vec<u32> = (0..nstat as u32).collect();
-        number.extend(src.moving_number.iter().map(|&k| nstat as u32 + k));
         Some(PointGrid {
-            c,
-            depth_margin: 2.0 * allowance,
             faces,
             starts,
             entries,
             near,
-            tris,
-            number,
         })
-    }
-
-    #[inline]
-    fn test(&self, pre: &RayPre, g: u32, ray: &Ray, best: &Option<Hit>) -> Option<Hit> {
-        let t_max = best.map_or(ray.t_max, |b| b.t);
-        intersect_pre(pre, &self.tris[g as usize], ray.t_min, t_max).map(|(t, u, v)| Hit {
-            t,
-            tri: self.number[g as usize],
-            u,
-            v,
-        })
-    }
-
-    fn trace<const ANY: bool>(&self, ray: &Ray, f: usize, tile: usize) -> Option<Hit> {
-        let pre = RayPre::new(ray.origin, ray.dir);
-        let mut best: Option<Hit> = None;
-        for &g in &self.near {
-            if let Some(hit) = self.test(&pre, g, ray, &best) {
-                if ANY {
-                    return Some(hit);
-                }
-                if best.is_none_or(|b| hit.is_closer_than(&b)) {
-                    best = Some(hit);
-                }
-            }
-        }
-        let o = ray.origin.as_dvec3();
-        let d = ray.dir.as_dvec3();
-        let (_, _, z0) = face_coords(f, o - self.c);
-        let (_, _, dz) = face_coords(f, d);
-        // How far (in t) a computed hit may sit from where the line truly meets its
-        // triangle, as in the parallel subfields' early exit.
-        let m = self.depth_margin;
-        let slack = m / d.length();
-        let t_min = ray.t_min as f64;
-        let window = |t_far: f64| {
-            let (za, zb) = (z0 + t_min * dz, z0 + t_far * dz);
-            (down(za.min(zb) - m), up(za.max(zb) + m))
-        };
-        let (mut lo, mut hi) = window(best.map_or(ray.t_max as f64, |b| b.t as f64 + slack));
-        let run = &self.entries[self.starts[tile] as usize..self.starts[tile + 1] as usize];
-        for e in run {
-            if e.zmin > hi {
-                break;
-            }
-            if e.zmax < lo {
-                continue;
-            }
-            if let Some(hit) = self.test(&pre, e.tri, ray, &best) {
-                if ANY {
-                    return Some(hit);
-                }
-                if best.is_none_or(|b| hit.is_closer_than(&b)) {
-                    best = Some(hit);
-                    (lo, hi) = window(hit.t as f64 + slack);
-                }
-            }
-        }
-        best
     }
 }
 

@@ -388,6 +388,7 @@ impl Psf {
             moving_number: &[],
             margin: self.margin,
             bounds: self.bounds,
+            cache: &self.points,
         }
     }
 
