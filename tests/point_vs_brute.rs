@@ -205,8 +205,20 @@ fn check(k: &Case) -> Result<(), TestCaseError> {
         let (mut og, mut ow) = (vec![false; n], vec![false; n]);
         both.occluded_batch(rs, &mut og);
         brute.occluded_batch(rs, &mut ow);
-        prop_assert_eq!(got, want, "next frame, from the point {}, seed {}", from, k.seed);
-        prop_assert_eq!(og, ow, "next frame, from the point {}, seed {}", from, k.seed);
+        prop_assert_eq!(
+            got,
+            want,
+            "next frame, from the point {}, seed {}",
+            from,
+            k.seed
+        );
+        prop_assert_eq!(
+            og,
+            ow,
+            "next frame, from the point {}, seed {}",
+            from,
+            k.seed
+        );
     }
     Ok(())
 }
@@ -298,7 +310,12 @@ fn kept_grids_serve_later_frames() {
     let c = Vec3::new(4.0, 3.0, 5.0);
     let light = Vec3::new(2.0, 7.0, 2.0);
     // Narrow, wider (beyond the kept rectangles), narrow again, another way.
-    let views = [(Vec3::X, 0.3), (Vec3::X, 0.9), (Vec3::X, 0.2), (Vec3::NEG_Z, 0.5)];
+    let views = [
+        (Vec3::X, 0.3),
+        (Vec3::X, 0.9),
+        (Vec3::X, 0.2),
+        (Vec3::NEG_Z, 0.5),
+    ];
     for (frame, &(axis, spread)) in views.iter().enumerate() {
         let moving = synth::soup(&mut rng, 100, LO + 1.0, HI - 1.0, 0.6);
         layer.update(&moving).expect("update");
@@ -316,7 +333,12 @@ fn kept_grids_serve_later_frames() {
             })
             .collect();
         assert_agrees(&both, &brute, &shadow, &format!("light, frame {frame}"));
-        assert_agrees(&psf, &BruteForce::new(&stat), &primary, &format!("static, frame {frame}"));
+        assert_agrees(
+            &psf,
+            &BruteForce::new(&stat),
+            &primary,
+            &format!("static, frame {frame}"),
+        );
     }
 }
 
@@ -331,19 +353,72 @@ fn a_point_seen_again_gets_a_grid() {
     let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
     let brute = BruteForce::new(&stat);
     let light = Vec3::new(4.0, 4.0, 4.0);
-    // Shadow rays from all around: all six faces, 800 rays for 20,000 triangles.
-    let rs: Vec<Ray> = (0..800)
+    // Shadow rays from all around: all six faces, 1,500 rays for 20,000 triangles
+    // (a grid pays for a twelfth as many rays as triangles times faces; one seen again,
+    // for an eighth of that).
+    let rs: Vec<Ray> = (0..1500)
         .map(|_| {
             let o = rng.in_box(LO, HI);
             let l = light - o;
             Ray::segment(o, l / l.length(), 0.0, l.length() * (1.0 - 1e-4))
         })
         .collect();
-    assert!(!psf.point_grid_for(&rs), "one batch does not pay for the grid");
+    assert!(
+        !psf.point_grid_for(&rs),
+        "one batch does not pay for the grid"
+    );
     assert!(psf.point_grid_for(&rs), "a point seen again gets a grid");
     assert_agrees(&psf, &brute, &rs, "the light's kept grid");
     // Rays that do not pass the light do not take it.
     let other: Vec<Ray> = rs.iter().map(|r| Ray::new(r.origin, rng.unit())).collect();
     assert!(!psf.point_grid_for(&other));
     assert_agrees(&psf, &brute, &other, "rays away from the light");
+}
+
+/// A batch mixing rays through several points (a camera's, a light's, and reflections
+/// off a plane, which pass the camera's mirror image in it) with scattered ones: each
+/// group takes a grid of its own, the rest the parallel subfields, and every answer is
+/// brute force's, frame after frame.
+#[test]
+fn several_points_in_one_batch() {
+    for seed in 0..6 {
+        let mut rng = Rng::new(100 + seed);
+        let mut stat = synth::box_faces(LO, HI);
+        stat.extend(synth::soup(&mut rng, 400, LO, HI, 0.8));
+        let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+        let mut layer = DynamicLayer::new(&psf);
+        let eye = rng.in_box(LO + 1.0, HI - 1.0);
+        let light = rng.in_box(LO + 1.0, HI - 1.0);
+        // The floor (y = 0) seen from `eye` reflects rays through `mirror`.
+        let mirror = Vec3::new(eye.x, -eye.y, eye.z);
+        for frame in 0..3 {
+            let moving = synth::soup(&mut rng, 150, LO + 1.0, HI - 1.0, 0.7);
+            layer.update(&moving).expect("update");
+            let all: Vec<[Vec3; 3]> = stat.iter().chain(&moving).copied().collect();
+            let brute = BruteForce::new(&all);
+            let both = psf.with_dynamic(&layer);
+            let mut rs = Vec::new();
+            // In runs of neighbours, as a renderer's rays come (pixel after pixel).
+            for i in 0..6000 {
+                let p = rng.in_box(LO, HI);
+                rs.push(match (i / 40) % 5 {
+                    0 | 1 => Ray::new(eye, rng.unit()),
+                    2 => {
+                        let l = light - p;
+                        Ray::segment(p, l / l.length(), 0.0, l.length() * (1.0 - 1e-4))
+                    }
+                    3 => {
+                        // From a point of the floor, away from the mirror image.
+                        let o = Vec3::new(p.x, 0.0, p.z);
+                        Ray::segment(o, (o - mirror).normalize(), 1e-3, f32::INFINITY)
+                    }
+                    _ => Ray::new(p, rng.unit()),
+                });
+            }
+            assert!(both.point_grid_for(&rs), "seed {seed} frame {frame}");
+            let what = format!("seed {seed}, frame {frame}");
+            assert_agrees(&both, &brute, &rs, &what);
+            assert_agrees(&psf, &BruteForce::new(&stat), &rs, &what);
+        }
+    }
 }

@@ -681,7 +681,7 @@ impl Layered<'_> {
     /// an earlier batch). Either way the hits are the same. It builds the grids to find
     /// out, and keeps and remembers what a batch would.
     pub fn point_grid_for(&self, rays: &[Ray]) -> bool {
-        Plan::for_batch(rays, &self.sources()).is_some()
+        !Plan::for_batch(rays, &self.sources()).is_empty()
     }
 
     /// Both layers' triangles, for a point grid.
@@ -731,33 +731,35 @@ impl Intersector for Layered<'_> {
     /// primary rays, shadow rays towards a point light) and are many enough; otherwise
     /// binned by the static PSF's subfield (`psf::batch`).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
-        let fallback = |r: &Ray| self.trace::<false, _>(r, None, &mut NoCount);
-        if trace_batch::<false, _>(rays, out, &self.sources(), |h| h, fallback) {
-            return;
-        }
         let bins = self.psf.subfields().len().max(1);
-        binned(
-            rays,
-            out,
-            bins,
-            |r| self.psf.bin_of(r),
-            |r, k| self.trace::<false, _>(r, Some(k), &mut NoCount),
-        );
+        let walk = |rays: &[Ray], out: &mut [Option<Hit>]| {
+            binned(
+                rays,
+                out,
+                bins,
+                |r| self.psf.bin_of(r),
+                |r, k| self.trace::<false, _>(r, Some(k), &mut NoCount),
+            )
+        };
+        if !trace_batch::<false, _>(rays, out, &self.sources(), |h| h, walk) {
+            walk(rays, out);
+        }
     }
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
-        let fallback = |r: &Ray| self.trace::<true, _>(r, None, &mut NoCount).is_some();
-        if trace_batch::<true, _>(rays, out, &self.sources(), |h| h.is_some(), fallback) {
-            return;
-        }
         let bins = self.psf.subfields().len().max(1);
-        binned(
-            rays,
-            out,
-            bins,
-            |r| self.psf.bin_of(r),
-            |r, k| self.trace::<true, _>(r, Some(k), &mut NoCount).is_some(),
-        );
+        let walk = |rays: &[Ray], out: &mut [bool]| {
+            binned(
+                rays,
+                out,
+                bins,
+                |r| self.psf.bin_of(r),
+                |r, k| self.trace::<true, _>(r, Some(k), &mut NoCount).is_some(),
+            )
+        };
+        if !trace_batch::<true, _>(rays, out, &self.sources(), |h| h.is_some(), walk) {
+            walk(rays, out);
+        }
     }
 }
 

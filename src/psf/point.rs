@@ -9,6 +9,12 @@
 //! perspective grids of Hunt and Mark, 2008). The grids cover the part of the view the
 //! batch's rays use, and are built only where the batch has rays enough to pay for them.
 //!
+//! A batch may pass several points: reflections off a plane pass the camera's mirror
+//! image in it, so a batch of reflections has a point for each mirror plane in view. A
+//! batch gets grids around up to [`MAX_POINTS`] points, a ray takes the first that
+//! qualifies it, and the rays that none takes are traced together through the parallel
+//! subfields.
+//!
 //! A camera or a light usually stays put from frame to frame, and the static triangles
 //! do not move: their grid around such a point is kept in the static PSF ([`PointCache`])
 //! and each batch builds a grid over the moving triangles only; a ray scans its tile in
@@ -65,7 +71,10 @@ const RAYS_PER_TILE: usize = 16;
 const TRIS_PER_TILE: usize = 4;
 
 /// Rays sampled to find the centre and to judge whether enough rays pass through it.
-const SAMPLE: usize = 64;
+const SAMPLE: usize = 256;
+
+/// Batches of fewer rays take no grid.
+const MIN_RAYS: usize = 256;
 
 /// Sampled lines whose crossing with their neighbour's is tried as the centre.
 const PAIRS: usize = 16;
@@ -153,7 +162,7 @@ const KEPT: usize = 8;
 /// A static part that one batch does not pay for is built for a point seen before
 /// only when this many batches would pay for it: a point seen twice and never again
 /// costs at most this many batches' worth.
-const REUSE: usize = 16;
+const REUSE: usize = 8;
 
 #[derive(Default)]
 struct CacheState {
@@ -420,14 +429,15 @@ fn static_pre(src: &Sources) -> Arc<[TriPre]> {
     p
 }
 
-/// A batch traced through point grids around one point: the static triangles' (kept
-/// in the cache) and, where the scene has moving triangles, theirs (built for the
-/// batch).
+/// The rays of a batch through one point traced through grids around it: the static
+/// triangles' (kept in the cache) and, where the scene has moving triangles, theirs
+/// (built for the batch); or one grid over all of them ([`SPLIT`]).
 ///
-/// One point a batch: a camera's rays, or the shadow rays towards one light. Reflections
-/// off planes pass the camera's mirror images, a point per plane, and grids for the
-/// largest such groups were tried (`benches/PERF.md`, step 54: building them cost what
-/// they saved; step 57 again with cheaper builds: no gain).
+/// A batch has one such point for a camera's rays or the shadow rays towards one light,
+/// and one for each mirror plane among reflections (they pass the camera's image in the
+/// plane). Grids for those paid once the static part was kept and the rays no grid takes
+/// were traced binned (`benches/PERF.md`, step 69; steps 54 and 57 had tried them
+/// without either).
 pub(crate) struct Plan<'a> {
     at: Around,
     /// The static triangles' grid, when kept apart from the batch's.
@@ -459,59 +469,124 @@ const SPLIT: usize = 6;
 /// many.
 const SPREAD: usize = 8;
 
-/// `out[i] = query(rays[i])` through a point grid when the batch takes one
-/// ([`Plan::for_batch`]), `wrap` turning a grid's answer into `T` and `fallback` answering
-/// the rays the grid does not take; `false` (and nothing written) when it takes none.
-pub(crate) fn trace_batch<const ANY: bool, T: Send>(
+/// `out[i] = query(rays[i])` through point grids where the batch takes any
+/// ([`Plan::for_batch`]), `wrap` turning a grid's answer into `T`; the rays no grid takes
+/// are gathered and answered together by `fallback`. `false` (and nothing written) when
+/// the batch takes no grid.
+pub(crate) fn trace_batch<const ANY: bool, T: Send + Sync + Copy + Default>(
     rays: &[Ray],
     out: &mut [T],
     src: &Sources,
     wrap: impl Fn(Option<Hit>) -> T + Sync,
-    fallback: impl Fn(&Ray) -> T + Sync,
+    fallback: impl Fn(&[Ray], &mut [T]),
 ) -> bool {
-    match Plan::for_batch(rays, src) {
-        Some(plan) => {
-            plan.run::<ANY, T>(rays, out, wrap, fallback);
-            true
-        }
-        None => false,
+    assert_eq!(rays.len(), out.len(), "one output slot per ray");
+    let plans = Plan::for_batch(rays, src);
+    if plans.is_empty() {
+        return false;
     }
+    // Each ray through the first grid that takes it; per chunk, the others' places.
+    let missed: Vec<Vec<u32>> = rays
+        .par_chunks(CHUNK)
+        .zip(out.par_chunks_mut(CHUNK))
+        .map(|(rays, out)| {
+            let mut miss = Vec::new();
+            for (i, (ray, o)) in rays.iter().zip(out).enumerate() {
+                match plans.iter().find_map(|p| p.query::<ANY>(ray)) {
+                    Some(hit) => *o = wrap(hit),
+                    None => miss.push(i as u32),
+                }
+            }
+            miss
+        })
+        .collect();
+    let total: usize = missed.iter().map(Vec::len).sum();
+    if total == 0 {
+        return true;
+    }
+    // The rest traced as one batch (binned by subfield, in parallel), the answers put
+    // back chunk by chunk.
+    let gathered: Vec<Ray> = missed
+        .iter()
+        .enumerate()
+        .flat_map(|(k, m)| m.iter().map(move |&i| rays[k * CHUNK + i as usize]))
+        .collect();
+    let mut answers = vec![T::default(); total];
+    fallback(&gathered, &mut answers);
+    let mut parts = Vec::with_capacity(missed.len());
+    let mut rest = &answers[..];
+    for m in &missed {
+        let (head, tail) = rest.split_at(m.len());
+        parts.push(head);
+        rest = tail;
+    }
+    out.par_chunks_mut(CHUNK)
+        .zip(missed.par_iter().zip(parts))
+        .for_each(|(out, (m, a))| {
+            for (&i, &x) in m.iter().zip(a) {
+                out[i as usize] = x;
+            }
+        });
+    true
 }
 
-/// Per face, the rectangle that every `SPREAD`th qualifying ray of `rays` projects
-/// into, and their number; and the greatest squared distance of their origins from
-/// `at.c`.
-fn spread(rays: &[Ray], at: &Around) -> (Rects, f64) {
+/// The rays of a batch a point's grids would take, as sampled by [`spread`].
+#[derive(Clone, Copy)]
+struct Spread {
+    /// Per face, the rectangle their projected points span, and their number.
+    rects: Rects,
+    /// The greatest squared distance of their origins from the point.
+    far2: f64,
+    /// How many of them start at the point (within `r`) or end at it, as camera and
+    /// shadow rays do.
+    ends: usize,
+}
+
+/// For each point of `ats`, every `SPREAD`th ray of `rays` that qualifies by it and by
+/// none before it.
+fn spread(rays: &[Ray], ats: &[Around]) -> Vec<Spread> {
     let n = rays.len();
-    let empty: (Rects, f64) = ([NO_RECT; 6], 0.0);
+    let none = Spread {
+        rects: [NO_RECT; 6],
+        far2: 0.0,
+        ends: 0,
+    };
+    let empty = vec![none; ats.len()];
     (0..n.div_ceil(SPREAD * CHUNK))
         .into_par_iter()
         .map(|k| {
-            let mut b = empty;
+            let mut b = empty.clone();
             let end = ((k + 1) * SPREAD * CHUNK).min(n);
             for ray in rays[k * SPREAD * CHUNK..end].iter().step_by(SPREAD) {
-                if let Some((f, q)) = at.aim(ray) {
+                let first = ats
+                    .iter()
+                    .enumerate()
+                    .find_map(|(i, at)| Some((i, passes(at.c, at.r, at.rho_max, ray)?)));
+                if let Some((i, forward)) = first {
+                    let (f, q) = project(ray.dir, forward);
                     let (pu, pv) = (q[0] as f64, q[1] as f64);
-                    let e = &mut b.0[f as usize];
-                    *e = (
-                        e.0.min(pu),
-                        e.1.min(pv),
-                        e.2.max(pu),
-                        e.3.max(pv),
-                        e.4 + SPREAD,
-                    );
-                    b.1 = b.1.max((ray.origin.as_dvec3() - at.c).length_squared());
+                    let s = &mut b[i];
+                    s.rects[f as usize] = union(s.rects[f as usize], (pu, pv, pu, pv, SPREAD));
+                    let d2 = (ray.origin.as_dvec3() - ats[i].c).length_squared();
+                    s.far2 = s.far2.max(d2);
+                    if !forward || d2 <= ats[i].r * ats[i].r {
+                        s.ends += SPREAD;
+                    }
                 }
             }
             b
         })
         .reduce(
-            || empty,
+            || empty.clone(),
             |mut a, b| {
-                for (x, y) in a.0.iter_mut().zip(b.0) {
-                    *x = union(*x, y);
+                for (x, y) in a.iter_mut().zip(b) {
+                    for (r, s) in x.rects.iter_mut().zip(y.rects) {
+                        *r = union(*r, s);
+                    }
+                    x.far2 = x.far2.max(y.far2);
+                    x.ends += y.ends;
                 }
-                (a.0, a.1.max(b.1))
+                a
             },
         )
 }
@@ -529,22 +604,30 @@ fn union(
     )
 }
 
+/// Points a batch may have grids around, at most.
+const MAX_POINTS: usize = 8;
+
 impl<'a> Plan<'a> {
-    /// Grids for `rays` over `src` when nine in ten of a sample pass one point and the
-    /// batch has rays enough to pay for what must be built; `None` otherwise.
+    /// Grids for `rays` over `src`: around each point that a share of a sample passes
+    /// (at most [`MAX_POINTS`], the first the one most pass), where the rays through
+    /// it are enough to pay for what must be built. Empty when there are none.
+    ///
+    /// A camera's rays pass one point and a light's shadow rays another; reflections
+    /// off a plane pass the camera's mirror image in it, a point a plane. Points of kept
+    /// grids are tried first, then crossings of the sample's lines ([`center`]).
     ///
     /// The build costs about 30 ns a triangle and cube face used (two threads), a ray
-    /// taken off the parallel subfields saves some 0.4–0.6 µs: a batch pays for a grid
+    /// taken off the parallel subfields saves some 0.4–0.6 µs: a point pays for a grid
     /// over at least a twelfth as many rays as triangles times faces. A camera's rays
     /// use one to three faces, a light's six (`benches/PERF.md`, step 64). The static
-    /// part is built when the batch pays for all of it, or when its point was seen in a
-    /// recent batch (a camera or light that stays put); once kept, a batch pays only for
-    /// the moving triangles' grid.
-    pub(crate) fn for_batch(rays: &[Ray], src: &'a Sources<'a>) -> Option<Plan<'a>> {
+    /// part is built when the point's rays pay for all of it, or when the point was seen
+    /// in a recent batch (a camera or light that stays put); once kept, a batch pays only
+    /// for the moving triangles' grid.
+    pub(crate) fn for_batch(rays: &[Ray], src: &'a Sources<'a>) -> Vec<Plan<'a>> {
         let ntri = src.statics.len() + src.moving.len();
         let n = rays.len();
-        if ntri == 0 || n < 4 * SAMPLE || ntri >= u32::MAX as usize {
-            return None;
+        if ntri == 0 || n < MIN_RAYS || ntri >= u32::MAX as usize {
+            return Vec::new();
         }
         let margin = src.margin as f64;
         let valid = |i: usize| rays[i].is_valid();
@@ -553,59 +636,93 @@ impl<'a> Plan<'a> {
             .filter(|&i| valid(i))
             .map(|i| (&rays[i], (i + 1 < n && valid(i + 1)).then(|| &rays[i + 1])))
             .collect();
-        if sample.is_empty() {
-            return None;
-        }
-        let most = |v: usize| v * 10 >= sample.len() * 9;
-        let passes_at = |at: &Around| most(sample.iter().filter(|r| at.aim(r.0).is_some()).count());
-
-        // A kept grid whose point the batch passes, its margin no less than the queries'.
-        let (kept, seen) = {
+        // A point is tried when this many of the sample pass it.
+        let least = (sample.len() / 32).max(8);
+        let mut rest = sample;
+        let mut points: Vec<(Around, Option<Arc<StaticGrid>>, bool)> = Vec::new();
+        let seen = {
             let mut st = src.cache.lock();
             st.stamp += 1;
             let stamp = st.stamp;
-            let mut kept = None;
             for (used, g) in st.grids.iter_mut().rev() {
-                if g.at.margin >= margin && passes_at(&g.at) {
-                    *used = stamp;
-                    kept = Some(g.clone());
+                if points.len() == MAX_POINTS {
                     break;
                 }
+                if g.at.margin < margin {
+                    continue;
+                }
+                let v = rest.iter().filter(|r| g.at.aim(r.0).is_some()).count();
+                if v >= least {
+                    *used = stamp;
+                    points.push((g.at, Some(g.clone()), false));
+                    rest.retain(|r| g.at.aim(r.0).is_none());
+                }
             }
-            let seen = kept.is_none()
-                && st
-                    .seen
-                    .iter()
-                    .any(|at| at.margin >= margin && passes_at(at));
-            (kept, seen)
+            st.seen.clone()
         };
+        // `margin` is 1e-5 of the scene's scale (`margin_for`); the near cube is a 256th
+        // of it, so its list is short and `eps` stays small beyond it.
+        let r = margin * 1e5 / 256.0;
+        // How closely a line must pass the centre: a ray aimed at it from `o` misses it
+        // by the rounding of its direction, some 1e-7 of the distance; allow a hundred
+        // times that for a point as far from the scene as it is.
+        let middle = src.bounds.center().as_dvec3();
+        let rho_of = |c: DVec3| margin.max(1e-5 * ((c - middle).length() + margin * 1e5));
+        while points.len() < MAX_POINTS && rest.len() >= least {
+            let Some((c, v)) = center(&rest, |c, ray| aim(c, r, rho_of(c), ray).is_some()) else {
+                break;
+            };
+            if v < least {
+                break;
+            }
+            let at = Around {
+                c,
+                r,
+                rho_max: rho_of(c),
+                reach2: 0.0,
+                margin,
+            };
+            // Seen before: nine in ten of the rays through this point pass a seen one.
+            let mine: Vec<&Ray> = rest
+                .iter()
+                .map(|r| r.0)
+                .filter(|r| at.aim(r).is_some())
+                .collect();
+            let again = seen.iter().any(|s| {
+                s.margin >= margin
+                    && mine.iter().filter(|r| s.aim(r).is_some()).count() * 10 >= mine.len() * 9
+            });
+            points.push((at, None, again));
+            rest.retain(|r| at.aim(r.0).is_none());
+        }
+        let ats: Vec<Around> = points.iter().map(|p| p.0).collect();
+        let spreads = spread(rays, &ats);
+        points
+            .into_iter()
+            .zip(spreads)
+            .filter_map(|((at, kept, again), s)| Self::around(src, at, kept, again, s))
+            .collect()
+    }
 
-        let at = match &kept {
-            Some(g) => g.at,
-            None => {
-                // `margin` is 1e-5 of the scene's scale (`margin_for`); the near cube is
-                // a 256th of it, so its list is short and `eps` stays small beyond it.
-                let r = margin * 1e5 / 256.0;
-                // How closely a line must pass the centre: a ray aimed at it from `o`
-                // misses it by the rounding of its direction, some 1e-7 of the
-                // distance; allow a hundred times that for a point as far from the
-                // scene as it is.
-                let middle = src.bounds.center().as_dvec3();
-                let rho_of = |c: DVec3| margin.max(1e-5 * ((c - middle).length() + margin * 1e5));
-                let (c, v) = center(&sample, |c, ray| aim(c, r, rho_of(c), ray).is_some())?;
-                if !most(v) {
-                    return None;
-                }
-                Around {
-                    c,
-                    r,
-                    rho_max: rho_of(c),
-                    reach2: 0.0,
-                    margin,
-                }
-            }
-        };
-        let (rects, far2) = spread(rays, &at);
+    /// The grids around `at` (kept's, when given) for the rays the batch takes through
+    /// it (as [`spread`] sampled them), if
+    /// they pay; `seen` when the point was seen before.
+    fn around(
+        src: &'a Sources<'a>,
+        at: Around,
+        kept: Option<Arc<StaticGrid>>,
+        seen: bool,
+        spread: Spread,
+    ) -> Option<Plan<'a>> {
+        let margin = src.margin as f64;
+        let ntri = src.statics.len() + src.moving.len();
+        let (rects, far2) = (spread.rects, spread.far2);
+        let n: usize = rects.iter().map(|b| b.4).sum();
+        // What a ray taken off the parallel subfields saves, in builds of a triangle
+        // and face: 12 for camera and shadow rays; rays that pass the point on their way
+        // elsewhere (reflections off a plane) saved about a quarter of that, and pay
+        // for half of what that would.
+        let saves = if 2 * spread.ends >= n { 12 } else { 2 };
         let faces = rects.iter().filter(|b| b.4 > 0).count();
         let nmov = src.moving.len();
         // The kept grid serves when the batch's rectangles and origins lie within its
@@ -619,7 +736,7 @@ impl<'a> Plan<'a> {
         let nstat = src.statics.len();
         if nmov > 0 && SPLIT * nstat * faces < n {
             // One grid over all triangles, as the batch alone pays for.
-            if 12 * n < ntri * faces {
+            if saves * n < ntri * faces {
                 return None;
             }
             let mut at = at;
@@ -657,15 +774,15 @@ impl<'a> Plan<'a> {
             });
         }
         let fixed = if fits {
-            if 12 * n < nmov * faces {
+            if saves * n < nmov * faces {
                 return None;
             }
             kept?
         } else {
             let again = (kept.is_some() || seen)
-                && 12 * n >= nmov * faces
-                && 12 * n * REUSE >= ntri * faces;
-            if 12 * n < ntri * faces && !again {
+                && saves * n >= nmov * faces
+                && saves * n * REUSE >= ntri * faces;
+            if saves * n < ntri * faces && !again {
                 let mut st = src.cache.lock();
                 st.seen.retain(|s| s.c != at.c);
                 st.seen.push(at);
@@ -735,63 +852,37 @@ impl<'a> Plan<'a> {
         })
     }
 
-    /// `out[i] = query(rays[i])`: through the grids where the ray passes their point, by
-    /// `fallback` elsewhere.
-    pub(crate) fn run<const ANY: bool, T: Send>(
-        &self,
-        rays: &[Ray],
-        out: &mut [T],
-        wrap: impl Fn(Option<Hit>) -> T + Sync,
-        fallback: impl Fn(&Ray) -> T + Sync,
-    ) {
-        assert_eq!(rays.len(), out.len(), "one output slot per ray");
-        // One loop for each arrangement of grids, so that none pays for the others'
-        // branches.
-        let stat = |pre: &RayPre, g: u32, ray: &Ray, best: &Option<Hit>| {
-            self.test_static(pre, g, ray, best)
-        };
+    /// The ray's hit through these grids, `None` when they do not take it (it does not
+    /// qualify, or lands outside them).
+    #[inline]
+    fn query<const ANY: bool>(&self, ray: &Ray) -> Option<Option<Hit>> {
+        let (f, p) = self.at.aim(ray)?;
+        let f = f as usize;
+        if (ray.origin.as_dvec3() - self.at.c).length_squared() > self.at.reach2 {
+            return None;
+        }
         match (&self.fixed, &self.batch) {
-            (Some(s), None) => self.each(rays, out, &fallback, &|ray, f, p| {
+            (Some(s), None) => {
                 let t = s.grid.faces[f].tile(p)?;
-                Some(wrap(self.trace_one::<ANY>(ray, f, &s.grid, t, stat)))
-            }),
-            (None, Some(m)) => self.each(rays, out, &fallback, &|ray, f, p| {
+                let test = |pre: &RayPre, g: u32, ray: &Ray, best: &Option<Hit>| {
+                    self.test_static(pre, g, ray, best)
+                };
+                Some(self.trace_one::<ANY>(ray, f, &s.grid, t, test))
+            }
+            (None, Some(m)) => {
                 let t = m.grid.faces[f].tile(p)?;
                 let test = |pre: &RayPre, g: u32, ray: &Ray, best: &Option<Hit>| {
                     Self::test_batch(m, pre, g, ray, best)
                 };
-                Some(wrap(self.trace_one::<ANY>(ray, f, &m.grid, t, test)))
-            }),
-            (Some(s), Some(m)) => self.each(rays, out, &fallback, &|ray, f, p| {
+                Some(self.trace_one::<ANY>(ray, f, &m.grid, t, test))
+            }
+            (Some(s), Some(m)) => {
                 let a = s.grid.faces[f].tile(p)?;
                 let b = m.grid.faces[f].tile(p)?;
-                Some(wrap(self.trace_two::<ANY>(ray, f, s, a, m, b)))
-            }),
-            (None, None) => self.each(rays, out, &fallback, &|_, _, _| None),
+                Some(self.trace_two::<ANY>(ray, f, s, a, m, b))
+            }
+            (None, None) => None,
         }
-    }
-
-    /// `out[i]` = `query(ray, face, point)` for the rays that qualify, `fallback(ray)`
-    /// for the others and where `query` says `None`.
-    fn each<T: Send>(
-        &self,
-        rays: &[Ray],
-        out: &mut [T],
-        fallback: &(impl Fn(&Ray) -> T + Sync),
-        query: &(impl Fn(&Ray, usize, [f32; 2]) -> Option<T> + Sync + ?Sized),
-    ) {
-        rays.par_chunks(CHUNK)
-            .zip(out.par_chunks_mut(CHUNK))
-            .for_each(|(rays, out)| {
-                for (ray, o) in rays.iter().zip(out) {
-                    let got = self.at.aim(ray).and_then(|(f, p)| {
-                        let near =
-                            (ray.origin.as_dvec3() - self.at.c).length_squared() <= self.at.reach2;
-                        near.then(|| query(ray, f as usize, p)).flatten()
-                    });
-                    *o = got.unwrap_or_else(|| fallback(ray));
-                }
-            });
     }
 
     /// Static triangle `g`'s hit, if closer than `best`.
@@ -1253,9 +1344,9 @@ mod tests {
         let mut rng = Rng::new(11);
         let light = Vec3::new(2.0, 7.5, -1.0);
         let rays: Vec<Ray> = (0..4000)
-            .map(|i| {
+            .map(|_| {
                 let o = rng.in_box(Vec3::splat(-5.0), Vec3::splat(5.0));
-                if i % 5 == 0 {
+                if rng.below(5) == 0 {
                     Ray::new(o, rng.unit())
                 } else {
                     let l = light - o;

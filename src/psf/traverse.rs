@@ -339,34 +339,35 @@ impl Intersector for Psf {
     /// Through a point grid when the rays pass through one point and are many enough
     /// ([`Psf::point_grid_for`]); otherwise binned by subfield (`psf::batch`).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
-        let fallback = |r: &Ray| self.trace::<false, _>(r, &mut NoCount);
-        if trace_batch::<false, _>(rays, out, &self.point_sources(), |h| h, fallback) {
-            return;
-        }
         let bins = self.subfields.len().max(1);
-        binned(
-            rays,
-            out,
-            bins,
-            |r| self.bin_of(r),
-            |r, k| self.trace_bin::<false>(r, k),
-        );
+        let walk = |rays: &[Ray], out: &mut [Option<Hit>]| {
+            binned(
+                rays,
+                out,
+                bins,
+                |r| self.bin_of(r),
+                |r, k| self.trace_bin::<false>(r, k),
+            )
+        };
+        if !trace_batch::<false, _>(rays, out, &self.point_sources(), |h| h, walk) {
+            walk(rays, out);
+        }
     }
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
-        let fallback = |r: &Ray| self.trace::<true, _>(r, &mut NoCount).is_some();
-        let sources = self.point_sources();
-        if trace_batch::<true, _>(rays, out, &sources, |h| h.is_some(), fallback) {
-            return;
-        }
         let bins = self.subfields.len().max(1);
-        binned(
-            rays,
-            out,
-            bins,
-            |r| self.bin_of(r),
-            |r, k| self.trace_bin::<true>(r, k).is_some(),
-        );
+        let walk = |rays: &[Ray], out: &mut [bool]| {
+            binned(
+                rays,
+                out,
+                bins,
+                |r| self.bin_of(r),
+                |r, k| self.trace_bin::<true>(r, k).is_some(),
+            )
+        };
+        if !trace_batch::<true, _>(rays, out, &self.point_sources(), |h| h.is_some(), walk) {
+            walk(rays, out);
+        }
     }
 }
 
@@ -376,7 +377,7 @@ impl Psf {
     /// (see [`Layered::point_grid_for`](super::Layered::point_grid_for)). Either way the
     /// hits are the same.
     pub fn point_grid_for(&self, rays: &[Ray]) -> bool {
-        Plan::for_batch(rays, &self.point_sources()).is_some()
+        !Plan::for_batch(rays, &self.point_sources()).is_empty()
     }
 
     /// This PSF's triangles, for a point grid.
