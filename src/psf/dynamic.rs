@@ -672,14 +672,15 @@ impl Layered<'_> {
     }
 
     /// Whether [`intersect_batch`](Intersector::intersect_batch) and
-    /// [`occluded_batch`](Intersector::occluded_batch) trace `rays` through a point grid
-    /// (a grid by central projection around the one point the rays pass through): when
-    /// they pass through one point, nine in ten of a sample closely enough, and the batch
-    /// has rays enough to pay for what it must build (at least a twelfth as many as
-    /// triangles times the cube faces the rays use; only the moving triangles count once
-    /// the static PSF keeps a grid around that point, which it does for a point seen in
-    /// an earlier batch). Either way the hits are the same. It builds the grids to find
-    /// out, and keeps and remembers what a batch would.
+    /// [`occluded_batch`](Intersector::occluded_batch) trace some of `rays` through point
+    /// grids (grids by central projection around a point rays pass through): when a share
+    /// of a sample passes one point (a camera's rays, a light's shadow rays, reflections
+    /// off one plane) and those rays are enough to pay for what must be built (for camera
+    /// and shadow rays at least a twelfth as many as triangles times the cube faces they
+    /// use, for rays that merely pass the point six times that; only the moving triangles
+    /// count once the static PSF keeps a grid around the point, which it does for a
+    /// point seen in an earlier batch). Either way the hits are the same. It builds the
+    /// grids to find out, and keeps and remembers what a batch would.
     pub fn point_grid_for(&self, rays: &[Ray]) -> bool {
         !Plan::for_batch(rays, &self.sources()).is_empty()
     }
