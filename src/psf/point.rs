@@ -607,6 +607,16 @@ fn union(
 /// Points a batch may have grids around, at most.
 const MAX_POINTS: usize = 8;
 
+/// Keeps `hit` in `best` when it is closer; `true` when that answers the query (any
+/// hit will do).
+#[inline]
+fn take<const ANY: bool>(best: &mut Option<Hit>, hit: Hit) -> bool {
+    if best.is_none_or(|b| hit.is_closer_than(&b)) {
+        *best = Some(hit);
+    }
+    ANY
+}
+
 impl<'a> Plan<'a> {
     /// Grids for `rays` over `src`: around each point that a share of a sample passes
     /// (at most [`MAX_POINTS`], the first the one most pass), where the rays through
@@ -949,11 +959,8 @@ impl<'a> Plan<'a> {
         let mut best: Option<Hit> = None;
         for &g in &grid.near {
             if let Some(hit) = test(&pre, g, ray, &best) {
-                if ANY {
-                    return Some(hit);
-                }
-                if best.is_none_or(|b| hit.is_closer_than(&b)) {
-                    best = Some(hit);
+                if take::<ANY>(&mut best, hit) {
+                    return best;
                 }
             }
         }
@@ -967,13 +974,10 @@ impl<'a> Plan<'a> {
                 continue;
             }
             if let Some(hit) = test(&pre, e.tri, ray, &best) {
-                if ANY {
-                    return Some(hit);
+                if take::<ANY>(&mut best, hit) {
+                    return best;
                 }
-                if best.is_none_or(|b| hit.is_closer_than(&b)) {
-                    best = Some(hit);
-                    (lo, hi) = window(hit.t as f64 + slack);
-                }
+                (lo, hi) = window(best.map_or(hit.t, |b| b.t) as f64 + slack);
             }
         }
         best
@@ -1001,11 +1005,8 @@ impl<'a> Plan<'a> {
                 Self::test_batch(m, &pre, g, ray, &best)
             };
             if let Some(hit) = hit {
-                if ANY {
-                    return Some(hit);
-                }
-                if best.is_none_or(|b| hit.is_closer_than(&b)) {
-                    best = Some(hit);
+                if take::<ANY>(&mut best, hit) {
+                    return best;
                 }
             }
         }
@@ -1039,13 +1040,10 @@ impl<'a> Plan<'a> {
                 Self::test_batch(m, &pre, e.tri, ray, &best)
             };
             if let Some(hit) = hit {
-                if ANY {
-                    return Some(hit);
+                if take::<ANY>(&mut best, hit) {
+                    return best;
                 }
-                if best.is_none_or(|b| hit.is_closer_than(&b)) {
-                    best = Some(hit);
-                    (lo, hi) = window(hit.t as f64 + slack);
-                }
+                (lo, hi) = window(best.map_or(hit.t, |b| b.t) as f64 + slack);
             }
         }
         best
