@@ -422,3 +422,33 @@ fn several_points_in_one_batch() {
         }
     }
 }
+
+/// A camera that stays put has its static grid built once and kept, one grid however
+/// many batches; one that moves leaves at most eight behind.
+#[test]
+fn kept_grids_are_one_a_point_and_eight_at_most() {
+    let mut rng = Rng::new(31);
+    let mut stat = synth::box_faces(LO, HI);
+    stat.extend(synth::soup(&mut rng, 2000, LO, HI, 0.3));
+    let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+    let brute = BruteForce::new(&stat);
+    let eye = Vec3::new(4.0, 3.0, 4.0);
+    for k in 0..4 {
+        let rs = view(&mut rng, 3000, eye, Vec3::Z, 0.4);
+        assert_agrees(&psf, &brute, &rs, &format!("fixed camera, batch {k}"));
+        assert_eq!(psf.kept_point_grids(), 1, "batch {k}");
+    }
+    for k in 0..12 {
+        let eye = Vec3::new(0.5 + 0.5 * k as f32, 3.0, 4.0);
+        let rs = view(&mut rng, 3000, eye, Vec3::Z, 0.4);
+        let (mut got, mut want) = (vec![None; rs.len()], vec![None; rs.len()]);
+        psf.intersect_batch(&rs, &mut got);
+        brute.intersect_batch(&rs, &mut want);
+        assert_eq!(got, want, "moving camera, batch {k}");
+        assert_eq!(
+            psf.kept_point_grids(),
+            (k + 2).min(8),
+            "moving camera, batch {k}"
+        );
+    }
+}

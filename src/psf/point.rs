@@ -183,6 +183,11 @@ impl std::fmt::Debug for PointCache {
 }
 
 impl PointCache {
+    /// The grids kept now.
+    pub(crate) fn len(&self) -> usize {
+        self.lock().grids.len()
+    }
+
     fn lock(&self) -> std::sync::MutexGuard<'_, CacheState> {
         // A panic elsewhere while the lock was held leaves a consistent state: every
         // change below is a single push, removal or assignment.
@@ -607,6 +612,15 @@ fn union(
 /// Points a batch may have grids around, at most.
 const MAX_POINTS: usize = 8;
 
+/// Adds `at` to the points seen (the most recent [`KEPT`]), once.
+fn remember(seen: &mut Vec<Around>, at: Around) {
+    seen.retain(|s| (s.c - at.c).length() > at.r);
+    seen.push(at);
+    if seen.len() > KEPT {
+        seen.remove(0);
+    }
+}
+
 /// Keeps `hit` in `best` when it is closer; `true` when that answers the query (any
 /// hit will do).
 #[inline]
@@ -793,12 +807,7 @@ impl<'a> Plan<'a> {
                 && saves * n >= nmov * faces
                 && saves * n * REUSE >= ntri * faces;
             if saves * n < ntri * faces && !again {
-                let mut st = src.cache.lock();
-                st.seen.retain(|s| s.c != at.c);
-                st.seen.push(at);
-                if st.seen.len() > KEPT {
-                    st.seen.remove(0);
-                }
+                remember(&mut src.cache.lock().seen, at);
                 return None;
             }
             // The furthest origin from `c` with half again to spare, and the rectangles
@@ -837,6 +846,18 @@ impl<'a> Plan<'a> {
             }
             fresh
         };
+        Self::with_static(src, fixed, rects, nstat, nmov)
+    }
+
+    /// The plan around `fixed`'s point: its static grid and, with moving triangles, a
+    /// grid over them for the rays that project into `rects`.
+    fn with_static(
+        src: &'a Sources<'a>,
+        fixed: Arc<StaticGrid>,
+        rects: Rects,
+        nstat: usize,
+        nmov: usize,
+    ) -> Option<Plan<'a>> {
         let pre = static_pre(src);
         let at = fixed.at;
         let batch = if nmov == 0 {
