@@ -633,12 +633,13 @@ fn take<const ANY: bool>(best: &mut Option<Hit>, hit: Hit) -> bool {
 
 impl<'a> Plan<'a> {
     /// Grids for `rays` over `src`: around each point that a share of a sample passes
-    /// (at most [`MAX_POINTS`], the first the one most pass), where the rays through
-    /// it are enough to pay for what must be built. Empty when there are none.
+    /// (at most [`MAX_POINTS`]), where the rays through it are enough to pay for what
+    /// must be built. Empty when there are none.
     ///
     /// A camera's rays pass one point and a light's shadow rays another; reflections
-    /// off a plane pass the camera's mirror image in it, a point a plane. Points of kept
-    /// grids are tried first, then crossings of the sample's lines ([`center`]).
+    /// off a plane pass the camera's mirror image in it, a point a plane. The points of
+    /// kept grids come first (the most recently used first), then crossings of the
+    /// lines of the sample's other rays ([`center`]), the one most pass first.
     ///
     /// The build costs about 30 ns a triangle and cube face used (two threads), a ray
     /// taken off the parallel subfields saves some 0.4–0.6 µs: a point pays for a grid
