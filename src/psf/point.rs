@@ -804,9 +804,12 @@ impl<'a> Plan<'a> {
             }
             kept?
         } else {
+            // A static part kept for a point that comes again is paid for over the
+            // batches to come: at the camera rays' rate, since the parallel subfields
+            // trace a large scene's reflections slowly too (`benches/PERF.md`, step 76).
             let again = (kept.is_some() || seen)
                 && saves * n >= nmov * faces
-                && saves * n * REUSE >= ntri * faces;
+                && 12 * n * REUSE >= ntri * faces;
             if saves * n < ntri * faces && !again {
                 remember(&mut src.cache.lock().seen, at);
                 return None;
