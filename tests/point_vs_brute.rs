@@ -143,51 +143,23 @@ fn check(k: &Case) -> Result<(), TestCaseError> {
             );
         }
         // The static PSF alone takes point grids too.
-        let (mut got, mut want) = (vec![None; n], vec![None; n]);
-        psf.intersect_batch(&rs, &mut got);
-        BruteForce::new(&stat).intersect_batch(&rs, &mut want);
-        prop_assert_eq!(
-            &got,
-            &want,
-            "static PSF alone, from the point {}, seed {}",
-            from,
-            k.seed
-        );
-        let (mut og, mut ow) = (vec![false; n], vec![false; n]);
-        psf.occluded_batch(&rs, &mut og);
-        BruteForce::new(&stat).occluded_batch(&rs, &mut ow);
-        prop_assert_eq!(
-            &og,
-            &ow,
-            "static PSF alone, from the point {}, seed {}",
-            from,
-            k.seed
-        );
-
-        let (mut got, mut want) = (vec![None; n], vec![None; n]);
-        both.intersect_batch(&rs, &mut got);
-        brute.intersect_batch(&rs, &mut want);
-        let (mut og, mut ow) = (vec![false; n], vec![false; n]);
-        both.occluded_batch(&rs, &mut og);
-        brute.occluded_batch(&rs, &mut ow);
-        for i in 0..n {
-            prop_assert_eq!(
-                got[i],
-                want[i],
-                "closest hit differs: ray {} {:?}, from the point {}, seed {}",
-                i,
-                rs[i],
+        let alone = BruteForce::new(&stat);
+        for (what, got, want) in [
+            (
+                "static PSF alone",
+                &psf as &dyn Intersector,
+                &alone as &dyn Intersector,
+            ),
+            ("both layers", &both, &brute),
+        ] {
+            let d = first_difference(got, want, &rs);
+            prop_assert!(
+                d.is_none(),
+                "{}, from the point {}, seed {}: {}",
+                what,
                 from,
-                k.seed
-            );
-            prop_assert_eq!(
-                og[i],
-                ow[i],
-                "any hit differs: ray {} {:?}, from the point {}, seed {}",
-                i,
-                rs[i],
-                from,
-                k.seed
+                k.seed,
+                d.unwrap_or_default()
             );
         }
     }
@@ -199,25 +171,13 @@ fn check(k: &Case) -> Result<(), TestCaseError> {
     let brute = BruteForce::new(&all);
     let both = psf.with_dynamic(&layer);
     for (from, rs) in &batches {
-        let (mut got, mut want) = (vec![None; n], vec![None; n]);
-        both.intersect_batch(rs, &mut got);
-        brute.intersect_batch(rs, &mut want);
-        let (mut og, mut ow) = (vec![false; n], vec![false; n]);
-        both.occluded_batch(rs, &mut og);
-        brute.occluded_batch(rs, &mut ow);
-        prop_assert_eq!(
-            got,
-            want,
-            "next frame, from the point {}, seed {}",
+        let d = first_difference(&both, &brute, rs);
+        prop_assert!(
+            d.is_none(),
+            "next frame, from the point {}, seed {}: {}",
             from,
-            k.seed
-        );
-        prop_assert_eq!(
-            og,
-            ow,
-            "next frame, from the point {}, seed {}",
-            from,
-            k.seed
+            k.seed,
+            d.unwrap_or_default()
         );
     }
     Ok(())
@@ -285,16 +245,31 @@ fn view(rng: &mut Rng, n: usize, c: Vec3, axis: Vec3, spread: f32) -> Vec<Ray> {
         .collect()
 }
 
-fn assert_agrees(got: &dyn Intersector, want: &dyn Intersector, rs: &[Ray], what: &str) {
+/// The first ray on which `got` and `want` answer differently (closest hit, then any
+/// hit), described; `None` when they agree on every ray.
+fn first_difference(got: &dyn Intersector, want: &dyn Intersector, rs: &[Ray]) -> Option<String> {
     let n = rs.len();
     let (mut a, mut b) = (vec![None; n], vec![None; n]);
     got.intersect_batch(rs, &mut a);
     want.intersect_batch(rs, &mut b);
-    assert_eq!(a, b, "closest hits differ: {what}");
+    if let Some(i) = (0..n).find(|&i| a[i] != b[i]) {
+        let (r, x, y) = (rs[i], a[i], b[i]);
+        return Some(format!(
+            "closest hit differs: ray {i} {r:?}: {x:?} against {y:?}"
+        ));
+    }
     let (mut a, mut b) = (vec![false; n], vec![false; n]);
     got.occluded_batch(rs, &mut a);
     want.occluded_batch(rs, &mut b);
-    assert_eq!(a, b, "any hits differ: {what}");
+    let i = (0..n).find(|&i| a[i] != b[i])?;
+    let (r, x, y) = (rs[i], a[i], b[i]);
+    Some(format!("any hit differs: ray {i} {r:?}: {x} against {y}"))
+}
+
+fn assert_agrees(got: &dyn Intersector, want: &dyn Intersector, rs: &[Ray], what: &str) {
+    if let Some(d) = first_difference(got, want, rs) {
+        panic!("{d}: {what}");
+    }
 }
 
 /// A camera that stays put over frames while its view changes: the static grid kept

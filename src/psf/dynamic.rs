@@ -728,9 +728,10 @@ impl Intersector for Layered<'_> {
         self.trace::<true, _>(ray, None, &mut NoCount).is_some()
     }
 
-    /// Through a point grid when the rays pass through one point (a camera's
-    /// primary rays, shadow rays towards a point light) and are many enough; otherwise
-    /// binned by the static PSF's subfield (`psf::batch`).
+    /// Through point grids for the rays that pass a point grids pay for (a camera's
+    /// primary rays, shadow rays towards a point light, reflections off a plane;
+    /// [`Layered::point_grid_for`]); the others binned by the static PSF's subfield
+    /// (`psf::batch`).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         let bins = self.psf.subfields().len().max(1);
         let walk = |rays: &[Ray], out: &mut [Option<Hit>]| {
@@ -742,9 +743,7 @@ impl Intersector for Layered<'_> {
                 |r, k| self.trace::<false, _>(r, Some(k), &mut NoCount),
             )
         };
-        if !trace_batch::<false, _>(rays, out, &self.sources(), |h| h, walk) {
-            walk(rays, out);
-        }
+        trace_batch::<false, _>(rays, out, &self.sources(), |h| h, walk);
     }
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
@@ -758,9 +757,7 @@ impl Intersector for Layered<'_> {
                 |r, k| self.trace::<true, _>(r, Some(k), &mut NoCount).is_some(),
             )
         };
-        if !trace_batch::<true, _>(rays, out, &self.sources(), |h| h.is_some(), walk) {
-            walk(rays, out);
-        }
+        trace_batch::<true, _>(rays, out, &self.sources(), |h| h.is_some(), walk);
     }
 }
 

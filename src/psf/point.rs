@@ -476,19 +476,18 @@ const SPREAD: usize = 8;
 
 /// `out[i] = query(rays[i])` through point grids where the batch takes any
 /// ([`Plan::for_batch`]), `wrap` turning a grid's answer into `T`; the rays no grid takes
-/// are gathered and answered together by `fallback`. `false` (and nothing written) when
-/// the batch takes no grid.
+/// (all of them, when the batch takes no grid) are answered together by `fallback`.
 pub(crate) fn trace_batch<const ANY: bool, T: Send + Sync + Copy + Default>(
     rays: &[Ray],
     out: &mut [T],
     src: &Sources,
     wrap: impl Fn(Option<Hit>) -> T + Sync,
     fallback: impl Fn(&[Ray], &mut [T]),
-) -> bool {
+) {
     assert_eq!(rays.len(), out.len(), "one output slot per ray");
     let plans = Plan::for_batch(rays, src);
     if plans.is_empty() {
-        return false;
+        return fallback(rays, out);
     }
     // Each ray through the first grid that takes it; per chunk, the others' places.
     let missed: Vec<Vec<u32>> = rays
@@ -507,7 +506,7 @@ pub(crate) fn trace_batch<const ANY: bool, T: Send + Sync + Copy + Default>(
         .collect();
     let total: usize = missed.iter().map(Vec::len).sum();
     if total == 0 {
-        return true;
+        return;
     }
     // The rest traced as one batch (binned by subfield, in parallel), the answers put
     // back chunk by chunk.
@@ -532,7 +531,6 @@ pub(crate) fn trace_batch<const ANY: bool, T: Send + Sync + Copy + Default>(
                 out[i as usize] = x;
             }
         });
-    true
 }
 
 /// The rays of a batch a point's grids would take, as sampled by [`spread`].
@@ -730,8 +728,8 @@ impl<'a> Plan<'a> {
     }
 
     /// The grids around `at` (kept's, when given) for the rays the batch takes through
-    /// it (as [`spread`] sampled them), if
-    /// they pay; `seen` when the point was seen before.
+    /// it (as [`spread`] sampled them), if they pay; `seen` when the point was seen
+    /// before.
     fn around(
         src: &'a Sources<'a>,
         at: Around,
@@ -850,18 +848,6 @@ impl<'a> Plan<'a> {
             }
             fresh
         };
-        Self::with_static(src, fixed, rects, nstat, nmov)
-    }
-
-    /// The plan around `fixed`'s point: its static grid and, with moving triangles, a
-    /// grid over them for the rays that project into `rects`.
-    fn with_static(
-        src: &'a Sources<'a>,
-        fixed: Arc<StaticGrid>,
-        rects: Rects,
-        nstat: usize,
-        nmov: usize,
-    ) -> Option<Plan<'a>> {
         let pre = static_pre(src);
         let at = fixed.at;
         let batch = if nmov == 0 {

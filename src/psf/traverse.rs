@@ -336,8 +336,8 @@ impl Intersector for Psf {
         self.trace::<true, _>(ray, &mut NoCount).is_some()
     }
 
-    /// Through a point grid when the rays pass through one point and are many enough
-    /// ([`Psf::point_grid_for`]); otherwise binned by subfield (`psf::batch`).
+    /// Through point grids for the rays that pass a point grids pay for
+    /// ([`Psf::point_grid_for`]); the others binned by subfield (`psf::batch`).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         let bins = self.subfields.len().max(1);
         let walk = |rays: &[Ray], out: &mut [Option<Hit>]| {
@@ -349,9 +349,7 @@ impl Intersector for Psf {
                 |r, k| self.trace_bin::<false>(r, k),
             )
         };
-        if !trace_batch::<false, _>(rays, out, &self.point_sources(), |h| h, walk) {
-            walk(rays, out);
-        }
+        trace_batch::<false, _>(rays, out, &self.point_sources(), |h| h, walk);
     }
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
@@ -365,15 +363,14 @@ impl Intersector for Psf {
                 |r, k| self.trace_bin::<true>(r, k).is_some(),
             )
         };
-        if !trace_batch::<true, _>(rays, out, &self.point_sources(), |h| h.is_some(), walk) {
-            walk(rays, out);
-        }
+        trace_batch::<true, _>(rays, out, &self.point_sources(), |h| h.is_some(), walk);
     }
 }
 
 impl Psf {
     /// Whether [`intersect_batch`](Intersector::intersect_batch) and
-    /// [`occluded_batch`](Intersector::occluded_batch) trace `rays` through a point grid
+    /// [`occluded_batch`](Intersector::occluded_batch) trace some of `rays` through point
+    /// grids
     /// (see [`Layered::point_grid_for`](super::Layered::point_grid_for)). Either way the
     /// hits are the same.
     pub fn point_grid_for(&self, rays: &[Ray]) -> bool {
