@@ -233,9 +233,8 @@ impl DynamicLayer {
     pub fn update(&mut self, tris: &[[Vec3; 3]]) -> Result<(), PsfError> {
         self.tris.clear();
         self.next_generation();
-        check_triangles(tris)?;
+        let bounds = checked_bounds(tris)?;
         self.tris.extend_from_slice(tris);
-        let bounds = Aabb::from_triangles(tris);
         self.margin = margin_for(&bounds);
         self.clip = bounds.padded(2.0 * self.margin);
         if tris.is_empty() {
@@ -244,14 +243,25 @@ impl DynamicLayer {
         self.reorder(&bounds);
         let (gv, margin, clip, tiles) =
             (self.generation, self.margin, self.clip, self.params.tiles);
-        let sorted = &self.sorted;
-        self.subfields
-            .par_iter_mut()
-            .for_each(|s| s.insert(sorted, gv, margin, &clip, tiles, None));
+        let (sorted, local) = (&self.sorted, &mut self.local);
+        let subfields = &mut self.subfields;
+        // The test's form of the triangles is for the queries alone: made beside the
+        // insertions (a fifth job for two threads) instead of before them.
+        rayon::join(
+            || {
+                local.clear();
+                local.extend(sorted.iter().map(TriPre::new));
+            },
+            || {
+                subfields
+                    .par_iter_mut()
+                    .for_each(|s| s.insert(sorted, gv, margin, &clip, tiles, None))
+            },
+        );
         Ok(())
     }
 
-    /// Fills `order`, `sorted` and `local`: the triangles sorted by the Morton code of their
+    /// Fills `order` and `sorted`: the triangles sorted by the Morton code of their
     /// centroid within `bounds`, cut to about one bucket a triangle (a stable counting
     /// sort, so ties keep the input order and the result depends on the input alone).
     fn reorder(&mut self, bounds: &Aabb) {
@@ -285,8 +295,6 @@ impl DynamicLayer {
         self.sorted.clear();
         self.sorted
             .extend(self.order.iter().map(|&i| self.tris[i as usize]));
-        self.local.clear();
-        self.local.extend(self.sorted.iter().map(TriPre::new));
     }
 
     /// Advances `GV`; on the (4-billion-frame) wrap every stamp is reset once.
@@ -581,6 +589,37 @@ impl DynSubfield {
     }
 }
 
+/// The triangles' bounds, found in the same pass that checks their coordinates: one
+/// pass over the nine coordinates of each triangle (lanes the compiler vectorises), where
+/// any infinity or NaN turns a sum of `x * 0` into NaN; [`check_triangles`] then names
+/// the first. Two passes (the check, then [`Aabb::from_triangles`]) had taken 0.19–0.27
+/// ms of a 1.5–2.5 ms update at 16,384 triangles.
+fn checked_bounds(tris: &[[Vec3; 3]]) -> Result<Aabb, PsfError> {
+    if tris.len() > u32::MAX as usize {
+        check_triangles(tris)?;
+    }
+    let flat: &[f32] = bytemuck::cast_slice(tris);
+    let (mut lo, mut hi, mut poison) = ([f32::INFINITY; 9], [f32::NEG_INFINITY; 9], [0f32; 9]);
+    for t in flat.chunks_exact(9) {
+        for k in 0..9 {
+            // Compares rather than `f32::min`, whose NaN rule costs the vectorised loop.
+            lo[k] = if t[k] < lo[k] { t[k] } else { lo[k] };
+            hi[k] = if t[k] > hi[k] { t[k] } else { hi[k] };
+            poison[k] += t[k] * 0.0;
+        }
+    }
+    if poison.iter().any(|p| !p.is_finite()) {
+        check_triangles(tris)?;
+    }
+    let fold = |a: [f32; 9], f: fn(f32, f32) -> f32| {
+        Vec3::from_array(std::array::from_fn(|k| f(f(a[k], a[k + 3]), a[k + 6])))
+    };
+    Ok(Aabb {
+        min: fold(lo, f32::min),
+        max: fold(hi, f32::max),
+    })
+}
+
 /// Whether an insertion counts by a difference array over the whole grid: when the
 /// grid's cells are few beside the triangles (`DynamicLayer::for_triangles` gives a
 /// quarter as many tiles as triangles), so that the prefix sums cost a small part of
@@ -786,6 +825,40 @@ mod tests {
             out.push((tile, list));
         }
         out
+    }
+
+    #[test]
+    fn checked_bounds_are_the_bounds_and_name_any_non_finite_coordinate() {
+        let mut rng = Rng::new(11);
+        let tris = soup(
+            &mut rng,
+            333,
+            Vec3::splat(-7.0),
+            Vec3::new(3.0, 9.0, 1.0),
+            2.0,
+        );
+        let b = checked_bounds(&tris).expect("finite");
+        let want = Aabb::from_triangles(&tris);
+        assert_eq!((b.min, b.max), (want.min, want.max));
+        let e = checked_bounds(&[]).expect("empty");
+        assert_eq!((e.min, e.max), (Aabb::EMPTY.min, Aabb::EMPTY.max));
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            for vertex in 0..3 {
+                for axis in 0..3 {
+                    let mut t = tris.clone();
+                    t[200][vertex][axis] = bad;
+                    t[250][0][0] = bad;
+                    match checked_bounds(&t) {
+                        Err(PsfError::NonFinite {
+                            triangle: 200,
+                            vertex: v,
+                            ..
+                        }) => assert_eq!(v, vertex),
+                        other => panic!("{bad} at {vertex}/{axis}: {other:?}"),
+                    }
+                }
+            }
+        }
     }
 
     #[test]
