@@ -560,7 +560,13 @@ fn spread(rays: &[Ray], ats: &[Around]) -> Vec<Spread> {
         .map(|k| {
             let mut b = empty.clone();
             let end = ((k + 1) * SPREAD * CHUNK).min(n);
-            for ray in rays[k * SPREAD * CHUNK..end].iter().step_by(SPREAD) {
+            // The sampled rays copied first: a loop of loads alone keeps many in flight.
+            let local: Vec<Ray> = rays[k * SPREAD * CHUNK..end]
+                .iter()
+                .step_by(SPREAD)
+                .copied()
+                .collect();
+            for ray in &local {
                 let first = ats
                     .iter()
                     .enumerate()
