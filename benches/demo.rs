@@ -51,7 +51,8 @@ fn main() {
         ..RenderOptions::default()
     };
     let t = Instant::now();
-    let summary = render_sequence(&scene, &opts, &mut |_| {}).expect("render");
+    // On a pool thread, as `subfield demo` and `subfield render` run.
+    let summary = rayon::scope(|_| render_sequence(&scene, &opts, &mut |_| {})).expect("render");
     let wall = t.elapsed().as_secs_f64();
     let f = &summary.frames;
     let col =

@@ -27,7 +27,7 @@
 //! "config": ..}` line with the harness's keys (`mean_blas_ms`/`mean_tlas_ms` are
 //! `null`: there is no BVH here) plus the total rays and hits per kind, so the two
 //! sides' workloads can be checked against each other. Threads: rayon's pool
-//! (`RAYON_NUM_THREADS`, else all cores).
+//! (`RAYON_NUM_THREADS`, else all cores); the frames run on one of its threads.
 //!
 //! The harness poses camera and light from the nodes' rest transforms and animates only
 //! morph weights; the museum animates nothing else, so taking them at `t = 0` here is the
@@ -305,90 +305,96 @@ fn main() {
     let mut rows = Vec::new();
     let mut run = vec![a.frames[0]];
     run.extend_from_slice(&a.frames);
-    for (fi, &f) in run.iter().enumerate() {
-        let mut r = FrameRow::default();
-        let tsec = (f as f64 / fps as f64) as f32;
-        let t = Instant::now();
-        scene.dynamic_triangles_at(&split, tsec, &mut soup);
-        r.eval_ms = ms(t);
-        let t = Instant::now();
-        layer
-            .update(&soup.positions)
-            .unwrap_or_else(|e| fail(&format!("frame {f}: dynamic update: {e}")));
-        r.update_ms = ms(t);
-        let both = psf.with_dynamic(&layer);
+    // The frames run on a pool thread, as the harness's calling thread takes its share
+    // of each batch (`trace_helper.c` runs one worker itself) and of Embree's builds
+    // (TBB's caller joins the work): a call from outside the pool would park this thread
+    // and wait for a sleeping worker instead (`benches/PERF.md`, step 79).
+    rayon::scope(|_| {
+        for (fi, &f) in run.iter().enumerate() {
+            let mut r = FrameRow::default();
+            let tsec = (f as f64 / fps as f64) as f32;
+            let t = Instant::now();
+            scene.dynamic_triangles_at(&split, tsec, &mut soup);
+            r.eval_ms = ms(t);
+            let t = Instant::now();
+            layer
+                .update(&soup.positions)
+                .unwrap_or_else(|e| fail(&format!("frame {f}: dynamic update: {e}")));
+            r.update_ms = ms(t);
+            let both = psf.with_dynamic(&layer);
 
-        let t = Instant::now();
-        both.intersect_batch(&primary, &mut hits);
-        r.primary_ms = ms(t);
-        r.primary_rays = primary.len();
-        r.primary_hits = hits.iter().flatten().count();
-        r.dynamic_hits = hits.iter().flatten().filter(|h| h.tri >= nstat).count();
+            let t = Instant::now();
+            both.intersect_batch(&primary, &mut hits);
+            r.primary_ms = ms(t);
+            r.primary_rays = primary.len();
+            r.primary_hits = hits.iter().flatten().count();
+            r.dynamic_hits = hits.iter().flatten().filter(|h| h.tri >= nstat).count();
 
-        // Secondary rays, as the harness builds them (untimed in the frame).
-        let t = Instant::now();
-        let tri = |i: u32| {
-            if i < nstat {
-                statics.positions[i as usize]
-            } else {
-                soup.positions[(i - nstat) as usize]
+            // Secondary rays, as the harness builds them (untimed in the frame).
+            let t = Instant::now();
+            let tri = |i: u32| {
+                if i < nstat {
+                    statics.positions[i as usize]
+                } else {
+                    soup.positions[(i - nstat) as usize]
+                }
+            };
+            let (shadow, reflect): (Vec<Ray>, Vec<Ray>) = primary
+                .par_iter()
+                .zip(hits.par_iter())
+                .filter_map(|(ray, h)| {
+                    let h = h.as_ref()?;
+                    let v = tri(h.tri);
+                    let n = (v[1] - v[0]).cross(v[2] - v[0]).normalize_or(Vec3::Y);
+                    let n = if n.dot(ray.dir) > 0.0 { -n } else { n };
+                    let o = ray.at(h.t) + eps * n;
+                    let l = light - o;
+                    let dist = l.length();
+                    let sd = l / dist.max(1e-30);
+                    let rd = ray.dir - 2.0 * ray.dir.dot(n) * n;
+                    Some((
+                        Ray::segment(o, sd, 0.0, dist * (1.0 - 1e-4)),
+                        Ray::new(o, rd),
+                    ))
+                })
+                .unzip();
+            r.setup_ms = ms(t);
+
+            let mut occ = vec![false; shadow.len()];
+            let t = Instant::now();
+            both.occluded_batch(&shadow, &mut occ);
+            r.shadow_ms = ms(t);
+            r.shadow_rays = shadow.len();
+            r.shadow_occluded = occ.iter().filter(|&&o| o).count();
+
+            let mut rhits = vec![None; reflect.len()];
+            let t = Instant::now();
+            both.intersect_batch(&reflect, &mut rhits);
+            r.reflect_ms = ms(t);
+            r.reflect_rays = reflect.len();
+            r.reflect_hits = rhits.iter().flatten().count();
+
+            if fi == 0 {
+                work(&psf, &layer, [&primary, &shadow, &reflect]);
             }
-        };
-        let (shadow, reflect): (Vec<Ray>, Vec<Ray>) = primary
-            .par_iter()
-            .zip(hits.par_iter())
-            .filter_map(|(ray, h)| {
-                let h = h.as_ref()?;
-                let v = tri(h.tri);
-                let n = (v[1] - v[0]).cross(v[2] - v[0]).normalize_or(Vec3::Y);
-                let n = if n.dot(ray.dir) > 0.0 { -n } else { n };
-                let o = ray.at(h.t) + eps * n;
-                let l = light - o;
-                let dist = l.length();
-                let sd = l / dist.max(1e-30);
-                let rd = ray.dir - 2.0 * ray.dir.dot(n) * n;
-                Some((
-                    Ray::segment(o, sd, 0.0, dist * (1.0 - 1e-4)),
-                    Ray::new(o, rd),
-                ))
-            })
-            .unzip();
-        r.setup_ms = ms(t);
-
-        let mut occ = vec![false; shadow.len()];
-        let t = Instant::now();
-        both.occluded_batch(&shadow, &mut occ);
-        r.shadow_ms = ms(t);
-        r.shadow_rays = shadow.len();
-        r.shadow_occluded = occ.iter().filter(|&&o| o).count();
-
-        let mut rhits = vec![None; reflect.len()];
-        let t = Instant::now();
-        both.intersect_batch(&reflect, &mut rhits);
-        r.reflect_ms = ms(t);
-        r.reflect_rays = reflect.len();
-        r.reflect_hits = rhits.iter().flatten().count();
-
-        if fi == 0 {
-            work(&psf, &layer, [&primary, &shadow, &reflect]);
+            println!(
+                "{}",
+                json!({
+                    "frame": f, "warmup": fi == 0, "eval_ms": r3(r.eval_ms),
+                    "update_ms": r3(r.update_ms), "primary_ms": r3(r.primary_ms),
+                    "primary_rays": r.primary_rays, "primary_hits": r.primary_hits,
+                    "dynamic_hits": r.dynamic_hits, "setup_ms": r3(r.setup_ms),
+                    "shadow_ms": r3(r.shadow_ms), "shadow_rays": r.shadow_rays,
+                    "shadow_occluded": r.shadow_occluded, "reflect_ms": r3(r.reflect_ms),
+                    "reflect_rays": r.reflect_rays, "reflect_hits": r.reflect_hits,
+                    "trace_ms": r3(r.trace_ms()), "frame_ms": r3(r.frame_ms()),
+                })
+            );
+            if fi > 0 {
+                rows.push(r);
+            }
         }
-        println!(
-            "{}",
-            json!({
-                "frame": f, "warmup": fi == 0, "eval_ms": r3(r.eval_ms),
-                "update_ms": r3(r.update_ms), "primary_ms": r3(r.primary_ms),
-                "primary_rays": r.primary_rays, "primary_hits": r.primary_hits,
-                "dynamic_hits": r.dynamic_hits, "setup_ms": r3(r.setup_ms),
-                "shadow_ms": r3(r.shadow_ms), "shadow_rays": r.shadow_rays,
-                "shadow_occluded": r.shadow_occluded, "reflect_ms": r3(r.reflect_ms),
-                "reflect_rays": r.reflect_rays, "reflect_hits": r.reflect_hits,
-                "trace_ms": r3(r.trace_ms()), "frame_ms": r3(r.frame_ms()),
-            })
-        );
-        if fi > 0 {
-            rows.push(r);
-        }
-    }
+    });
 
     let n = rows.len() as f64;
     let mean = |g: fn(&FrameRow) -> f64| rows.iter().map(g).sum::<f64>() / n;

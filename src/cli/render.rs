@@ -161,58 +161,64 @@ pub fn drive(
         .map(|w| format!("warning: {w}"))
         .collect();
     let mut done = 0u64;
-    let summary = render::render_sequence(scene, opts, &mut |e| match e {
-        RenderEvent::Planned(p) => {
-            pending.push(format!(
-                "{}: {}; frames {}..{} at {} fps, {} to render, {}x{} at {} spp",
-                label.display(),
-                p.split,
-                p.range.start,
-                p.range.end,
-                p.fps,
-                p.frames.len(),
-                opts.width,
-                opts.height,
-                opts.spp
-            ));
-        }
-        RenderEvent::StaticReady {
-            triangles,
-            baked_file,
-            seconds,
-        } => {
-            pending.push(format!(
-                "static part: {triangles} triangles, {} in {:.2} s",
-                if baked_file {
-                    "opened from the baked file"
-                } else {
-                    "baked in memory"
-                },
-                seconds
-            ));
-            if !quiet {
-                for line in pending.drain(..) {
-                    eprintln!("{line}");
+    // The sequence runs on a pool thread: each of its parallel loops then starts at once
+    // on this thread, where from outside the pool it would park this thread and wait for
+    // a sleeping worker to wake, which on a virtual machine takes 0.5–2 ms a time
+    // (`benches/PERF.md`, step 79: the demo's frame 409 → 383 ms).
+    let summary = rayon::scope(|_| {
+        render::render_sequence(scene, opts, &mut |e| match e {
+            RenderEvent::Planned(p) => {
+                pending.push(format!(
+                    "{}: {}; frames {}..{} at {} fps, {} to render, {}x{} at {} spp",
+                    label.display(),
+                    p.split,
+                    p.range.start,
+                    p.range.end,
+                    p.fps,
+                    p.frames.len(),
+                    opts.width,
+                    opts.height,
+                    opts.spp
+                ));
+            }
+            RenderEvent::StaticReady {
+                triangles,
+                baked_file,
+                seconds,
+            } => {
+                pending.push(format!(
+                    "static part: {triangles} triangles, {} in {:.2} s",
+                    if baked_file {
+                        "opened from the baked file"
+                    } else {
+                        "baked in memory"
+                    },
+                    seconds
+                ));
+                if !quiet {
+                    for line in pending.drain(..) {
+                        eprintln!("{line}");
+                    }
                 }
             }
-        }
-        RenderEvent::Frame(f) => {
-            let b = bar.get_or_insert_with(|| Progress::new("frames", f.total as u64, quiet));
-            done += 1;
-            let extra = match &f.stats {
-                Some(s) => {
-                    let secs = (s.trace_ms + s.shade_ms) / 1e3;
-                    format!(
-                        "frame {} {:.0} ms, {:.2} Mrays/s",
-                        f.frame,
-                        s.update_ms + s.trace_ms + s.shade_ms,
-                        s.rays.total() as f64 / secs.max(1e-9) / 1e6
-                    )
-                }
-                None => format!("frame {} complete, skipped", f.frame),
-            };
-            b.set(done, &extra);
-        }
+            RenderEvent::Frame(f) => {
+                let b = bar.get_or_insert_with(|| Progress::new("frames", f.total as u64, quiet));
+                done += 1;
+                let extra = match &f.stats {
+                    Some(s) => {
+                        let secs = (s.trace_ms + s.shade_ms) / 1e3;
+                        format!(
+                            "frame {} {:.0} ms, {:.2} Mrays/s",
+                            f.frame,
+                            s.update_ms + s.trace_ms + s.shade_ms,
+                            s.rays.total() as f64 / secs.max(1e-9) / 1e6
+                        )
+                    }
+                    None => format!("frame {} complete, skipped", f.frame),
+                };
+                b.set(done, &extra);
+            }
+        })
     })?;
     if !quiet {
         let n = summary.rendered.max(1) as f64;
