@@ -77,7 +77,10 @@ impl Hit {
 }
 
 /// Closest-hit and any-hit queries over a set of triangles. Batch calls trace in
-/// parallel with rayon; results come back in the order of the rays.
+/// parallel with rayon; results come back in the order of the rays. Called from outside
+/// rayon's pool, a batch parks the calling thread until the pool's workers (which may
+/// have to wake first) are done: a program tracing batch after batch runs them from a
+/// pool thread (inside `rayon::scope`), as the renderer does.
 pub trait Intersector: Sync {
     /// The closest hit in `[t_min, t_max]` under the tie rule of [`Hit::is_closer_than`].
     fn intersect(&self, ray: &Ray) -> Option<Hit>;

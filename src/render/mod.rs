@@ -417,7 +417,9 @@ fn write_job(job: &Job, opts: &RenderOptions) -> Result<f64, RenderError> {
 
 /// Renders the planned frames of `scene` to EXR files (see the module docs). Every
 /// option is checked before the first file is written; `on_event` sees the plan, the
-/// static part, and each frame as it is written or skipped.
+/// static part, and each frame as it is written or skipped. Its parallel loops start
+/// soonest when it is called from a rayon pool thread (`subfield render` calls it inside
+/// `rayon::scope`; [`Intersector`](crate::Intersector) says why).
 pub fn render_sequence(
     scene: &Scene,
     opts: &RenderOptions,
