@@ -161,10 +161,12 @@ pub fn drive(
         .map(|w| format!("warning: {w}"))
         .collect();
     let mut done = 0u64;
-    // The sequence runs on a pool thread: each of its parallel loops then starts at once
-    // on this thread, where from outside the pool it would park this thread and wait for
-    // a sleeping worker to wake, which on a virtual machine takes 0.5–2 ms a time
-    // (`benches/PERF.md`, step 79: the demo's frame 409 → 383 ms).
+    // The sequence runs on a pool thread (this one waits): each of its parallel loops
+    // then starts at once on that thread, where from outside the pool each would park its
+    // caller and wait for a sleeping worker to wake, which took 0.5–2 ms a time on the
+    // shared machines (`benches/PERF.md`, step 79: the demo's frame 409 → 383 ms). The
+    // writer thread it feeds encodes without rayon (`non_parallel`), so a frame waiting
+    // for the writer cannot hold up work the writer needs.
     let summary = rayon::scope(|_| {
         render::render_sequence(scene, opts, &mut |e| match e {
             RenderEvent::Planned(p) => {
