@@ -262,12 +262,16 @@ impl DynamicLayer {
     }
 
     /// Fills `order` and `sorted`: the triangles sorted by the Morton code of their
-    /// centroid within `bounds`, cut to about one bucket a triangle (a stable counting
-    /// sort, so ties keep the input order and the result depends on the input alone).
+    /// centroid within `bounds`, cut to a bucket for every one to eight triangles (a
+    /// stable counting sort, so ties keep the input order and the result depends on the
+    /// input alone).
     fn reorder(&mut self, bounds: &Aabb) {
         let n = self.tris.len();
-        // 3 bits of code per level of an octree with about n leaves, 3..=30 bits.
-        let levels = ((usize::BITS - n.leading_zeros()).div_ceil(3)).clamp(1, 10);
+        // 3 bits of code per level of an octree with n / 8 to n leaves, 3..=27 bits. A
+        // level finer (up to eight buckets a triangle) sorted no better for the
+        // insertions and the queries and updated 4-6% slower: its counts outgrow the
+        // first-level cache (`benches/PERF.md`, step 80).
+        let levels = ((usize::BITS - n.leading_zeros()).div_ceil(3)).clamp(2, 10) - 1;
         let bits = 3 * levels;
         let scale = Vec3::splat((1u32 << levels) as f32) / bounds.extent().max(Vec3::splat(1e-30));
         let top = ((1u32 << levels) - 1) as f32;
