@@ -110,18 +110,26 @@ impl Entries {
         self.blocks.capacity() * LANES
     }
 
-    fn clear(&mut self) {
-        self.blocks.clear();
+    /// At least `n` entries (a multiple of `LANES`). The buffer only grows, its new
+    /// blocks padding, and keeps headroom: grown to 5/4 of the need whenever it is short,
+    /// so it settles after the first frames instead of doubling whenever a frame sets a
+    /// record. What lies beyond this frame's runs is never read.
+    fn ensure(&mut self, n: usize) {
+        let need = n / LANES;
+        if self.blocks.capacity() < need {
+            let want = (n + n / 4).next_multiple_of(LANES) / LANES;
+            self.blocks.reserve_exact(want - self.blocks.len());
+        }
+        if self.blocks.len() < need {
+            self.blocks.resize(need, PADDING);
+        }
     }
 
-    /// Room for `n` entries, a multiple of `LANES`.
-    fn reserve_exact(&mut self, n: usize) {
-        self.blocks.reserve_exact(n / LANES);
-    }
-
-    /// `n` entries (a multiple of `LANES`), all of them padding.
-    fn resize_padding(&mut self, n: usize) {
-        self.blocks.resize(n / LANES, PADDING);
+    /// Padding in the block holding entry `i` (the first place after a run whose last
+    /// block is not full; the run's entries are written into the block afterwards).
+    #[inline]
+    fn pad(&mut self, i: usize) {
+        self.blocks[i / LANES] = PADDING;
     }
 
     #[inline]
@@ -544,15 +552,23 @@ impl DynSubfield {
             }
         }
         let at = at as usize;
-        // Buffers keep headroom over this frame's need: grown to 5/4 of it whenever they
-        // are short, so they settle after the first frames instead of doubling whenever a
-        // frame sets a record.
-        self.entries.clear();
-        if self.entries.capacity() < at {
-            self.entries
-                .reserve_exact((at + at / 4).next_multiple_of(LANES));
+        // The buffer is written in place: each run's last block, where it is not full,
+        // padded first (instead of padding the whole buffer every frame).
+        self.entries.ensure(at);
+        let mut pad = |slot: &Slot| {
+            let end = (slot.start + slot.count) as usize;
+            if end % LANES != 0 {
+                self.entries.pad(end);
+            }
+        };
+        if dense {
+            slots[..nu * nv]
+                .iter()
+                .filter(|s| s.version == gv && s.count > 0)
+                .for_each(&mut pad);
+        } else {
+            touched.iter().for_each(|&t| pad(&slots[t as usize]));
         }
-        self.entries.resize_padding(at);
         let entries = &mut self.entries;
         let mut put = |tile: usize, e: &Entry| {
             let at = &mut cursor[tile];
@@ -862,6 +878,45 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// The entry buffer is reused from frame to frame: after a frame of many triangles,
+    /// a frame of fewer leaves every run's last block padded beyond its entries (a stale
+    /// entry there would be tested, against a triangle that may no longer exist).
+    #[test]
+    fn runs_end_in_padding_after_a_larger_frame() {
+        let mut rng = Rng::new(5);
+        let (lo, hi) = (Vec3::new(-4.0, -2.0, -3.0), Vec3::new(4.0, 2.0, 3.0));
+        let many = soup(&mut rng, 3000, lo, hi, 0.4);
+        let few = soup(&mut rng, 200, lo, hi, 0.3);
+        for dense in [true, false] {
+            let layer = DynamicLayer::with_params(PsfParams {
+                level: 0,
+                tiles: 32,
+            });
+            let mut s = layer.expect("params").subfields.remove(0);
+            for (gv, tris) in [(1, &many), (2, &few)] {
+                let bounds = Aabb::from_triangles(tris);
+                let margin = margin_for(&bounds);
+                let clip = bounds.padded(2.0 * margin);
+                s.insert(tris, gv, margin, &clip, 32, Some(dense));
+            }
+            let mut runs = 0;
+            for slot in s.slots.iter().filter(|x| x.version == 2) {
+                let (start, end) = (slot.start as usize, (slot.start + slot.count) as usize);
+                for i in end..end.next_multiple_of(LANES) {
+                    let b = &s.entries.blocks[i / LANES];
+                    let j = i % LANES;
+                    assert_eq!(
+                        (b.zmin[j], b.zmax[j]),
+                        (f32::INFINITY, f32::NEG_INFINITY),
+                        "dense {dense}: run {start}..{end}, lane {i}"
+                    );
+                }
+                runs += 1;
+            }
+            assert!(runs > 10, "dense {dense}: {runs} runs");
         }
     }
 
