@@ -117,7 +117,7 @@ impl Entries {
     fn ensure(&mut self, n: usize) {
         let need = n / LANES;
         if self.blocks.capacity() < need {
-            let want = (n + n / 4).next_multiple_of(LANES) / LANES;
+            let want = (n + n / 4).div_ceil(LANES);
             self.blocks.reserve_exact(want - self.blocks.len());
         }
         if self.blocks.len() < need {
