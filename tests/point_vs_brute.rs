@@ -272,6 +272,31 @@ fn assert_agrees(got: &dyn Intersector, want: &dyn Intersector, rs: &[Ray], what
     }
 }
 
+/// A frame without moving triangles after one with many: the point grids of its
+/// batches are built over the layer's triangles, and must find none of the last
+/// frame's (they once did: the layer's sorted copies outlived an empty update, and a
+/// camera batch reported hits on triangles gone). Then a refused update, the same.
+#[test]
+fn an_empty_frame_leaves_no_moving_triangle_behind() {
+    let mut rng = Rng::new(31);
+    let stat = synth::box_faces(LO, HI);
+    let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+    let brute = BruteForce::new(&stat);
+    let mut layer = DynamicLayer::new(&psf);
+    let c = Vec3::new(4.0, 3.0, 5.0);
+    let crowd = synth::soup(&mut rng, 400, LO + 1.0, HI - 1.0, 0.8);
+    let bad = [[Vec3::ZERO, Vec3::new(f32::NAN, 0.0, 0.0), Vec3::ONE]];
+    for (what, next) in [("empty", &[][..]), ("refused", &bad[..])] {
+        layer.update(&crowd).expect("update");
+        let _ = layer.update(next);
+        assert!(layer.is_empty(), "{what}");
+        let both = psf.with_dynamic(&layer);
+        let primary = view(&mut rng, 4000, c, Vec3::X, 0.9);
+        assert!(both.point_grid_for(&primary), "{what}");
+        assert_agrees(&both, &brute, &primary, what);
+    }
+}
+
 /// A camera that stays put over frames while its view changes: the static grid kept
 /// from the first frame serves the views within it and is built again, wider, for one
 /// beyond it. Every frame agrees with brute force, and takes a grid.

@@ -239,7 +239,13 @@ impl DynamicLayer {
     /// Replaces the layer's triangles with `tris` (this frame's positions). On error
     /// (a non-finite coordinate) the layer is left empty.
     pub fn update(&mut self, tris: &[[Vec3; 3]]) -> Result<(), PsfError> {
+        // Everything that describes the last frame's triangles goes, the sorted copies
+        // too: the point grids read those, and a frame without moving triangles (or a
+        // refused one) must leave none of the last frame's behind.
         self.tris.clear();
+        self.sorted.clear();
+        self.local.clear();
+        self.order.clear();
         self.next_generation();
         let bounds = checked_bounds(tris)?;
         self.tris.extend_from_slice(tris);
