@@ -219,8 +219,7 @@ proptest! {
 #[test]
 fn camera_and_light_batches_take_the_point_grid() {
     let mut rng = Rng::new(7);
-    let stat = synth::box_faces(LO, HI);
-    let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+    let (_, psf) = room(&mut rng, 0, 0.0);
     let mut layer = DynamicLayer::new(&psf);
     layer
         .update(&synth::soup(&mut rng, 100, LO, HI, 0.5))
@@ -236,6 +235,15 @@ fn camera_and_light_batches_take_the_point_grid() {
     assert!(!both.point_grid_for(&scattered));
     // Too small a batch (under 256 rays) to pay for a grid.
     assert!(!both.point_grid_for(&rays(&mut rng, 100, c, 0, true, &[])));
+}
+
+/// The box room with `n` random triangles of about `size` inside, and its PSF baked with
+/// the parameters the renderer picks.
+fn room(rng: &mut Rng, n: usize, size: f32) -> (Vec<[Vec3; 3]>, Psf) {
+    let mut stat = synth::box_faces(LO, HI);
+    stat.extend(synth::soup(rng, n, LO, HI, size));
+    let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+    (stat, psf)
 }
 
 /// Rays from `c` within `spread` of `axis` (a camera's view, wider or narrower).
@@ -279,8 +287,7 @@ fn assert_agrees(got: &dyn Intersector, want: &dyn Intersector, rs: &[Ray], what
 #[test]
 fn an_empty_frame_leaves_no_moving_triangle_behind() {
     let mut rng = Rng::new(31);
-    let stat = synth::box_faces(LO, HI);
-    let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+    let (stat, psf) = room(&mut rng, 0, 0.0);
     let brute = BruteForce::new(&stat);
     let mut layer = DynamicLayer::new(&psf);
     let c = Vec3::new(4.0, 3.0, 5.0);
@@ -303,9 +310,7 @@ fn an_empty_frame_leaves_no_moving_triangle_behind() {
 #[test]
 fn kept_grids_serve_later_frames() {
     let mut rng = Rng::new(23);
-    let mut stat = synth::box_faces(LO, HI);
-    stat.extend(synth::soup(&mut rng, 3000, LO, HI, 0.3));
-    let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+    let (stat, psf) = room(&mut rng, 3000, 0.3);
     let mut layer = DynamicLayer::new(&psf);
     let c = Vec3::new(4.0, 3.0, 5.0);
     let light = Vec3::new(2.0, 7.0, 2.0);
@@ -348,9 +353,7 @@ fn kept_grids_serve_later_frames() {
 #[test]
 fn a_point_seen_again_gets_a_grid() {
     let mut rng = Rng::new(29);
-    let mut stat = synth::box_faces(LO, HI);
-    stat.extend(synth::soup(&mut rng, 20_000, LO, HI, 0.2));
-    let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+    let (stat, psf) = room(&mut rng, 20_000, 0.2);
     let brute = BruteForce::new(&stat);
     let light = Vec3::new(4.0, 4.0, 4.0);
     // Shadow rays from all around: all six faces, 1,500 rays for 20,000 triangles
@@ -383,9 +386,7 @@ fn a_point_seen_again_gets_a_grid() {
 fn several_points_in_one_batch() {
     for seed in 0..6 {
         let mut rng = Rng::new(100 + seed);
-        let mut stat = synth::box_faces(LO, HI);
-        stat.extend(synth::soup(&mut rng, 400, LO, HI, 0.8));
-        let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+        let (stat, psf) = room(&mut rng, 400, 0.8);
         let mut layer = DynamicLayer::new(&psf);
         let eye = rng.in_box(LO + 1.0, HI - 1.0);
         let light = rng.in_box(LO + 1.0, HI - 1.0);
@@ -428,9 +429,7 @@ fn several_points_in_one_batch() {
 #[test]
 fn kept_grids_are_one_a_point_and_eight_at_most() {
     let mut rng = Rng::new(31);
-    let mut stat = synth::box_faces(LO, HI);
-    stat.extend(synth::soup(&mut rng, 2000, LO, HI, 0.3));
-    let psf = Psf::build(&stat, &PsfParams::for_triangles(stat.len())).expect("bake");
+    let (stat, psf) = room(&mut rng, 2000, 0.3);
     let brute = BruteForce::new(&stat);
     let eye = Vec3::new(4.0, 3.0, 4.0);
     for k in 0..4 {
