@@ -1221,20 +1221,6 @@ impl PointGrid {
         {
             return None;
         }
-        // Near to far within every tile: write the entries in order of depth. Depths
-        // are positive (at least `r / 2`), so their bits order them; ties go to the
-        // earlier item, so the grid depends on its input alone.
-        let items = {
-            let mut keys: Vec<u64> = items
-                .iter()
-                .enumerate()
-                .map(|(k, it)| (it.zmin.to_bits() as u64) << 32 | k as u64)
-                .collect();
-            keys.par_sort_unstable();
-            keys.iter()
-                .map(|&k| items[k as u32 as usize])
-                .collect::<Vec<Item>>()
-        };
         // Tiles in ranges, one job a range: each goes through all the items in order
         // and counts (then writes) the entries of its own tiles.
         let jobs = (2 * rayon::current_num_threads()).clamp(1, total.max(1));
@@ -1302,6 +1288,16 @@ impl PointGrid {
                     };
                     *k += 1;
                 });
+                // Near to far within every tile. The items come in triangle order, so
+                // a stable sort by depth leaves ties to the earlier triangle and the
+                // grid depends on its input alone; depths are positive (at least `r /
+                // 2`), so their bits order them. Sorting each tile's short run after
+                // it is written costs less than sorting all the items first
+                // (`benches/PERF.md`, step 82).
+                for t in lo..hi {
+                    let run = starts[t] as usize - base..starts[t + 1] as usize - base;
+                    out[run].sort_by_key(|e| e.zmin.to_bits());
+                }
             });
         }
         Some(PointGrid {
