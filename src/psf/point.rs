@@ -1112,13 +1112,22 @@ impl PointGrid {
 
         // Each triangle's rectangles of tiles, face by face, in triangle order.
         let h = 0.5 * r;
-        let items_of = |g: usize| {
-            let mut out = [None; 6];
+        // The most any `eps` below can be: its clipped part's least depth is at least `h`.
+        let eps_max = 4.0 * allowance / h + EPS_P;
+        let beyond = faces.map(|f| {
+            [
+                f.u0 - eps_max,
+                f.v0 - eps_max,
+                f.u0 + f.nu as f64 / f.inv + eps_max,
+                f.v0 + f.nv as f64 / f.inv + eps_max,
+            ]
+        });
+        let items_of = |g: usize, out: &mut Vec<Item>| {
             let q = tri(g).map(|v| v.as_dvec3() - c);
             let lo = q[0].min(q[1]).min(q[2]);
             let hi = q[0].max(q[1]).max(q[2]);
             if lo.cmple(DVec3::splat(r)).all() && hi.cmpge(DVec3::splat(-r)).all() {
-                out[0] = Some(Item {
+                out.push(Item {
                     face: NEAR,
                     i0: 0,
                     i1: 0,
@@ -1128,7 +1137,7 @@ impl PointGrid {
                     zmax: 0.0,
                     tri: g as u32,
                 });
-                return out;
+                return;
             }
             for (f, face) in faces.iter().enumerate() {
                 if face.nu == 0 {
@@ -1136,6 +1145,19 @@ impl PointGrid {
                 }
                 let p = q.map(|x| face_coords(f, x));
                 if p.iter().all(|x| x.2 < h) {
+                    continue;
+                }
+                // Wholly beyond one side of the face's grid grown by `eps_max`: every
+                // point of the triangle with `z > 0` projects further out than the
+                // grown rectangle below could reach (`u > k z` is a half-space through
+                // `c`, and the clipped corners lie in it), so nothing is listed and no
+                // corner need be projected.
+                let [ku0, kv0, ku1, kv1] = beyond[f];
+                if p.iter().all(|x| x.0 > ku1 * x.2)
+                    || p.iter().all(|x| x.0 < ku0 * x.2)
+                    || p.iter().all(|x| x.1 > kv1 * x.2)
+                    || p.iter().all(|x| x.1 < kv0 * x.2)
+                {
                     continue;
                 }
                 // Clip to z >= h (at most four corners), project, bound.
@@ -1147,7 +1169,10 @@ impl PointGrid {
                 );
                 let (mut z0, mut z1) = (f64::INFINITY, f64::NEG_INFINITY);
                 let mut add = |(u, v, z): (f64, f64, f64)| {
-                    let (pu, pv) = (u / z, v / z);
+                    // One division a corner: the product differs from `u / z` by an
+                    // ulp of f64, far inside `eps`.
+                    let inv = 1.0 / z;
+                    let (pu, pv) = (u * inv, v * inv);
                     pu0 = pu0.min(pu);
                     pv0 = pv0.min(pv);
                     pu1 = pu1.max(pu);
@@ -1180,7 +1205,7 @@ impl PointGrid {
                 if !(a1 >= 0.0 && b1 >= 0.0 && a0 < face.nu as f64 && b0 < face.nv as f64) {
                     continue;
                 }
-                out[f] = Some(Item {
+                out.push(Item {
                     face: f as u8,
                     i0: a0.max(0.0) as u32,
                     i1: (a1 as usize).min(face.nu - 1) as u32,
@@ -1191,15 +1216,16 @@ impl PointGrid {
                     tri: g as u32,
                 });
             }
-            out
         };
         let chunks: Vec<Vec<Item>> = (0..count.div_ceil(CHUNK))
             .into_par_iter()
             .map(|k| {
                 let range = k * CHUNK..((k + 1) * CHUNK).min(count);
-                range
-                    .flat_map(|g| items_of(g).into_iter().flatten())
-                    .collect()
+                let mut out = Vec::with_capacity(2 * range.len());
+                for g in range {
+                    items_of(g, &mut out);
+                }
+                out
             })
             .collect();
         let mut items = chunks.concat();
@@ -1348,6 +1374,55 @@ mod tests {
         assert_eq!(passes(c, r, rho, &off), None);
         // Not a ray at all.
         assert_eq!(passes(c, r, rho, &Ray::new(cf, Vec3::ZERO)), None);
+    }
+
+    /// A triangle whose projection lies beyond a face's grid by less than its `eps`
+    /// can still be hit by a ray landing in the edge tile: the build's early cull of
+    /// triangles beyond the grid must leave it listed, and drop one further out.
+    #[test]
+    fn triangles_just_beyond_a_grid_stay_listed() {
+        let at = Around {
+            c: DVec3::ZERO,
+            r: 0.05,
+            rho_max: 1e-4,
+            reach2: 1.0,
+            margin: 1e-4,
+        };
+        // Face 0 looks along +x: `(u, v, z) = (y, z, x)`.
+        let mut rects = [NO_RECT; 6];
+        rects[0] = (-0.5, -0.5, 0.5, 0.5, 64 * RAYS_PER_TILE);
+        let depth = 10.0f64;
+        let eps = 4.0 * at.allowance() / depth + EPS_P;
+        let probe = |gap: f64| {
+            let grid = PointGrid::build(
+                &at,
+                &rects,
+                1,
+                |_| {
+                    // Its projection starts `gap` beyond the rectangle's right side.
+                    let u = 0.5 + gap;
+                    [
+                        Vec3::new(depth as f32, (u * depth) as f32, 0.0),
+                        Vec3::new(depth as f32, ((u + 0.01) * depth) as f32, 0.0),
+                        Vec3::new(depth as f32, ((u + 0.01) * depth) as f32, 0.1),
+                    ]
+                },
+                0,
+            )
+            .expect("a small grid");
+            let face = grid.faces[0];
+            let right = face.u0 + face.nu as f64 / face.inv;
+            let edge = face.tile([(right - 1e-6) as f32, 0.0]).expect("inside");
+            (right, grid.run(edge).iter().any(|e| e.tri == 0))
+        };
+        // Whole tiles put the grid's edge at or beyond the rectangle's: measure from it.
+        let (right, _) = probe(1.0);
+        let beyond = right - 0.5;
+        assert!(
+            probe(beyond + 0.25 * eps).1,
+            "within eps of the edge: listed"
+        );
+        assert!(!probe(beyond + 0.01).1, "well beyond: not listed");
     }
 
     #[test]
