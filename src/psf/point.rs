@@ -471,8 +471,10 @@ struct BatchGrid<'a> {
 const SPLIT: usize = 6;
 
 /// The batch's rays sampled to find the rectangles its rays project into: one in this
-/// many.
-const SPREAD: usize = 8;
+/// many. Prime, so that the sampled columns of an image's rows move from row to row and
+/// together reach its last columns at the usual widths (8 sampled the same columns in
+/// every row; 17 spends half the time of 8, `benches/PERF.md`, step 84).
+const SPREAD: usize = 17;
 
 /// `out[i] = query(rays[i])` through point grids where the batch takes any
 /// ([`Plan::for_batch`]), `wrap` turning a grid's answer into `T`; the rays no grid takes
