@@ -115,7 +115,7 @@ impl Face {
 }
 
 /// A triangle listed in a rectangle of tiles of one face (face 6: the near list).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 struct Item {
     face: u8,
     i0: u32,
@@ -128,6 +128,40 @@ struct Item {
 }
 
 const NEAR: u8 = 6;
+
+/// `items` sorted by `zmin`, ties in their order (a stable radix sort, 11 bits a pass,
+/// a pass skipped where every key has the same digit). Depths are positive (at least
+/// `r / 2`), so their bits order them; items come in triangle order, so ties go to the
+/// earlier triangle and a grid depends on its input alone. Two or three passes over a
+/// few thousand items cost less than a comparison sort of them (`benches/PERF.md`,
+/// step 82).
+fn by_depth(mut items: Vec<Item>) -> Vec<Item> {
+    let mut spare = vec![Item::default(); items.len()];
+    for shift in [0, 11, 22] {
+        let digit = |it: &Item| ((it.zmin.to_bits() >> shift) & 0x7ff) as usize;
+        let mut at = [0u32; 2048];
+        for it in &items {
+            at[digit(it)] += 1;
+        }
+        if items
+            .first()
+            .is_none_or(|it| at[digit(it)] as usize == items.len())
+        {
+            continue;
+        }
+        let mut sum = 0;
+        for a in at.iter_mut() {
+            (*a, sum) = (sum, sum + *a);
+        }
+        for it in &items {
+            let k = &mut at[digit(it)];
+            spare[*k as usize] = *it;
+            *k += 1;
+        }
+        std::mem::swap(&mut items, &mut spare);
+    }
+    items
+}
 
 /// The triangles a point grid is built over: the static PSF's, then the dynamic layer's
 /// in its own (Morton) order, and the hit number each one reports; and the static
@@ -1249,6 +1283,8 @@ impl PointGrid {
         {
             return None;
         }
+        // Near to far within every tile: the entries are written in order of depth.
+        let items = by_depth(items);
         // Tiles in ranges, one job a range: each goes through all the items in order
         // and counts (then writes) the entries of its own tiles.
         let jobs = (2 * rayon::current_num_threads()).clamp(1, total.max(1));
@@ -1316,16 +1352,6 @@ impl PointGrid {
                     };
                     *k += 1;
                 });
-                // Near to far within every tile. The items come in triangle order, so
-                // a stable sort by depth leaves ties to the earlier triangle and the
-                // grid depends on its input alone; depths are positive (at least `r /
-                // 2`), so their bits order them. Sorting each tile's short run after
-                // it is written costs less than sorting all the items first
-                // (`benches/PERF.md`, step 82).
-                for t in lo..hi {
-                    let run = starts[t] as usize - base..starts[t + 1] as usize - base;
-                    out[run].sort_by_key(|e| e.zmin.to_bits());
-                }
             });
         }
         Some(PointGrid {
@@ -1376,6 +1402,31 @@ mod tests {
         assert_eq!(passes(c, r, rho, &off), None);
         // Not a ray at all.
         assert_eq!(passes(c, r, rho, &Ray::new(cf, Vec3::ZERO)), None);
+    }
+
+    #[test]
+    fn items_sort_by_depth_ties_in_order() {
+        let mut rng = Rng::new(5);
+        for n in [0, 1, 2, 100, 5000] {
+            let items: Vec<Item> = (0..n)
+                .map(|k| Item {
+                    face: 0,
+                    i0: 0,
+                    i1: 0,
+                    j0: 0,
+                    j1: 0,
+                    // Few distinct depths (ties), spread over many binades.
+                    zmin: (1 + rng.below(40)) as f32 * 10f32.powi(rng.below(12) as i32 - 6),
+                    zmax: 0.0,
+                    tri: k,
+                })
+                .collect();
+            let mut want = items.clone();
+            want.sort_by_key(|it| it.zmin.to_bits());
+            let got = by_depth(items);
+            let key = |v: &[Item]| v.iter().map(|it| (it.zmin, it.tri)).collect::<Vec<_>>();
+            assert_eq!(key(&got), key(&want), "{n} items");
+        }
     }
 
     /// A triangle whose projection lies beyond a face's grid by less than its `eps`
