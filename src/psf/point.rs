@@ -12,8 +12,9 @@
 //! A batch may pass several points: reflections off a plane pass the camera's mirror
 //! image in it, so a batch of reflections has a point for each mirror plane in view. A
 //! batch gets grids around up to [`MAX_POINTS`] points, a ray takes the first that
-//! qualifies it, and the rays that none takes are traced together through the parallel
-//! subfields.
+//! qualifies it (trying first the grid that took the ray before it: neighbouring rays
+//! mostly reflect off the same plane), and the rays that none takes are traced together
+//! through the parallel subfields.
 //!
 //! A camera or a light usually stays put from frame to frame, and the static triangles
 //! do not move: their grid around such a point is kept in the static PSF ([`PointCache`])
@@ -525,14 +526,26 @@ pub(crate) fn trace_batch<const ANY: bool, T: Send + Sync + Copy + Default>(
     if plans.is_empty() {
         return fallback(rays, out);
     }
-    // Each ray through the first grid that takes it; per chunk, the others' places.
+    // Each ray through a grid that takes it; per chunk, the others' places.
     let missed: Vec<Vec<u32>> = rays
         .par_chunks(CHUNK)
         .zip(out.par_chunks_mut(CHUNK))
         .map(|(rays, out)| {
             let mut miss = Vec::new();
+            // Neighbouring rays mostly take the same grid (a mirror plane's reflections
+            // lie together in the image): the one that took the last ray is tried
+            // first, which saved a reflection batch a qualification or two a ray
+            // (`benches/PERF.md`, step 85). Any grid that takes a ray gives it the same
+            // hit.
+            let mut last = 0;
             for (i, (ray, o)) in rays.iter().zip(out).enumerate() {
-                match plans.iter().find_map(|p| p.query::<ANY>(ray)) {
+                let hit = plans[last].query::<ANY>(ray).or_else(|| {
+                    plans.iter().enumerate().find_map(|(k, p)| {
+                        let h = if k == last { None } else { p.query::<ANY>(ray) };
+                        h.inspect(|_| last = k)
+                    })
+                });
+                match hit {
                     Some(hit) => *o = wrap(hit),
                     None => miss.push(i as u32),
                 }
