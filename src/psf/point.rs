@@ -665,12 +665,46 @@ fn union(
 /// Points a batch may have grids around, at most.
 const MAX_POINTS: usize = 8;
 
-/// Adds `at` to the points seen (the most recent [`KEPT`]), once.
-fn remember(seen: &mut Vec<Around>, at: Around) {
-    seen.retain(|s| (s.c - at.c).length() > at.r);
-    seen.push(at);
-    if seen.len() > KEPT {
-        seen.remove(0);
+/// What a batch's grids leave in the cache for later batches.
+enum Keep {
+    /// A point that took no grid: one of the points seen (the most recent [`KEPT`]).
+    Seen(Around),
+    /// A static grid built for the batch, kept (least recently used dropped beyond
+    /// [`KEPT`]) in place of the one it `replaces`.
+    Grid {
+        fresh: Arc<StaticGrid>,
+        replaces: Option<Arc<StaticGrid>>,
+    },
+}
+
+impl Keep {
+    fn enter(self, cache: &PointCache) {
+        let mut st = cache.lock();
+        match self {
+            Keep::Seen(at) => {
+                st.seen.retain(|s| (s.c - at.c).length() > at.r);
+                st.seen.push(at);
+                if st.seen.len() > KEPT {
+                    st.seen.remove(0);
+                }
+            }
+            Keep::Grid { fresh, replaces } => {
+                st.stamp += 1;
+                let stamp = st.stamp;
+                let at = fresh.at;
+                st.seen.retain(|s| (s.c - at.c).length() > at.r);
+                if let Some(g) = &replaces {
+                    st.grids.retain(|(_, x)| !Arc::ptr_eq(x, g));
+                }
+                st.grids.push((stamp, fresh));
+                if st.grids.len() > KEPT {
+                    let oldest = (0..st.grids.len())
+                        .min_by_key(|&i| st.grids[i].0)
+                        .unwrap_or(0);
+                    st.grids.remove(oldest);
+                }
+            }
+        }
     }
 }
 
@@ -775,22 +809,41 @@ impl<'a> Plan<'a> {
         }
         let ats: Vec<Around> = points.iter().map(|p| p.0).collect();
         let spreads = spread(rays, &ats);
-        points
-            .into_iter()
+        // The points' grids built side by side: a build has serial stretches (the
+        // gathering and sorting of its items, the prefix sums) that the other thread
+        // fills with another point's build (`benches/PERF.md`, step 86). What a build
+        // keeps is entered in the cache afterwards, in the points' order, so the cache,
+        // and what later batches keep, does not depend on which build finished first.
+        let built: Vec<(Option<Plan<'a>>, Option<Keep>)> = points
+            .into_par_iter()
             .zip(spreads)
-            .filter_map(|((at, kept, again), s)| Self::around(src, at, kept, again, s))
-            .collect()
+            .with_max_len(1)
+            .map(|((at, kept, again), s)| {
+                let mut keep = None;
+                let plan = Self::around(src, at, kept, again, s, &mut keep);
+                (plan, keep)
+            })
+            .collect();
+        let mut plans = Vec::with_capacity(built.len());
+        for (plan, keep) in built {
+            if let Some(k) = keep {
+                k.enter(src.cache);
+            }
+            plans.extend(plan);
+        }
+        plans
     }
 
     /// The grids around `at` (kept's, when given) for the rays the batch takes through
     /// it (as [`spread`] sampled them), if they pay; `seen` when the point was seen
-    /// before.
+    /// before. What the cache should remember of it is left in `keep`.
     fn around(
         src: &'a Sources<'a>,
         at: Around,
         kept: Option<Arc<StaticGrid>>,
         seen: bool,
         spread: Spread,
+        keep: &mut Option<Keep>,
     ) -> Option<Plan<'a>> {
         let margin = src.margin as f64;
         let ntri = src.statics.len() + src.moving.len();
@@ -864,7 +917,7 @@ impl<'a> Plan<'a> {
                 && saves * n >= nmov * faces
                 && 12 * n * REUSE >= ntri * faces;
             if saves * n < ntri * faces && !again {
-                remember(&mut src.cache.lock().seen, at);
+                *keep = Some(Keep::Seen(at));
                 return None;
             }
             // The furthest origin from `c` with half again to spare, and the rectangles
@@ -887,20 +940,10 @@ impl<'a> Plan<'a> {
                 rects: all,
                 grid,
             });
-            let mut st = src.cache.lock();
-            st.stamp += 1;
-            let stamp = st.stamp;
-            st.seen.retain(|s| (s.c - at.c).length() > at.r);
-            if let Some(g) = &kept {
-                st.grids.retain(|(_, x)| !Arc::ptr_eq(x, g));
-            }
-            st.grids.push((stamp, fresh.clone()));
-            if st.grids.len() > KEPT {
-                let oldest = (0..st.grids.len())
-                    .min_by_key(|&i| st.grids[i].0)
-                    .unwrap_or(0);
-                st.grids.remove(oldest);
-            }
+            *keep = Some(Keep::Grid {
+                fresh: fresh.clone(),
+                replaces: kept,
+            });
             fresh
         };
         let pre = static_pre(src);
