@@ -19,12 +19,16 @@
 //! A camera or a light usually stays put from frame to frame, and the static triangles
 //! do not move: their grid around such a point is kept in the static PSF ([`PointCache`])
 //! and each batch builds a grid over the moving triangles only; a ray scans its tile in
-//! both, the two lists merged by depth. Where the static triangles are few beside the
-//! batch's rays the second tile costs more than the build saves, and the batch builds one
-//! grid over all the triangles instead ([`SPLIT`]). Every grid lists its triangles by the
-//! rules below, whatever batch it was built for, and a kept grid serves a batch only
-//! with its own point and numbers (the rays qualify by them) and only where its margin
-//! covers the batch's: so the hits do not depend on which grids were kept.
+//! both, the two lists merged by depth. For rays that start or end at the point (a
+//! light's shadow rays) the moving grid is built on the kept grid's tiles and the two
+//! are merged into one, tile by tile, where the kept lists are short beside the batch
+//! ([`MERGE`]): the copy costs less than every ray's second tile. Where the static
+//! triangles are few beside the batch's rays the second tile costs more than the build
+//! saves, and the batch builds one grid over all the triangles instead ([`SPLIT`]).
+//! Every grid lists its triangles by the rules below, whatever batch it was built for,
+//! and a kept grid serves a batch only with its own point and numbers (the rays qualify
+//! by them) and only where its margin covers the batch's: so the hits do not depend on
+//! which grids were kept.
 //!
 //! # Why every hit is found
 //!
@@ -505,6 +509,15 @@ struct BatchGrid<'a> {
 /// (`benches/PERF.md`, step 68).
 const SPLIT: usize = 6;
 
+/// For rays that start or end at the point, a kept static grid is merged with the
+/// batch's moving one (built on its tiles) into one grid when it has at most this many
+/// entries a ray of the batch. Copying its entries costs about what a ray's second tile
+/// and merged scan cost per ray: shadow rays 19.6 -> 21.1 Mrays/s on the museum-class
+/// scene (n=6). Merging the grids of reflections off mirror planes as well cost more
+/// than it saved there (reflection 6.21 -> 6.11 Mrays/s, n=6; `benches/PERF.md`, step
+/// 87).
+const MERGE: usize = 4;
+
 /// The batch's rays sampled to find the rectangles its rays project into: one in this
 /// many. Prime, so that the sampled columns of an image's rows move from row to row and
 /// together reach its last columns at the usual widths (8 sampled the same columns in
@@ -948,6 +961,34 @@ impl<'a> Plan<'a> {
         };
         let pre = static_pre(src);
         let at = fixed.at;
+        let both = fixed.grid.entries.len() as u64 + 32 * n as u64 + 8 * nmov as u64;
+        if nmov > 0
+            && saves == 12
+            && fixed.grid.entries.len() <= MERGE * n
+            && both < u32::MAX as u64
+        {
+            let total = fixed.grid.starts.len() - 1;
+            let (faces, rays) = (fixed.grid.faces, n as u64);
+            let moving = PointGrid::build_on(&at, faces, total, rays, nmov, |g| src.moving[g])?;
+            let grid = PointGrid::merged(&fixed.grid, &moving, nstat as u32);
+            let mut tris = Vec::with_capacity(ntri);
+            tris.extend_from_slice(&pre);
+            tris.extend_from_slice(src.moving_pre);
+            let number = (0..nstat as u32)
+                .chain(src.moving_number.iter().map(|&k| nstat as u32 + k))
+                .collect();
+            return Some(Plan {
+                at,
+                fixed: None,
+                pre,
+                batch: Some(BatchGrid {
+                    grid,
+                    tris: Cow::Owned(tris),
+                    number,
+                }),
+                depth_margin: 2.0 * at.allowance(),
+            });
+        }
         let batch = if nmov == 0 {
             None
         } else {
@@ -1160,6 +1201,71 @@ impl<'a> Plan<'a> {
 }
 
 impl PointGrid {
+    /// `a`'s lists and `b`'s (on the same tiling, `b`'s triangles numbered from
+    /// `offset` on) merged tile by tile, near to far, `a`'s entry first where depths
+    /// tie: the grid over both sets of triangles, so a ray scans one list.
+    fn merged(a: &PointGrid, b: &PointGrid, offset: u32) -> PointGrid {
+        assert_eq!(
+            a.starts.len(),
+            b.starts.len(),
+            "merged grids share their tiling"
+        );
+        let total = a.starts.len() - 1;
+        let starts: Vec<u32> = a.starts.iter().zip(&b.starts).map(|(x, y)| x + y).collect();
+        let blank = PEntry {
+            zmin: 0.0,
+            zmax: 0.0,
+            tri: 0,
+        };
+        let mut entries = vec![blank; starts[total] as usize];
+        // Tiles in ranges, one job a range, each writing its own part of `entries`.
+        let jobs = (4 * rayon::current_num_threads()).clamp(1, total.max(1));
+        let cut = |k: usize| k * total / jobs;
+        let mut parts = Vec::with_capacity(jobs);
+        let mut rest = &mut entries[..];
+        for k in 0..jobs {
+            let (head, tail) = rest.split_at_mut((starts[cut(k + 1)] - starts[cut(k)]) as usize);
+            parts.push((cut(k), cut(k + 1), head));
+            rest = tail;
+        }
+        let moved = |e: &PEntry| PEntry {
+            tri: e.tri + offset,
+            ..*e
+        };
+        parts.into_par_iter().for_each(|(lo, hi, out)| {
+            let mut k = 0;
+            for t in lo..hi {
+                let (ra, rb) = (a.run(t), b.run(t));
+                let (mut i, mut j) = (0, 0);
+                while i < ra.len() && j < rb.len() {
+                    if ra[i].zmin.to_bits() <= rb[j].zmin.to_bits() {
+                        out[k] = ra[i];
+                        i += 1;
+                    } else {
+                        out[k] = moved(&rb[j]);
+                        j += 1;
+                    }
+                    k += 1;
+                }
+                for e in &ra[i..] {
+                    out[k] = *e;
+                    k += 1;
+                }
+                for e in &rb[j..] {
+                    out[k] = moved(e);
+                    k += 1;
+                }
+            }
+        });
+        let near = a.near.iter().copied();
+        PointGrid {
+            faces: a.faces,
+            starts,
+            entries,
+            near: near.chain(b.near.iter().map(|&g| g + offset)).collect(),
+        }
+    }
+
     /// Tile `t`'s entries, near to far.
     #[inline]
     fn run(&self, t: usize) -> &[PEntry] {
@@ -1176,8 +1282,14 @@ impl PointGrid {
         tri: impl Fn(usize) -> [Vec3; 3] + Sync,
         min_tiles: usize,
     ) -> Option<PointGrid> {
-        let (c, r) = (at.c, at.r);
-        let allowance = at.allowance();
+        let (faces, total) = Self::faces_for(rects, min_tiles);
+        let rays: u64 = rects.iter().map(|b| b.4 as u64).sum();
+        Self::build_on(at, faces, total, rays, count, tri)
+    }
+
+    /// The tiling of the faces for rays that project into `rects`: a tile for about
+    /// [`RAYS_PER_TILE`] of them, at least `min_tiles` a face used; and the tiles in all.
+    fn faces_for(rects: &Rects, min_tiles: usize) -> ([Face; 6], usize) {
         let mut faces = [Face::default(); 6];
         let mut total = 0;
         for (face, &(u0, v0, u1, v1, n)) in faces.iter_mut().zip(rects) {
@@ -1201,7 +1313,21 @@ impl PointGrid {
             };
             total += nu * nv;
         }
+        (faces, total)
+    }
 
+    /// The grid over `count` triangles on the tiling `faces` (`total` tiles), for some
+    /// `rays` rays; `None` when it would list too many entries.
+    fn build_on(
+        at: &Around,
+        faces: [Face; 6],
+        total: usize,
+        rays: u64,
+        count: usize,
+        tri: impl Fn(usize) -> [Vec3; 3] + Sync,
+    ) -> Option<PointGrid> {
+        let (c, r) = (at.c, at.r);
+        let allowance = at.allowance();
         // Each triangle's rectangles of tiles, face by face, in triangle order.
         let h = 0.5 * r;
         // The most any `eps` below can be: its clipped part's least depth is at least `h`.
@@ -1334,9 +1460,7 @@ impl PointGrid {
             .map(|i| (i.i1 - i.i0 + 1) as u64 * (i.j1 - i.j0 + 1) as u64)
             .sum();
         // Entries are counted in u32: a grid of more is not built either.
-        if listed > 32 * rects.iter().map(|b| b.4 as u64).sum::<u64>() + 8 * count as u64
-            || listed >= u32::MAX as u64
-        {
+        if listed > 32 * rays + 8 * count as u64 || listed >= u32::MAX as u64 {
             return None;
         }
         // Near to far within every tile: the entries are written in order of depth.
@@ -1483,6 +1607,65 @@ mod tests {
             let key = |v: &[Item]| v.iter().map(|it| (it.zmin, it.tri)).collect::<Vec<_>>();
             assert_eq!(key(&got), key(&want), "{n} items");
         }
+    }
+
+    /// A kept static grid merged with a moving one lists exactly what one grid built
+    /// over both sets at once lists, entry for entry and in the same order.
+    #[test]
+    fn merged_grids_are_the_grid_over_both() {
+        let mut rng = Rng::new(17);
+        let at = Around {
+            c: DVec3::new(0.5, 1.0, -0.5),
+            r: 0.05,
+            rho_max: 1e-4,
+            reach2: 4.0,
+            margin: 1e-4,
+        };
+        let mut tri = || {
+            let a = rng.in_box(Vec3::splat(-6.0), Vec3::splat(6.0));
+            let size = 0.05 + 2.0 * rng.f32();
+            [a, a + size * rng.unit(), a + size * rng.unit()]
+        };
+        // One of each set in the near cube, listed apart.
+        let c = at.c.as_vec3();
+        let near = [c - Vec3::X, c + Vec3::Y, c + Vec3::Z];
+        let mut statics: Vec<[Vec3; 3]> = (0..700).map(|_| tri()).collect();
+        statics.push(near);
+        // Some moving triangles repeat static ones, so that depths tie.
+        let mut moving: Vec<[Vec3; 3]> = (0..500).map(|_| tri()).collect();
+        moving.extend_from_slice(&statics[..40]);
+        moving.push(near);
+        // A view over three faces, rays enough for a few hundred tiles.
+        let mut rects = [NO_RECT; 6];
+        rects[0] = (-0.9, -0.7, 0.8, 0.9, 4000);
+        rects[2] = (-1.0, -1.0, 1.0, 1.0, 2000);
+        rects[5] = (-0.3, -0.2, 0.4, 0.5, 600);
+        let (faces, total) = PointGrid::faces_for(&rects, 0);
+        let ns = statics.len();
+        let a = PointGrid::build_on(&at, faces, total, 6600, ns, |g| statics[g]).unwrap();
+        let b = PointGrid::build_on(&at, faces, total, 6600, moving.len(), |g| moving[g]).unwrap();
+        let all = PointGrid::build_on(&at, faces, total, 6600, ns + moving.len(), |g| {
+            if g < ns {
+                statics[g]
+            } else {
+                moving[g - ns]
+            }
+        })
+        .unwrap();
+        let m = PointGrid::merged(&a, &b, ns as u32);
+        let key = |g: &PointGrid| {
+            let e: Vec<(u32, u32, u32)> = g
+                .entries
+                .iter()
+                .map(|e| (e.zmin.to_bits(), e.zmax.to_bits(), e.tri))
+                .collect();
+            (g.starts.clone(), e, g.near.clone())
+        };
+        assert!(
+            all.entries.len() > 1000 && all.near.len() >= 2,
+            "a grid worth merging"
+        );
+        assert_eq!(key(&m), key(&all));
     }
 
     /// A triangle whose projection lies beyond a face's grid by less than its `eps`
