@@ -520,9 +520,10 @@ const MERGE: usize = 4;
 
 /// The batch's rays sampled to find the rectangles its rays project into: one in this
 /// many. Prime, so that the sampled columns of an image's rows move from row to row and
-/// together reach its last columns at the usual widths (8 sampled the same columns in
-/// every row; 17 spends half the time of 8, `benches/PERF.md`, step 84).
-const SPREAD: usize = 17;
+/// together reach its last columns at the usual widths (8, and round 7's 32, sampled the
+/// same columns in every row; 17 spent half the time of 8 and 31 less again, for the
+/// same rays taken, `benches/PERF.md`, steps 84 and 88).
+const SPREAD: usize = 31;
 
 /// `out[i] = query(rays[i])` through point grids where the batch takes any
 /// ([`Plan::for_batch`]), `wrap` turning a grid's answer into `T`; the rays no grid takes
