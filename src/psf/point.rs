@@ -848,6 +848,29 @@ impl<'a> Plan<'a> {
         plans
     }
 
+    /// The plan through `grid`, a grid over all the triangles numbered static ones first:
+    /// its triangles in one array, in the test's form, and their hit numbers.
+    fn over_all(src: &'a Sources<'a>, at: Around, pre: Arc<[TriPre]>, grid: PointGrid) -> Plan<'a> {
+        let nstat = src.statics.len();
+        let mut tris = Vec::with_capacity(nstat + src.moving.len());
+        tris.extend_from_slice(&pre);
+        tris.extend_from_slice(src.moving_pre);
+        let number = (0..nstat as u32)
+            .chain(src.moving_number.iter().map(|&k| nstat as u32 + k))
+            .collect();
+        Plan {
+            at,
+            fixed: None,
+            pre,
+            batch: Some(BatchGrid {
+                grid,
+                tris: Cow::Owned(tris),
+                number,
+            }),
+            depth_margin: 2.0 * at.allowance(),
+        }
+    }
+
     /// The grids around `at` (kept's, when given) for the rays the batch takes through
     /// it (as [`spread`] sampled them), if they pay; `seen` when the point was seen
     /// before. What the cache should remember of it is left in `keep`.
@@ -900,23 +923,7 @@ impl<'a> Plan<'a> {
                 },
                 0,
             )?;
-            let mut tris = Vec::with_capacity(ntri);
-            tris.extend_from_slice(&pre);
-            tris.extend_from_slice(src.moving_pre);
-            let number = (0..nstat as u32)
-                .chain(src.moving_number.iter().map(|&k| nstat as u32 + k))
-                .collect();
-            return Some(Plan {
-                at,
-                fixed: None,
-                pre,
-                batch: Some(BatchGrid {
-                    grid,
-                    tris: Cow::Owned(tris),
-                    number,
-                }),
-                depth_margin: 2.0 * at.allowance(),
-            });
+            return Some(Self::over_all(src, at, pre, grid));
         }
         let fixed = if fits {
             if saves * n < nmov * faces {
@@ -972,23 +979,7 @@ impl<'a> Plan<'a> {
             let (faces, rays) = (fixed.grid.faces, n as u64);
             let moving = PointGrid::build_on(&at, faces, total, rays, nmov, |g| src.moving[g])?;
             let grid = PointGrid::merged(&fixed.grid, &moving, nstat as u32);
-            let mut tris = Vec::with_capacity(ntri);
-            tris.extend_from_slice(&pre);
-            tris.extend_from_slice(src.moving_pre);
-            let number = (0..nstat as u32)
-                .chain(src.moving_number.iter().map(|&k| nstat as u32 + k))
-                .collect();
-            return Some(Plan {
-                at,
-                fixed: None,
-                pre,
-                batch: Some(BatchGrid {
-                    grid,
-                    tris: Cow::Owned(tris),
-                    number,
-                }),
-                depth_margin: 2.0 * at.allowance(),
-            });
+            return Some(Self::over_all(src, at, pre, grid));
         }
         let batch = if nmov == 0 {
             None
