@@ -89,7 +89,7 @@ const CHUNK: usize = 1024;
 
 /// A triangle's entry in a tile: the depth range (along the face's axis) of its part
 /// beyond `r / 2`, and its number in the grid's own triangle array.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 struct PEntry {
     zmin: f32,
     zmax: f32,
@@ -1192,6 +1192,25 @@ impl<'a> Plan<'a> {
     }
 }
 
+/// A grid's entries (`starts` over `total` tiles) cut into `jobs` ranges of whole tiles:
+/// `(first tile, end tile, their entries)`, for jobs that each write their own part.
+fn by_tiles<'e>(
+    starts: &[u32],
+    entries: &'e mut [PEntry],
+    jobs: usize,
+) -> Vec<(usize, usize, &'e mut [PEntry])> {
+    let total = starts.len() - 1;
+    let cut = |k: usize| k * total / jobs;
+    let mut parts = Vec::with_capacity(jobs);
+    let mut rest = entries;
+    for k in 0..jobs {
+        let (head, tail) = rest.split_at_mut((starts[cut(k + 1)] - starts[cut(k)]) as usize);
+        parts.push((cut(k), cut(k + 1), head));
+        rest = tail;
+    }
+    parts
+}
+
 impl PointGrid {
     /// `a`'s lists and `b`'s (on the same tiling, `b`'s triangles numbered from
     /// `offset` on) merged tile by tile, near to far, `a`'s entry first where depths
@@ -1204,22 +1223,10 @@ impl PointGrid {
         );
         let total = a.starts.len() - 1;
         let starts: Vec<u32> = a.starts.iter().zip(&b.starts).map(|(x, y)| x + y).collect();
-        let blank = PEntry {
-            zmin: 0.0,
-            zmax: 0.0,
-            tri: 0,
-        };
-        let mut entries = vec![blank; starts[total] as usize];
+        let mut entries = vec![PEntry::default(); starts[total] as usize];
         // Tiles in ranges, one job a range, each writing its own part of `entries`.
         let jobs = (4 * rayon::current_num_threads()).clamp(1, total.max(1));
-        let cut = |k: usize| k * total / jobs;
-        let mut parts = Vec::with_capacity(jobs);
-        let mut rest = &mut entries[..];
-        for k in 0..jobs {
-            let (head, tail) = rest.split_at_mut((starts[cut(k + 1)] - starts[cut(k)]) as usize);
-            parts.push((cut(k), cut(k + 1), head));
-            rest = tail;
-        }
+        let parts = by_tiles(&starts, &mut entries, jobs);
         let moved = |e: &PEntry| PEntry {
             tri: e.tri + offset,
             ..*e
@@ -1496,21 +1503,9 @@ impl PointGrid {
         for k in 0..total {
             starts[k + 1] += starts[k];
         }
-        let blank = PEntry {
-            zmin: 0.0,
-            zmax: 0.0,
-            tri: 0,
-        };
-        let mut entries = vec![blank; starts[total] as usize];
+        let mut entries = vec![PEntry::default(); starts[total] as usize];
         {
-            let mut parts: Vec<(usize, usize, &mut [PEntry])> = Vec::with_capacity(jobs);
-            let mut rest = &mut entries[..];
-            for k in 0..jobs {
-                let len = (starts[cut(k + 1)] - starts[cut(k)]) as usize;
-                let (head, tail) = rest.split_at_mut(len);
-                parts.push((cut(k), cut(k + 1), head));
-                rest = tail;
-            }
+            let parts = by_tiles(&starts, &mut entries, jobs);
             let starts = &starts;
             parts.into_par_iter().for_each(|(lo, hi, out)| {
                 let base = starts[lo] as usize;
@@ -1582,15 +1577,10 @@ mod tests {
         for n in [0, 1, 2, 100, 5000] {
             let items: Vec<Item> = (0..n)
                 .map(|k| Item {
-                    face: 0,
-                    i0: 0,
-                    i1: 0,
-                    j0: 0,
-                    j1: 0,
                     // Few distinct depths (ties), spread over many binades.
                     zmin: (1 + rng.below(40)) as f32 * 10f32.powi(rng.below(12) as i32 - 6),
-                    zmax: 0.0,
                     tri: k,
+                    ..Item::default()
                 })
                 .collect();
             let mut want = items.clone();
