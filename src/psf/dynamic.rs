@@ -277,10 +277,7 @@ impl DynamicLayer {
         // The test's form of the triangles is for the queries alone: made beside the
         // insertions (a fifth job for two threads) instead of before them.
         rayon::join(
-            || {
-                local.clear();
-                local.extend(sorted.iter().map(TriPre::new));
-            },
+            || local.extend(sorted.iter().map(TriPre::new)),
             || {
                 subfields
                     .par_iter_mut()
