@@ -161,19 +161,60 @@ impl GridFrame {
         let (lo_u, hi_u, lo_v, hi_v) = (lo.x - m, hi.x + m, lo.y - m, hi.y + m);
         let (zmin, zmax) = (lo.z, hi.z);
         let dz = margin + 1e-5 * (zmax - zmin);
-        // Truncation is floor once negatives are clamped to 0, without `floor`'s libm
-        // call (5% of an update); `as` saturates and maps NaN to 0, as before.
-        let cell = |x: f32, n: u32| ((x.max(0.0) as i64).min(n as i64 - 1)) as u32;
+        let [i0, i1, j0, j1] = cells([lo_u, hi_u, lo_v, hi_v], self.nu, self.nv);
         let f = Footprint {
-            i0: cell(lo_u, self.nu),
-            i1: cell(hi_u, self.nu),
-            j0: cell(lo_v, self.nv),
-            j1: cell(hi_v, self.nv),
+            i0,
+            i1,
+            j0,
+            j1,
             zmin: zmin - dz,
             zmax: zmax + dz,
         };
         (p, m, dz, f)
     }
+}
+
+/// The columns and rows of tiles that the rectangle `[lo_u, hi_u, lo_v, hi_v]` (tile
+/// units) reaches: each bound clamped to `0..=n - 1` and truncated, which is its floor
+/// once clamped; NaN gives 0. `nu` and `nv` are at least 1 and at most
+/// [`PsfParams::MAX_TILES`](super::PsfParams::MAX_TILES).
+///
+/// On x86-64 the four bounds go through one clamp and one conversion (SSE2, always
+/// there): the four scalar conversions, each with its saturation checks, had been a
+/// fifth of an insertion's time (`benches/PERF.md`, step 90). The result is the same.
+#[inline(always)]
+fn cells(r: [f32; 4], nu: u32, nv: u32) -> [u32; 4] {
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    // SAFETY: these intrinsics are unsafe only for the target feature they need, SSE2
+    // (SSE for the first four), and the `cfg` above compiles this block only where the
+    // build enables it (always, on x86-64); none of them reads or writes memory.
+    unsafe {
+        use std::arch::x86_64::*;
+        let (tu, tv) = ((nu - 1) as f32, (nv - 1) as f32);
+        // `maxps` gives its second operand, 0, where the first is NaN.
+        let x = _mm_max_ps(_mm_set_ps(r[3], r[2], r[1], r[0]), _mm_setzero_ps());
+        let x = _mm_min_ps(x, _mm_set_ps(tv, tv, tu, tu));
+        // Whole numbers in 0..=4095: exact as i32, and as i16 after packing.
+        let w = _mm_cvtsi128_si64(_mm_packs_epi32(_mm_cvttps_epi32(x), _mm_setzero_si128()));
+        let w = w as u64;
+        [0, 16, 32, 48].map(|s| (w >> s) as u16 as u32)
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+    cells_scalar(r, nu, nv)
+}
+
+/// [`cells`] one bound at a time.
+#[cfg_attr(all(target_arch = "x86_64", target_feature = "sse2"), allow(dead_code))]
+fn cells_scalar(r: [f32; 4], nu: u32, nv: u32) -> [u32; 4] {
+    // Truncation is floor once negatives are clamped to 0, without `floor`'s libm call;
+    // `as` saturates and maps NaN to 0.
+    let cell = |x: f32, n: u32| ((x.max(0.0) as i64).min(n as i64 - 1)) as u32;
+    [
+        cell(r[0], nu),
+        cell(r[1], nu),
+        cell(r[2], nv),
+        cell(r[3], nv),
+    ]
 }
 
 /// A rectangle of tiles, columns `i0..=i1` and rows `j0..=j1`, with a depth range.
@@ -250,6 +291,52 @@ fn clipped_depth_range(tri: &[[f32; 3]; 3], rect: [f32; 4]) -> Option<(f32, f32)
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cells_clamp_and_floor_every_bound() {
+        // The vector form against one bound at a time, and both against the definition.
+        let special = [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            -0.0,
+            0.0,
+            -1e-30,
+            0.999_999_94,
+            1.0,
+            7.0,
+            7.5,
+            8.0,
+            4095.0,
+            4096.0,
+            1e9,
+            -1e9,
+        ];
+        let mut rng = crate::synth::Rng::new(5);
+        for (nu, nv) in [(1, 1), (8, 3), (64, 64), (4096, 17), (1, 4096)] {
+            for k in 0..4000 {
+                let r: [f32; 4] = std::array::from_fn(|c| {
+                    let x = special[(k * 7 + c * 3) % special.len()];
+                    if k % 3 == 0 {
+                        x
+                    } else {
+                        (rng.f32() - 0.25) * 1.5 * [nu, nu, nv, nv][c] as f32
+                    }
+                });
+                let want: [u32; 4] = std::array::from_fn(|c| {
+                    let n = [nu, nu, nv, nv][c];
+                    let x = r[c];
+                    if x.is_nan() || x < 1.0 {
+                        0
+                    } else {
+                        (x.floor() as f64).min((n - 1) as f64) as u32
+                    }
+                });
+                assert_eq!(cells(r, nu, nv), want, "{r:?} in {nu} x {nv}");
+                assert_eq!(cells_scalar(r, nu, nv), want, "{r:?} in {nu} x {nv}");
+            }
+        }
+    }
 
     #[test]
     fn projection_is_project() {
