@@ -45,9 +45,8 @@ pub struct DynamicLayer {
     margin: f32,
     /// This frame's bounds grown by the rounding allowance; rays are clipped to it.
     clip: Aabb,
-    tris: Vec<[Vec3; 3]>,
-    /// The same triangles in the order of their centroids' Morton codes (`local[k] =
-    /// tris[order[k]]`), laid out for the candidate test: entries name positions in
+    /// This frame's triangles in the order of their centroids' Morton codes (`local[k]`
+    /// is the update's `tris[order[k]]`; no copy in the input order is kept), laid out for the candidate test: entries name positions in
     /// `local`, so the candidates of a tile, and of neighbouring tiles, sit together in
     /// memory whatever the input order.
     local: Vec<TriPre>,
@@ -83,6 +82,51 @@ struct DynSubfield {
     touched: Vec<u32>,
     diff: Vec<i32>,
     cursor: Vec<u32>,
+}
+
+/// The first pass's counting of entries per tile (see [`DynSubfield::insert`]): a
+/// method forced inline rather than a closure, which its two callers had kept out of
+/// line (a call for every triangle).
+struct Counts<'a> {
+    dense: bool,
+    nu: usize,
+    gv: u32,
+    /// The difference array, `(nu + 1) × (nv + 1)`, when dense.
+    diff: &'a mut [i32],
+    slots: &'a mut [Slot],
+    touched: &'a mut Vec<u32>,
+}
+
+impl Counts<'_> {
+    /// One entry more in every tile of columns `i0..=i1` and rows `j0..=j1`.
+    #[inline(always)]
+    fn add(&mut self, i0: u32, i1: u32, j0: u32, j1: u32) {
+        let (i0, i1, j0, j1) = (i0 as usize, i1 as usize, j0 as usize, j1 as usize);
+        if self.dense {
+            let stride = self.nu + 1;
+            let (a, b) = (j0 * stride, (j1 + 1) * stride);
+            self.diff[a + i0] += 1;
+            self.diff[a + i1 + 1] -= 1;
+            self.diff[b + i0] -= 1;
+            self.diff[b + i1 + 1] += 1;
+            return;
+        }
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let tile = j * self.nu + i;
+                let slot = &mut self.slots[tile];
+                if slot.version != self.gv {
+                    *slot = Slot {
+                        version: self.gv,
+                        start: 0,
+                        count: 0,
+                    };
+                    self.touched.push(tile as u32);
+                }
+                slot.count += 1;
+            }
+        }
+    }
 }
 
 /// A coarse triangle's [`Footprint`](super::grid::Footprint), packed in 16 bytes: the
@@ -237,7 +281,6 @@ impl DynamicLayer {
             generation: 0,
             margin: 0.0,
             clip: Aabb::EMPTY,
-            tris: Vec::new(),
             local: Vec::new(),
             sorted: Vec::new(),
             order: Vec::new(),
@@ -257,19 +300,17 @@ impl DynamicLayer {
         // Everything that describes the last frame's triangles goes, the sorted copies
         // too: the point grids read those, and a frame without moving triangles (or a
         // refused one) must leave none of the last frame's behind.
-        self.tris.clear();
         self.sorted.clear();
         self.local.clear();
         self.order.clear();
         self.next_generation();
         let bounds = checked_bounds(tris)?;
-        self.tris.extend_from_slice(tris);
         self.margin = margin_for(&bounds);
         self.clip = bounds.padded(2.0 * self.margin);
         if tris.is_empty() {
             return Ok(());
         }
-        self.reorder(&bounds);
+        self.reorder(tris, &bounds);
         let (gv, margin, clip, tiles) =
             (self.generation, self.margin, self.clip, self.params.tiles);
         let (sorted, local) = (&self.sorted, &mut self.local);
@@ -291,8 +332,8 @@ impl DynamicLayer {
     /// centroid within `bounds`, cut to a bucket for every one to eight triangles (a
     /// stable counting sort, so ties keep the input order and the result depends on the
     /// input alone).
-    fn reorder(&mut self, bounds: &Aabb) {
-        let n = self.tris.len();
+    fn reorder(&mut self, tris: &[[Vec3; 3]], bounds: &Aabb) {
+        let n = tris.len();
         // 3 bits of code per level of an octree with n / 8 to n leaves, 3..=27 bits. A
         // level finer (up to eight buckets a triangle) sorted no better for the
         // insertions and the queries and updated 4-6% slower: its counts outgrow the
@@ -302,7 +343,7 @@ impl DynamicLayer {
         let scale = Vec3::splat((1u32 << levels) as f32) / bounds.extent().max(Vec3::splat(1e-30));
         let top = ((1u32 << levels) - 1) as f32;
         self.keys.clear();
-        self.keys.extend(self.tris.iter().map(|t| {
+        self.keys.extend(tris.iter().map(|t| {
             let c = ((t[0] + t[1] + t[2]) * (1.0 / 3.0) - bounds.min) * scale;
             let q = |x: f32| x.clamp(0.0, top) as u32;
             morton3(q(c.x), q(c.y), q(c.z))
@@ -324,7 +365,7 @@ impl DynamicLayer {
         }
         self.sorted.clear();
         self.sorted
-            .extend(self.order.iter().map(|&i| self.tris[i as usize]));
+            .extend(self.order.iter().map(|&i| tris[i as usize]));
     }
 
     /// Advances `GV`; on the (4-billion-frame) wrap every stamp is reset once.
@@ -338,25 +379,21 @@ impl DynamicLayer {
         }
     }
 
-    /// The triangles of the last update.
-    pub fn triangles(&self) -> &[[Vec3; 3]] {
-        &self.tris
-    }
-
+    /// The number of triangles of the last update.
     pub fn len(&self) -> usize {
-        self.tris.len()
+        self.sorted.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.tris.is_empty()
+        self.sorted.is_empty()
     }
 
     /// Occupancy and memory now (visits every tile: for reports, not per frame).
     pub fn stats(&self) -> DynamicStats {
         let mut st = DynamicStats {
-            triangles: self.tris.len(),
+            triangles: self.len(),
             bytes: std::mem::size_of::<Self>()
-                + (self.tris.capacity() + self.sorted.capacity()) * 36
+                + self.sorted.capacity() * 36
                 + self.local.capacity() * std::mem::size_of::<TriPre>()
                 + (self.order.capacity() + self.keys.capacity() + self.counts.capacity()) * 4,
             ..DynamicStats::default()
@@ -368,7 +405,7 @@ impl DynamicLayer {
                 + s.raw.capacity() * std::mem::size_of::<(u32, Entry)>()
                 + s.clipped.capacity() * 8
                 + (s.touched.capacity() + s.diff.capacity() + s.cursor.capacity()) * 4;
-            if self.tris.is_empty() {
+            if self.is_empty() {
                 continue;
             }
             for slot in s.slots.iter().filter(|x| x.version == self.generation) {
@@ -410,7 +447,7 @@ impl DynamicLayer {
         sub: Option<usize>,
         count: &mut C,
     ) -> Option<Hit> {
-        if self.tris.is_empty() {
+        if self.is_empty() {
             return None;
         }
         let (o, d, t0, t1) = clipped_span(&self.clip, ray)?;
@@ -478,36 +515,18 @@ impl DynSubfield {
         if dense {
             diff.resize(stride * (nv + 1), 0);
         }
-        let mut count = |i0: u32, i1: u32, j0: u32, j1: u32| {
-            let (i0, i1, j0, j1) = (i0 as usize, i1 as usize, j0 as usize, j1 as usize);
-            if dense {
-                let (a, b) = (j0 * stride, (j1 + 1) * stride);
-                diff[a + i0] += 1;
-                diff[a + i1 + 1] -= 1;
-                diff[b + i0] -= 1;
-                diff[b + i1 + 1] += 1;
-                return;
-            }
-            for j in j0..=j1 {
-                for i in i0..=i1 {
-                    let tile = j * nu + i;
-                    let slot = &mut slots[tile];
-                    if slot.version != gv {
-                        *slot = Slot {
-                            version: gv,
-                            start: 0,
-                            count: 0,
-                        };
-                        touched.push(tile as u32);
-                    }
-                    slot.count += 1;
-                }
-            }
+        let mut counts = Counts {
+            dense,
+            nu,
+            gv,
+            diff,
+            slots,
+            touched,
         };
         for (k, t) in tris.iter().enumerate() {
             match frame.coarse_footprint(t, margin, COARSE) {
                 Some(f) => {
-                    count(f.i0, f.i1, f.j0, f.j1);
+                    counts.add(f.i0, f.i1, f.j0, f.j1);
                     // Tile indices are below `PsfParams::MAX_TILES` (4096): they fit.
                     rects.push(Rect {
                         i0: f.i0 as u16,
@@ -521,7 +540,7 @@ impl DynSubfield {
                 None => {
                     frame.raster_with(t, margin, COARSE, |tile, zmin, zmax| {
                         let (i, j) = (tile % nu as u32, tile / nu as u32);
-                        count(i, i, j, j);
+                        counts.add(i, i, j, j);
                         raw.push((
                             tile,
                             Entry {
@@ -636,21 +655,31 @@ fn checked_bounds(tris: &[[Vec3; 3]]) -> Result<Aabb, PsfError> {
     if tris.len() > u32::MAX as usize {
         check_triangles(tris)?;
     }
+    // Four vertices (twelve coordinates, three vector registers) a step: lane `k` holds
+    // axis `k % 3`. Nine lanes a triangle had left the compiler a poor loop.
     let flat: &[f32] = bytemuck::cast_slice(tris);
-    let (mut lo, mut hi, mut poison) = ([f32::INFINITY; 9], [f32::NEG_INFINITY; 9], [0f32; 9]);
-    for t in flat.chunks_exact(9) {
-        for k in 0..9 {
+    let (mut lo, mut hi, mut poison) = ([f32::INFINITY; 12], [f32::NEG_INFINITY; 12], [0f32; 12]);
+    let mut step = |t: &[f32]| {
+        for k in 0..t.len() {
             // Compares rather than `f32::min`, whose NaN rule costs the vectorised loop.
             lo[k] = if t[k] < lo[k] { t[k] } else { lo[k] };
             hi[k] = if t[k] > hi[k] { t[k] } else { hi[k] };
             poison[k] += t[k] * 0.0;
         }
+    };
+    let mut chunks = flat.chunks_exact(12);
+    for t in &mut chunks {
+        step(t);
     }
+    // What is left is whole vertices (the length is a multiple of 3).
+    step(chunks.remainder());
     if poison.iter().any(|p| !p.is_finite()) {
         check_triangles(tris)?;
     }
-    let fold = |a: [f32; 9], f: fn(f32, f32) -> f32| {
-        Vec3::from_array(std::array::from_fn(|k| f(f(a[k], a[k + 3]), a[k + 6])))
+    let fold = |a: [f32; 12], f: fn(f32, f32) -> f32| {
+        Vec3::from_array(std::array::from_fn(|k| {
+            f(f(a[k], a[k + 3]), f(a[k + 6], a[k + 9]))
+        }))
     };
     Ok(Aabb {
         min: fold(lo, f32::min),
@@ -773,8 +802,8 @@ impl Layered<'_> {
             margin: self
                 .psf
                 .margin()
-                .max(if d.tris.is_empty() { 0.0 } else { d.margin }),
-            bounds: if d.tris.is_empty() {
+                .max(if d.is_empty() { 0.0 } else { d.margin }),
+            bounds: if d.is_empty() {
                 *self.psf.bounds()
             } else {
                 self.psf.bounds().union(&d.clip)
