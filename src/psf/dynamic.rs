@@ -19,6 +19,7 @@ use rayon::prelude::*;
 
 use super::batch::binned;
 use super::bsp::{Block, LANES, PADDING};
+use super::grid::clamped_floor;
 use super::point::{trace_batch, Plan, Sources};
 use super::stats::{Counter, NoCount, RayStats};
 use super::traverse::{block_window, clipped_span, scan_blocks, walk_tiles};
@@ -341,12 +342,12 @@ impl DynamicLayer {
         let levels = ((usize::BITS - n.leading_zeros()).div_ceil(3)).clamp(2, 10) - 1;
         let bits = 3 * levels;
         let scale = Vec3::splat((1u32 << levels) as f32) / bounds.extent().max(Vec3::splat(1e-30));
-        let top = ((1u32 << levels) - 1) as f32;
+        let top = (1u32 << levels) - 1;
         self.keys.clear();
         self.keys.extend(tris.iter().map(|t| {
             let c = ((t[0] + t[1] + t[2]) * (1.0 / 3.0) - bounds.min) * scale;
-            let q = |x: f32| x.clamp(0.0, top) as u32;
-            morton3(q(c.x), q(c.y), q(c.z))
+            let [x, y, z, _] = clamped_floor([c.x, c.y, c.z, 0.0], [top; 4]);
+            morton3(x, y, z)
         }));
         self.counts.clear();
         self.counts.resize((1usize << bits) + 1, 0);

@@ -178,43 +178,44 @@ impl GridFrame {
 /// units) reaches: each bound clamped to `0..=n - 1` and truncated, which is its floor
 /// once clamped; NaN gives 0. `nu` and `nv` are at least 1 and at most
 /// [`PsfParams::MAX_TILES`](super::PsfParams::MAX_TILES).
-///
-/// On x86-64 the four bounds go through one clamp and one conversion (SSE2, always
-/// there): the four scalar conversions, each with its saturation checks, had been a
-/// fifth of an insertion's time (`benches/PERF.md`, step 90). The result is the same.
 #[inline(always)]
 fn cells(r: [f32; 4], nu: u32, nv: u32) -> [u32; 4] {
+    clamped_floor(r, [nu - 1, nu - 1, nv - 1, nv - 1])
+}
+
+/// Each of `r` clamped to `0..=top` and truncated, which is its floor once clamped; NaN
+/// gives 0. Every `top` at most `i16::MAX`.
+///
+/// On x86-64 the four go through one clamp and one conversion (SSE2, always there):
+/// four scalar conversions, each with its saturation checks, had been a fifth of an
+/// insertion's time (`benches/PERF.md`, step 90). The result is the same.
+#[inline(always)]
+pub(crate) fn clamped_floor(r: [f32; 4], top: [u32; 4]) -> [u32; 4] {
     #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
     // SAFETY: these intrinsics are unsafe only for the target feature they need, SSE2
-    // (SSE for the first four), and the `cfg` above compiles this block only where the
-    // build enables it (always, on x86-64); none of them reads or writes memory.
+    // (SSE for some), and the `cfg` above compiles this block only where the build
+    // enables it (always, on x86-64); none of them reads or writes memory.
     unsafe {
         use std::arch::x86_64::*;
-        let (tu, tv) = ((nu - 1) as f32, (nv - 1) as f32);
+        let t = top.map(|t| t as i32 as f32);
         // `maxps` gives its second operand, 0, where the first is NaN.
         let x = _mm_max_ps(_mm_set_ps(r[3], r[2], r[1], r[0]), _mm_setzero_ps());
-        let x = _mm_min_ps(x, _mm_set_ps(tv, tv, tu, tu));
-        // Whole numbers in 0..=4095: exact as i32, and as i16 after packing.
+        let x = _mm_min_ps(x, _mm_set_ps(t[3], t[2], t[1], t[0]));
+        // Whole numbers in 0..=i16::MAX: exact as i32, and as i16 after packing.
         let w = _mm_cvtsi128_si64(_mm_packs_epi32(_mm_cvttps_epi32(x), _mm_setzero_si128()));
         let w = w as u64;
         [0, 16, 32, 48].map(|s| (w >> s) as u16 as u32)
     }
     #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
-    cells_scalar(r, nu, nv)
+    clamped_floor_scalar(r, top)
 }
 
-/// [`cells`] one bound at a time.
+/// [`clamped_floor`] one at a time.
 #[cfg_attr(all(target_arch = "x86_64", target_feature = "sse2"), allow(dead_code))]
-fn cells_scalar(r: [f32; 4], nu: u32, nv: u32) -> [u32; 4] {
+fn clamped_floor_scalar(r: [f32; 4], top: [u32; 4]) -> [u32; 4] {
     // Truncation is floor once negatives are clamped to 0, without `floor`'s libm call;
     // `as` saturates and maps NaN to 0.
-    let cell = |x: f32, n: u32| ((x.max(0.0) as i64).min(n as i64 - 1)) as u32;
-    [
-        cell(r[0], nu),
-        cell(r[1], nu),
-        cell(r[2], nv),
-        cell(r[3], nv),
-    ]
+    std::array::from_fn(|k| ((r[k].max(0.0) as i64).min(top[k] as i64)) as u32)
 }
 
 /// A rectangle of tiles, columns `i0..=i1` and rows `j0..=j1`, with a depth range.
@@ -333,7 +334,8 @@ mod tests {
                     }
                 });
                 assert_eq!(cells(r, nu, nv), want, "{r:?} in {nu} x {nv}");
-                assert_eq!(cells_scalar(r, nu, nv), want, "{r:?} in {nu} x {nv}");
+                let top = [nu - 1, nu - 1, nv - 1, nv - 1];
+                assert_eq!(clamped_floor_scalar(r, top), want, "{r:?} in {nu} x {nv}");
             }
         }
     }
