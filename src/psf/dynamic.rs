@@ -47,9 +47,9 @@ pub struct DynamicLayer {
     /// This frame's bounds grown by the rounding allowance; rays are clipped to it.
     clip: Aabb,
     /// This frame's triangles in the order of their centroids' Morton codes (`local[k]`
-    /// is the update's `tris[order[k]]`; no copy in the input order is kept), laid out for the candidate test: entries name positions in
-    /// `local`, so the candidates of a tile, and of neighbouring tiles, sit together in
-    /// memory whatever the input order.
+    /// is the update's `tris[order[k]]`; no copy in the input order is kept), laid out
+    /// for the candidate test: entries name positions in `local`, so the candidates of a
+    /// tile, and of neighbouring tiles, sit together in memory whatever the input order.
     local: Vec<TriPre>,
     /// `local` as plain vertices, which the insertion rasterises in order.
     sorted: Vec<[Vec3; 3]>,
