@@ -3,11 +3,14 @@
 # same image size, same thread count, in one run (issue 8).
 #
 #   benches/embree.sh [--quick] [--frames A:B:S] [--width W] [--height H] [--threads T]
-#                     [--configs STATIC:DYNAMIC,...] [--out DIR]
+#                     [--configs STATIC:DYNAMIC,...] [--repeat N] [--out DIR]
 #
 # Defaults: 10284:1024,10284:16384,10284:100000,1000000:16384; frames 0:300:30 (10 frames,
 # plus one untimed warm-up on each side); 640x480; threads = nproc. --quick: frames 0:90:30
-# (3 frames) at 320x240. Scenes and raw JSON lines go to DIR (default target/embree-bench).
+# (3 frames) at 320x240. --repeat N: each side runs N times, alternating (Embree first in
+# odd runs, subfield first in even ones); the table shows each side's median over its runs
+# and the ratios of every pair of runs below it (a shared machine moves runs by 5-10%).
+# Scenes and raw JSON lines go to DIR (default target/embree-bench).
 #
 # Needs python3 with embreex and numpy (pip install embreex numpy) and gcc (the harness
 # compiles its small C tracing helper on first use). The harness is
@@ -22,6 +25,7 @@ WIDTH=640
 HEIGHT=480
 THREADS=$(nproc)
 CONFIGS=10284:1024,10284:16384,10284:100000,1000000:16384
+REPEAT=1
 OUT=target/embree-bench
 while [ $# -gt 0 ]; do
     case "$1" in
@@ -31,8 +35,9 @@ while [ $# -gt 0 ]; do
         --height) HEIGHT=${2:?--height needs a value}; shift ;;
         --threads) THREADS=${2:?--threads needs a value}; shift ;;
         --configs) CONFIGS=${2:?--configs needs a value}; shift ;;
+        --repeat) REPEAT=${2:?--repeat needs a value}; shift ;;
         --out) OUT=${2:?--out needs a value}; shift ;;
-        -h|--help) sed -n '2,15p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -h|--help) sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) die "unknown option $1 (see --help)" ;;
     esac
     shift
@@ -44,13 +49,14 @@ command -v gcc >/dev/null || die "gcc is missing (the Embree harness compiles tr
 python3 -c "import embreex, numpy" 2>/dev/null ||
     die "python3 cannot import embreex and numpy: pip install embreex numpy"
 [ -f "$ANCHOR" ] || die "the Embree harness $ANCHOR is not there (set EMBREE_ANCHOR)"
+[[ "$REPEAT" =~ ^[1-9][0-9]*$ ]] || die "--repeat needs a whole number of runs, 1 or more (got $REPEAT)"
 mkdir -p "$OUT"
 
 echo "# subfield against Embree"
 echo
 echo "* machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//')"
 echo "* load before the run: $(uptime | sed 's/.*load average/load average/')"
-echo "* frames $FRAMES (plus one untimed warm-up on each side), ${WIDTH}x${HEIGHT}, $THREADS threads on both sides"
+echo "* frames $FRAMES (plus one untimed warm-up on each side), ${WIDTH}x${HEIGHT}, $THREADS threads on both sides, $REPEAT run(s) a side"
 echo "* Embree: $(python3 -c 'import embreex; print("embreex", embreex.__version__)'), harness $ANCHOR (two-level, per-frame rebuild)"
 echo "* subfield: static PSF baked once + dynamic layer updated per frame (cargo bench --bench embree)"
 
@@ -72,22 +78,30 @@ for c in "${configs[@]}"; do
         status=1
         continue
     fi
-    ejs="$OUT/embree_${n}_${m}.jsonl"; sjs="$OUT/subfield_${n}_${m}.jsonl"
-    echo >&2 "$c: Embree ..."
-    if ! python3 "$ANCHOR" "$scene" --frames "$FRAMES" --width "$WIDTH" --height "$HEIGHT" \
-            --threads "$THREADS" >"$ejs" 2>"$OUT/embree_${n}_${m}.err"; then
-        echo "skipped: the Embree harness failed: $(tail -n1 "$OUT/embree_${n}_${m}.err")"
-        status=1
-        continue
-    fi
-    echo >&2 "$c: subfield ..."
-    if ! RAYON_NUM_THREADS=$THREADS cargo bench -q --bench embree -- "$scene" --frames "$FRAMES" \
-            --width "$WIDTH" --height "$HEIGHT" >"$sjs" 2>"$OUT/subfield_${n}_${m}.err"; then
-        echo "skipped: the subfield bench failed: $(tail -n1 "$OUT/subfield_${n}_${m}.err")"
-        status=1
-        continue
-    fi
-    python3 - "$ejs" "$sjs" <<'PY' || status=1
+    run_embree() {
+        echo >&2 "$c: Embree (run $1 of $REPEAT) ..."
+        python3 "$ANCHOR" "$scene" --frames "$FRAMES" --width "$WIDTH" --height "$HEIGHT" \
+            --threads "$THREADS" >"$OUT/embree_${n}_${m}.$1.jsonl" 2>"$OUT/embree_${n}_${m}.err" ||
+            { echo "skipped: the Embree harness failed: $(tail -n1 "$OUT/embree_${n}_${m}.err")"; return 1; }
+    }
+    run_subfield() {
+        echo >&2 "$c: subfield (run $1 of $REPEAT) ..."
+        RAYON_NUM_THREADS=$THREADS cargo bench -q --bench embree -- "$scene" --frames "$FRAMES" \
+            --width "$WIDTH" --height "$HEIGHT" >"$OUT/subfield_${n}_${m}.$1.jsonl" \
+            2>"$OUT/subfield_${n}_${m}.err" ||
+            { echo "skipped: the subfield bench failed: $(tail -n1 "$OUT/subfield_${n}_${m}.err")"; return 1; }
+    }
+    ok=1; runs=()
+    for ((k = 1; k <= REPEAT; k++)); do
+        if ((k % 2)); then
+            run_embree "$k" && run_subfield "$k" || { ok=0; break; }
+        else
+            run_subfield "$k" && run_embree "$k" || { ok=0; break; }
+        fi
+        runs+=("$OUT/embree_${n}_${m}.$k.jsonl" "$OUT/subfield_${n}_${m}.$k.jsonl")
+    done
+    if ((!ok)); then status=1; continue; fi
+    python3 - "${runs[@]}" <<'PY' || status=1
 import json, sys
 
 def read(path):
@@ -106,7 +120,21 @@ def read(path):
     return setup, summary, {k: tot(k) for k in ("primary_rays", "primary_hits", "dynamic_hits",
                                                  "shadow_occluded", "reflect_hits")}
 
-sides = [("Embree 4", *read(sys.argv[1])), ("subfield", *read(sys.argv[2]))]
+from statistics import median
+
+# Arguments: Embree's and subfield's JSON lines, run by run.
+pairs = [(read(a), read(b)) for a, b in zip(sys.argv[1::2], sys.argv[2::2])]
+KEYS = ("static_build_ms", "mean_eval_ms", "mean_update_ms", "mean_trace_ms", "mean_frame_ms",
+        "primary_mrays_s", "shadow_mrays_s", "reflect_mrays_s")
+
+def side(k):
+    runs = [p[k] for p in pairs]
+    setup, summary, totals = runs[0]
+    if any(r[1]["frames"] != summary["frames"] or r[2] != totals for r in runs):
+        print(f"WARNING: {('Embree', 'subfield')[k]}'s runs differ in frames or hit counts")
+    return setup, {**summary, **{key: median(r[1][key] for r in runs) for key in KEYS}}, totals
+
+sides = [("Embree 4", *side(0)), ("subfield", *side(1))]
 (_, es, e, et), (_, ss, s, st) = sides
 if (es["static_tris"], es["dynamic_tris"]) != (ss["static_tris"], ss["dynamic_tris"]):
     print(f"WARNING: the sides read different triangle counts: Embree {es['static_tris']} + "
@@ -131,6 +159,12 @@ print(f"| subfield / Embree | {r(s['static_build_ms'], e['static_build_ms'])} "
       f"| {r(st['primary_hits'], et['primary_hits'])} | {r(st['dynamic_hits'], et['dynamic_hits'])} "
       f"| {r(st['shadow_occluded'], et['shadow_occluded'])} | {r(st['reflect_hits'], et['reflect_hits'])} |")
 print()
+if len(pairs) > 1:
+    ratio = lambda f: ", ".join(f"{f(b[1]) / f(a[1]):.2f}" for a, b in pairs)
+    print(f"Medians of {len(pairs)} runs a side. Run by run, subfield / Embree: ms/frame "
+          f"{ratio(lambda m: m['mean_frame_ms'])}; update {ratio(lambda m: m['mean_update_ms'])}; "
+          f"update + trace {ratio(lambda m: m['mean_update_ms'] + m['mean_trace_ms'])}.")
+    print()
 print(f"{s['frames']} frames, {st['primary_rays'] // s['frames']} primary rays per frame. Time ratios "
       "(build, eval, update, ms/frame, update + trace): <= 1.0 means subfield is as fast or faster; Mrays/s ratios: "
       ">= 1.0 means subfield is faster. eval = posing the moving triangles (numpy on the Embree side); ms/frame = eval + update + trace.")
