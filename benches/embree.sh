@@ -37,7 +37,7 @@ while [ $# -gt 0 ]; do
         --configs) CONFIGS=${2:?--configs needs a value}; shift ;;
         --repeat) REPEAT=${2:?--repeat needs a value}; shift ;;
         --out) OUT=${2:?--out needs a value}; shift ;;
-        -h|--help) sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -h|--help) sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) die "unknown option $1 (see --help)" ;;
     esac
     shift
