@@ -55,9 +55,12 @@ fn update(frames: usize, dyn_params: &[PsfParams]) {
     for n in [1_000usize, 16_384, 100_000] {
         let mut tris = Vec::new();
         let mut ours = Vec::new();
-        let auto = *DynamicLayer::for_triangles(n).params();
-        for p in std::iter::once(&auto).chain(dyn_params) {
-            let mut layer = DynamicLayer::with_params(*p).unwrap();
+        let layers = std::iter::once(DynamicLayer::for_triangles(n)).chain(
+            dyn_params
+                .iter()
+                .map(|p| DynamicLayer::with_params(*p).unwrap()),
+        );
+        for mut layer in layers {
             let mut times = Vec::new();
             for f in 0..frames + 2 {
                 common::moving(n, f as f32 / 30.0, &mut tris);
@@ -97,13 +100,16 @@ fn update(frames: usize, dyn_params: &[PsfParams]) {
             peer[0] / ours[0]
         );
     }
-    let auto = |n: usize| *DynamicLayer::for_triangles(n).params();
+    let auto = |n: usize| {
+        let l = DynamicLayer::for_triangles(n);
+        format!("{} tiles, {} grids", l.params().tiles, l.grids())
+    };
     println!(
-        "(ratio: obvhs fastest rebuild time / subfield update time with the parameters the renderer uses, DynamicLayer::for_triangles(n): level {}, {} tiles at 1k, {} at 16k, {} at 100k; > 1 means subfield is faster)",
-        auto(1_000).level,
-        auto(1_000).tiles,
-        auto(16_384).tiles,
-        auto(100_000).tiles
+        "(ratio: obvhs fastest rebuild time / subfield update time with the parameters the renderer uses, DynamicLayer::for_triangles(n): level {}, {} at 1k, {} at 16k, {} at 100k; > 1 means subfield is faster)",
+        DynamicLayer::for_triangles(1_000).params().level,
+        auto(1_000),
+        auto(16_384),
+        auto(100_000)
     );
 }
 
@@ -163,10 +169,10 @@ fn frame(frames: usize, dyn_params: Option<PsfParams>) {
     let st_bvh = common::Obvhs::build(&stat);
     let nstat = stat.len() as u32;
     for n in [1_000usize, 16_384, 100_000] {
-        let mut layer = DynamicLayer::with_params(
-            dyn_params.unwrap_or(*DynamicLayer::for_triangles(n).params()),
-        )
-        .unwrap();
+        let mut layer = match dyn_params {
+            Some(p) => DynamicLayer::with_params(p).unwrap(),
+            None => DynamicLayer::for_triangles(n),
+        };
         let (mut ours, mut peer) = (FrameTimes::default(), FrameTimes::default());
         let mut tris = Vec::new();
         let mut nrays = 0usize;
@@ -255,11 +261,11 @@ fn frame(frames: usize, dyn_params: Option<PsfParams>) {
     }
 }
 
-fn memory(frames: usize, dyn_params: PsfParams) {
+/// `layer`: a fresh layer for 16,384 moving triangles.
+fn memory(frames: usize, mut layer: DynamicLayer) {
     println!("\n## memory: {frames} frames of 16,384 moving triangles");
     println!("| frame | layer bytes (MiB) | entries | max list | peak RSS (MiB) |");
     println!("|---|---|---|---|---|");
-    let mut layer = DynamicLayer::with_params(dyn_params).unwrap();
     let mut tris = Vec::new();
     let start = Instant::now();
     for f in 1..=frames {
@@ -327,7 +333,7 @@ fn main() {
     if want("memory") {
         memory(
             if quick { 100 } else { 1000 },
-            *DynamicLayer::for_triangles(16_384).params(),
+            DynamicLayer::for_triangles(16_384),
         );
     }
 }

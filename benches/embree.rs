@@ -2,7 +2,9 @@
 //! `../shared/peers/embree_anchor.py`, on the same glTF file, in our tracer.
 //!
 //! `cargo bench --bench embree -- SCENE.glb [--frames A:B[:S] | --frames F1,F2,..]
-//! [--width W] [--height H] [--psf LEVEL:TILES] [--dyn LEVEL:TILES]` (defaults `0:300:30`, 640x480, as the harness's).
+//! [--width W] [--height H] [--psf LEVEL:TILES] [--dyn LEVEL:TILES[:GRIDS]]` (defaults
+//! `0:300:30`, 640x480, as the harness's; `--dyn` without `GRIDS` takes every direction of
+//! the level).
 //! `benches/embree.sh` runs both sides and prints the table.
 //!
 //! What it mirrors, point by point (read off the harness's code):
@@ -91,9 +93,9 @@ struct Args {
     frames: Vec<i64>,
     width: u32,
     height: u32,
-    /// Overrides of the defaults, for parameter sweeps: `--psf L:N`, `--dyn L:N`.
+    /// Overrides of the defaults, for parameter sweeps: `--psf L:N`, `--dyn L:N[:G]`.
     psf: Option<PsfParams>,
-    dynamic: Option<PsfParams>,
+    dynamic: Option<(PsfParams, Option<usize>)>,
 }
 
 /// `start:stop[:step]` like Python's `range`, or a comma list.
@@ -150,25 +152,37 @@ fn parse_args() -> Args {
             }
             "--psf" | "--dyn" => {
                 let v = val(&a);
-                let p = v
-                    .split_once(':')
-                    .and_then(|(l, n)| {
-                        Some(PsfParams {
-                            level: l.parse().ok()?,
-                            tiles: n.parse().ok()?,
-                        })
-                    })
+                let want = if a == "--psf" {
+                    "LEVEL:TILES"
+                } else {
+                    "LEVEL:TILES[:GRIDS]"
+                };
+                let msg = format!("{a} {v}: want {want}");
+                let bad = || -> ! { fail(&msg) };
+                let f: Vec<&str> = v.split(':').collect();
+                let (l, n, g) = match f[..] {
+                    [l, n] => (l, n, None),
+                    [l, n, g] if a == "--dyn" => (l, n, Some(g)),
+                    _ => bad(),
+                };
+                let p = l
+                    .parse()
+                    .ok()
+                    .zip(n.parse().ok())
+                    .map(|(level, tiles)| PsfParams { level, tiles })
                     .filter(|p| p.validate().is_ok())
-                    .unwrap_or_else(|| fail(&format!("{a} {v}: want LEVEL:TILES")));
+                    .unwrap_or_else(|| bad());
+                let g = g.map(|g| g.parse::<usize>().unwrap_or_else(|_| bad()));
                 if a == "--psf" {
                     psf = Some(p)
                 } else {
-                    dynamic = Some(p)
+                    dynamic = Some((p, g))
                 }
             }
             _ if a.starts_with('-') => fail(&format!(
                 "unknown option {a}; usage: cargo bench --bench embree -- SCENE.glb \
-                 [--frames A:B[:S]] [--width W] [--height H]"
+                 [--frames A:B[:S]] [--width W] [--height H] [--psf LEVEL:TILES] \
+                 [--dyn LEVEL:TILES[:GRIDS]]"
             )),
             _ if scene.is_none() => scene = Some(PathBuf::from(a)),
             _ => fail(&format!("one scene only (got {a} too)")),
@@ -280,7 +294,11 @@ fn main() {
         .unwrap_or_else(|e| fail(&format!("baking the static part: {e}")));
     let static_build_ms = ms(t);
     let mut layer = match a.dynamic {
-        Some(p) => DynamicLayer::with_params(p).unwrap_or_else(|e| fail(&e.to_string())),
+        Some((p, grids)) => match grids {
+            Some(g) => DynamicLayer::with_grids(p, g),
+            None => DynamicLayer::with_params(p),
+        }
+        .unwrap_or_else(|e| fail(&format!("--dyn: {e}"))),
         None => DynamicLayer::for_triangles(ndyn),
     };
     let nstat = statics.len() as u32;
@@ -295,6 +313,7 @@ fn main() {
             "width": a.width, "height": a.height, "fps": fps,
             "psf_level": params.level, "psf_tiles": params.tiles,
             "dyn_level": layer.params().level, "dyn_tiles": layer.params().tiles,
+            "dyn_grids": layer.grids(),
             "light": light.to_array(), "eps": eps,
             "static_build_ms": static_build_ms,
         }})

@@ -17,8 +17,9 @@ use subfield::{DynamicLayer, Psf, PsfParams};
 struct Case {
     seed: u64,
     static_params: PsfParams,
-    /// The dynamic layer's own level and tile count (`None`: those of the static PSF).
-    dynamic_params: Option<PsfParams>,
+    /// The dynamic layer's own level and tile count (`None`: those of the static PSF),
+    /// and a number that picks how many of the level's directions it lists in.
+    dynamic_params: Option<(PsfParams, usize)>,
     moving: usize,
     frames: usize,
     rays: usize,
@@ -167,7 +168,10 @@ fn check(c: &Case) -> Result<(), TestCaseError> {
     let stat = static_scene(&mut rng);
     let psf = Psf::build(&stat, &c.static_params).expect("bake");
     let mut layer = match c.dynamic_params {
-        Some(p) => DynamicLayer::with_params(p).expect("params"),
+        Some((p, g)) => {
+            let all = DynamicLayer::with_params(p).expect("params").grids();
+            DynamicLayer::with_grids(p, 1 + g % all).expect("grids")
+        }
         None => DynamicLayer::new(&psf),
     };
     let mut before: Vec<[Vec3; 3]> = Vec::new();
@@ -223,7 +227,7 @@ fn case() -> impl Strategy<Value = Case> {
     (
         any::<u64>(),
         params(),
-        prop_oneof![Just(None), params().prop_map(Some)],
+        prop_oneof![Just(None), (params(), 0usize..7).prop_map(Some)],
         prop_oneof![Just(1usize), 2usize..50, 50usize..400],
     )
         .prop_map(|(seed, static_params, dynamic_params, moving)| Case {

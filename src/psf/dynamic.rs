@@ -243,23 +243,56 @@ impl DynamicLayer {
     }
 
     /// An empty layer sized for `n` moving triangles: the tile count of
-    /// [`PsfParams::for_triangles`], level 0 always (four directions). A higher level
-    /// shortens the walk but multiplies the update. Since camera and shadow rays take
-    /// point grids, only the other rays walk this layer: level 0 updated 30–35% faster
-    /// than level 1 on the museum scenes (1k to 100k moving triangles, and with the 1M
-    /// room), for frames within −2% to +4% (`benches/PERF.md`, step 62).
+    /// [`PsfParams::for_triangles`], level 0, and [`grids_for(n)`](Self::grids_for) of
+    /// its four directions. Since camera and shadow rays take point grids, only the
+    /// other rays walk this layer: level 0 updated 30–35% faster than level 1 on the
+    /// museum scenes (1k to 100k moving triangles, and with the 1M room), for frames
+    /// within −2% to +4% (`benches/PERF.md`, step 62).
     pub fn for_triangles(n: usize) -> DynamicLayer {
-        Self::with_params(PsfParams {
+        let params = PsfParams {
             level: 0,
             ..PsfParams::for_triangles(n)
-        })
-        .expect("for_triangles gives valid parameters")
+        };
+        Self::with_grids(params, Self::grids_for(n)).expect("for_triangles gives valid parameters")
     }
 
-    /// An empty layer with its own direction level and tile count.
+    /// How many of level 0's four directions [`for_triangles`](Self::for_triangles)
+    /// lists `n` moving triangles in: two below 32,768, all four from there. Fewer grids
+    /// shorten the update (its grids are independent jobs: on two cores, two are one
+    /// round of them, four two rounds) and lengthen the walk of the rays far from both
+    /// directions, which costs more the more moving triangles there are. On the museum
+    /// scenes, two threads, 640x480 (`benches/PERF.md`, step 93): at 16,384 two grids
+    /// updated in 1.13 ms against 1.84 with a trace as fast (+0.1 ± 0.9 ms), at 40,000
+    /// in 2.8 against 4.4 ms but traced 4.2 ± 1.1 ms slower, a slower frame.
+    pub fn grids_for(n: usize) -> usize {
+        if n < 32_768 {
+            2
+        } else {
+            4
+        }
+    }
+
+    /// An empty layer with its own direction level and tile count, over every direction
+    /// of the level.
     pub fn with_params(params: PsfParams) -> Result<DynamicLayer, PsfError> {
         params.validate()?;
-        let dirs = super::subfield_directions(params.level);
+        Self::with_grids(params, super::subfield_directions(params.level).len())
+    }
+
+    /// An empty layer over the first `grids` directions of `params.level` (1 up to all of
+    /// them: 4 at level 0, 7 at level 1). A ray walks the grid of the closest of those
+    /// directions; any grid gives the same hits, a farther one a longer walk.
+    pub fn with_grids(params: PsfParams, grids: usize) -> Result<DynamicLayer, PsfError> {
+        params.validate()?;
+        let mut dirs = super::subfield_directions(params.level);
+        if grids == 0 || grids > dirs.len() {
+            return Err(PsfError::Params(format!(
+                "grids {grids} is outside 1..={} for level {}",
+                dirs.len(),
+                params.level
+            )));
+        }
+        dirs.truncate(grids);
         let n = (params.tiles * params.tiles) as usize;
         let subfields = dirs
             .iter()
@@ -293,6 +326,11 @@ impl DynamicLayer {
 
     pub fn params(&self) -> &PsfParams {
         &self.params
+    }
+
+    /// The number of grids (directions) the layer lists its triangles in.
+    pub fn grids(&self) -> usize {
+        self.subfields.len()
     }
 
     /// Replaces the layer's triangles with `tris` (this frame's positions). On error
@@ -991,5 +1029,34 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn grids_are_the_first_directions_of_the_level_and_refused_outside_it() {
+        let p = |level| PsfParams { level, tiles: 8 };
+        for (level, all) in [(0, 4), (1, 7)] {
+            assert_eq!(
+                DynamicLayer::with_params(p(level)).expect("params").grids(),
+                all
+            );
+            let dirs = crate::psf::subfield_directions(level);
+            for g in 1..=all {
+                let layer = DynamicLayer::with_grids(p(level), g).expect("grids");
+                let got: Vec<Vec3> = layer.subfields.iter().map(|s| s.dir).collect();
+                assert_eq!(got, dirs[..g], "level {level}, {g} grids");
+            }
+            for g in [0, all + 1] {
+                let e = DynamicLayer::with_grids(p(level), g).expect_err("out of range");
+                assert!(
+                    e.to_string()
+                        .contains(&format!("grids {g} is outside 1..={all}")),
+                    "{e}"
+                );
+            }
+        }
+        assert_eq!(DynamicLayer::for_triangles(16_384).grids(), 2);
+        assert_eq!(DynamicLayer::for_triangles(32_767).grids(), 2);
+        assert_eq!(DynamicLayer::for_triangles(32_768).grids(), 4);
+        assert_eq!(DynamicLayer::for_triangles(100_000).params().level, 0);
     }
 }
