@@ -173,7 +173,7 @@ fn by_depth(mut items: Vec<Item>) -> Vec<Item> {
 /// PSF's cache of grids.
 pub(crate) struct Sources<'a> {
     pub statics: &'a [[Vec3; 3]],
-    pub moving: &'a [[Vec3; 3]],
+    /// The moving triangles in the test's form, which holds their vertices exactly.
     pub moving_pre: &'a [TriPre],
     /// Hit number of moving triangle `k`, less `statics.len()`.
     pub moving_number: &'a [u32],
@@ -750,7 +750,7 @@ impl<'a> Plan<'a> {
     /// in a recent batch (a camera or light that stays put); once kept, a batch pays only
     /// for the moving triangles' grid.
     pub(crate) fn for_batch(rays: &[Ray], src: &'a Sources<'a>) -> Vec<Plan<'a>> {
-        let ntri = src.statics.len() + src.moving.len();
+        let ntri = src.statics.len() + src.moving_pre.len();
         let n = rays.len();
         if ntri == 0 || n < MIN_RAYS || ntri >= u32::MAX as usize {
             return Vec::new();
@@ -852,7 +852,7 @@ impl<'a> Plan<'a> {
     /// its triangles in one array, in the test's form, and their hit numbers.
     fn over_all(src: &'a Sources<'a>, at: Around, pre: Arc<[TriPre]>, grid: PointGrid) -> Plan<'a> {
         let nstat = src.statics.len();
-        let mut tris = Vec::with_capacity(nstat + src.moving.len());
+        let mut tris = Vec::with_capacity(nstat + src.moving_pre.len());
         tris.extend_from_slice(&pre);
         tris.extend_from_slice(src.moving_pre);
         let number = (0..nstat as u32)
@@ -883,7 +883,7 @@ impl<'a> Plan<'a> {
         keep: &mut Option<Keep>,
     ) -> Option<Plan<'a>> {
         let margin = src.margin as f64;
-        let ntri = src.statics.len() + src.moving.len();
+        let ntri = src.statics.len() + src.moving_pre.len();
         let (rects, far2) = (spread.rects, spread.far2);
         let n: usize = rects.iter().map(|b| b.4).sum();
         // What a ray taken off the parallel subfields saves, in builds of a triangle
@@ -892,7 +892,7 @@ impl<'a> Plan<'a> {
         // for half of what that would.
         let saves = if 2 * spread.ends >= n { 12 } else { 2 };
         let faces = rects.iter().filter(|b| b.4 > 0).count();
-        let nmov = src.moving.len();
+        let nmov = src.moving_pre.len();
         // The kept grid serves when the batch's rectangles and origins lie within its
         // own; otherwise it is built again over both.
         let fits = kept.as_ref().is_some_and(|g| {
@@ -918,7 +918,7 @@ impl<'a> Plan<'a> {
                     if g < nstat {
                         src.statics[g]
                     } else {
-                        src.moving[g - nstat]
+                        src.moving_pre[g - nstat].vertices()
                     }
                 },
                 0,
@@ -977,14 +977,22 @@ impl<'a> Plan<'a> {
         {
             let total = fixed.grid.starts.len() - 1;
             let (faces, rays) = (fixed.grid.faces, n as u64);
-            let moving = PointGrid::build_on(&at, faces, total, rays, nmov, |g| src.moving[g])?;
+            let moving = PointGrid::build_on(&at, faces, total, rays, nmov, |g| {
+                src.moving_pre[g].vertices()
+            })?;
             let grid = PointGrid::merged(&fixed.grid, &moving, nstat as u32);
             return Some(Self::over_all(src, at, pre, grid));
         }
         let batch = if nmov == 0 {
             None
         } else {
-            let grid = PointGrid::build(&at, &grown(rects), nmov, |g| src.moving[g], 0)?;
+            let grid = PointGrid::build(
+                &at,
+                &grown(rects),
+                nmov,
+                |g| src.moving_pre[g].vertices(),
+                0,
+            )?;
             Some(BatchGrid {
                 grid,
                 tris: Cow::Borrowed(src.moving_pre),

@@ -381,7 +381,6 @@ impl Psf {
     fn point_sources(&self) -> Sources<'_> {
         Sources {
             statics: &self.triangles,
-            moving: &[],
             moving_pre: &[],
             moving_number: &[],
             margin: self.margin,
