@@ -228,7 +228,9 @@ fn case() -> impl Strategy<Value = Case> {
         any::<u64>(),
         params(),
         prop_oneof![Just(None), (params(), 0usize..7).prop_map(Some)],
-        prop_oneof![Just(1usize), 2usize..50, 50usize..400],
+        // The last range crosses `DynamicLayer::PARALLEL_FROM` (2,048), where an update
+        // goes from one thread to the pool's.
+        prop_oneof![Just(1usize), 2usize..50, 50usize..400, 1900usize..2400],
     )
         .prop_map(|(seed, static_params, dynamic_params, moving)| Case {
             seed,

@@ -327,6 +327,11 @@ impl DynamicLayer {
         }
     }
 
+    /// Moving triangles from which an update runs its jobs on the pool's threads; with
+    /// fewer, the hand-overs between threads cost more than they share, and the calling
+    /// thread does it all (`benches/PERF.md`, step 95).
+    pub const PARALLEL_FROM: usize = 2048;
+
     /// An empty layer with its own direction level and tile count, over every direction
     /// of the level.
     pub fn with_params(params: PsfParams) -> Result<DynamicLayer, PsfError> {
@@ -428,27 +433,43 @@ impl DynamicLayer {
         let grids = self.subfields.len();
         let (rest, last) = self.subfields.split_at_mut(grids - 1);
         let last = &mut last[0];
-        rayon::join(
-            || {
+        // Few triangles are not worth the hand-overs between threads.
+        let serial = tris.len() < Self::PARALLEL_FROM;
+        let both = |a: &mut (dyn FnMut() + Send), b: &mut (dyn FnMut() + Send)| {
+            if serial {
+                a();
+                b();
+            } else {
+                rayon::join(a, b);
+            }
+        };
+        both(
+            &mut || {
                 morton_order(tris, &bounds, keys, counts, order, rank);
                 last.count(tris, gv, margin, &clip, tiles, None);
             },
-            || {
-                rest.par_iter_mut()
-                    .for_each(|s| s.count(tris, gv, margin, &clip, tiles, None))
+            &mut || {
+                let count = |s: &mut DynSubfield| s.count(tris, gv, margin, &clip, tiles, None);
+                match serial {
+                    true => rest.iter_mut().for_each(count),
+                    false => rest.par_iter_mut().for_each(count),
+                }
             },
         );
         // Overwritten in place: resizing writes only where the count grew.
         self.local.resize(tris.len(), TriPre::default());
         let (order, rank, local) = (&self.order, &self.rank, &mut self.local);
-        rayon::join(
-            || {
+        both(
+            &mut || {
                 for (o, &i) in local.iter_mut().zip(order) {
                     *o = TriPre::new(&tris[i as usize]);
                 }
                 last.write(rank, gv);
             },
-            || rest.par_iter_mut().for_each(|s| s.write(rank, gv)),
+            &mut || match serial {
+                true => rest.iter_mut().for_each(|s| s.write(rank, gv)),
+                false => rest.par_iter_mut().for_each(|s| s.write(rank, gv)),
+            },
         );
         Ok(())
     }
@@ -1134,9 +1155,21 @@ mod tests {
     fn update_lists_what_an_insertion_of_the_sorted_copy_lists() {
         let mut rng = Rng::new(23);
         let (lo, hi) = (Vec3::new(-4.0, -2.0, -3.0), Vec3::new(4.0, 2.0, 3.0));
-        let mut tris = soup(&mut rng, 900, lo, hi, 0.3);
-        tris.extend(soup(&mut rng, 15, lo, hi, 5.0));
-        for (level, tiles, grids) in [(0, 32, 2), (0, 7, 4), (1, 64, 7), (0, 1, 1)] {
+        // Below and above `PARALLEL_FROM`: the update on one thread, then on the pool's.
+        let small = DynamicLayer::PARALLEL_FROM - 100;
+        let sizes = [
+            (small, 0, 32, 2),
+            (small, 1, 64, 7),
+            (900, 0, 7, 4),
+            (900, 0, 1, 1),
+        ];
+        let large = DynamicLayer::PARALLEL_FROM + 400;
+        let sizes = sizes
+            .into_iter()
+            .chain([(large, 0, 32, 2), (large, 1, 16, 7)]);
+        for (n, level, tiles, grids) in sizes {
+            let mut tris = soup(&mut rng, n, lo, hi, 0.3);
+            tris.extend(soup(&mut rng, 15, lo, hi, 5.0));
             let params = PsfParams { level, tiles };
             let mut layer = DynamicLayer::with_grids(params, grids).expect("params");
             // A larger frame first: the buffers it leaves must not show through.
