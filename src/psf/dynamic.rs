@@ -756,22 +756,6 @@ impl DynSubfield {
             }
         }
     }
-
-    /// Both passes, the entries naming the triangles by their input numbers.
-    #[cfg(test)]
-    fn insert(
-        &mut self,
-        tris: &[[Vec3; 3]],
-        gv: u32,
-        margin: f32,
-        clip: &Aabb,
-        tiles: u32,
-        dense: Option<bool>,
-    ) {
-        self.count(tris, gv, margin, clip, tiles, dense);
-        let rank: Vec<u32> = (0..tris.len() as u32).collect();
-        self.write(&rank, gv);
-    }
 }
 
 /// The triangles' bounds, found in the same pass that checks their coordinates: one
@@ -999,6 +983,11 @@ mod tests {
     use super::*;
     use crate::synth::{soup, Rng};
 
+    /// The ranks of triangles already in the order their entries name them.
+    fn identity(n: usize) -> Vec<u32> {
+        (0..n as u32).collect()
+    }
+
     /// A tile's list as (triangle, zmin bits, zmax bits), in list order.
     type List = Vec<(u32, u32, u32)>;
 
@@ -1074,7 +1063,8 @@ mod tests {
                 let bounds = Aabb::from_triangles(tris);
                 let margin = margin_for(&bounds);
                 let clip = bounds.padded(2.0 * margin);
-                s.insert(tris, gv, margin, &clip, 32, Some(dense));
+                s.count(tris, gv, margin, &clip, 32, Some(dense));
+                s.write(&identity(tris.len()), gv);
             }
             let mut runs = 0;
             for slot in s.slots.iter().filter(|x| x.version == 2) {
@@ -1109,8 +1099,10 @@ mod tests {
                 let layer = || DynamicLayer::with_params(PsfParams { level, tiles });
                 let (da, db) = (layer().expect("params"), layer().expect("params"));
                 for (mut a, mut b) in da.subfields.into_iter().zip(db.subfields) {
-                    a.insert(&tris, 3, margin, &clip, tiles, Some(true));
-                    b.insert(&tris, 3, margin, &clip, tiles, Some(false));
+                    a.count(&tris, 3, margin, &clip, tiles, Some(true));
+                    b.count(&tris, 3, margin, &clip, tiles, Some(false));
+                    a.write(&identity(tris.len()), 3);
+                    b.write(&identity(tris.len()), 3);
                     let (la, lb) = (lists(&a, 3), lists(&b, 3));
                     assert!(!la.is_empty());
                     assert_eq!(la, lb, "level {level}, {tiles} tiles, direction {}", a.dir);
@@ -1186,7 +1178,8 @@ mod tests {
             let gv = layer.generation;
             let mut fresh = DynamicLayer::with_grids(params, grids).expect("params");
             for (s, f) in layer.subfields.iter().zip(&mut fresh.subfields) {
-                f.insert(&sorted, gv, layer.margin, &layer.clip, tiles, None);
+                f.count(&sorted, gv, layer.margin, &layer.clip, tiles, None);
+                f.write(&identity(sorted.len()), gv);
                 let (got, want) = (lists(s, gv), lists(f, gv));
                 assert_eq!(got.len(), want.len(), "level {level}, {tiles} tiles");
                 assert!(want.iter().any(|(_, l)| l.len() > 1));
