@@ -90,7 +90,7 @@ pub(crate) fn clipped_span(clip: &Aabb, ray: &Ray) -> Option<(DVec3, DVec3, f64,
 
 /// A triangle as a query stores it: the static PSF's as plain vertices (as the baked
 /// file holds them, so opening a file builds nothing), the dynamic layer's as
-/// [`TriPre`] (built with its sorted copy every update).
+/// [`TriPre`] (built every update, in the Morton order).
 pub(crate) trait Candidate {
     fn intersect(&self, pre: &RayPre, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)>;
 }
