@@ -443,18 +443,19 @@ impl DynamicLayer {
                 rayon::join(a, b);
             }
         };
+        let each = |grids: &mut [DynSubfield], f: &(dyn Fn(&mut DynSubfield) + Sync)| {
+            if serial {
+                grids.iter_mut().for_each(f)
+            } else {
+                grids.par_iter_mut().for_each(f)
+            }
+        };
         both(
             &mut || {
                 morton_order(tris, &bounds, keys, counts, order, rank);
                 last.count(tris, gv, margin, &clip, tiles, None);
             },
-            &mut || {
-                let count = |s: &mut DynSubfield| s.count(tris, gv, margin, &clip, tiles, None);
-                match serial {
-                    true => rest.iter_mut().for_each(count),
-                    false => rest.par_iter_mut().for_each(count),
-                }
-            },
+            &mut || each(rest, &|s| s.count(tris, gv, margin, &clip, tiles, None)),
         );
         // Overwritten in place: resizing writes only where the count grew.
         self.local.resize(tris.len(), TriPre::default());
@@ -466,10 +467,7 @@ impl DynamicLayer {
                 }
                 last.write(rank, gv);
             },
-            &mut || match serial {
-                true => rest.iter_mut().for_each(|s| s.write(rank, gv)),
-                false => rest.par_iter_mut().for_each(|s| s.write(rank, gv)),
-            },
+            &mut || each(rest, &|s| s.write(rank, gv)),
         );
         Ok(())
     }
