@@ -6,6 +6,7 @@
 
 pub mod aff;
 pub mod atomic;
+pub mod farm;
 pub mod format;
 pub mod geometry;
 pub mod museum;

@@ -621,7 +621,7 @@ fn try_open_and_trace(bytes: Vec<u8>, probe: &[Ray]) -> u8 {
                 let _ = baked.psf.intersect(r);
                 let _ = baked.psf.occluded(r);
             }
-            let _ = format::Inspection::of(&baked).to_json();
+            let _ = format::Inspection::of(&baked, format::ContentHash::default()).to_json();
             0
         }
         Err(e) => {

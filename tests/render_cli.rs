@@ -213,8 +213,11 @@ fn a_killed_run_resumed_gives_the_same_frames() {
     let done_before = visible(&dir.join("part")).len();
     eprintln!("killed with {done_before} of 24 frames written");
     // And one stale temporary for sure, as a writer killed mid-file leaves it (the pid
-    // is above Linux's largest, so no such process runs).
-    let stale = dir.join("part/.f.0005.exr.4194321-0.tmp");
+    // is above Linux's largest, so no such process runs; the host is this one).
+    let stale = dir.join(format!(
+        "part/.f.0005.exr.4194321-0-{}.tmp",
+        subfield::atomic::host_id()
+    ));
     std::fs::write(&stale, b"half a frame").unwrap();
     let mut resume = args(&part);
     resume.push("--resume".into());

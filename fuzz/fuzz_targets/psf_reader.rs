@@ -45,7 +45,7 @@ fn open_and_use(bytes: Vec<u8>, rays: &[Ray]) {
             let _ = baked.psf.intersect(r);
             let _ = baked.psf.occluded(r);
         }
-        let _ = Inspection::of(&baked).to_json();
+        let _ = Inspection::of(&baked, Default::default()).to_json();
     }
 }
 

@@ -1,7 +1,7 @@
 //! `subfield bake SCENE -o FILE.psf [--levels L] [--tiles N] [--codec zstd|none]
 //! [--threads T]`: the static part of a scene (all clips playing), baked and written.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -56,24 +56,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     for w in &scene.warnings {
         say(format!("warning: {w}"));
     }
-    let split = scene.split(ClipSelection::All);
-    say(format!("{}: {}", a.scene.display(), split.summary()));
-    let soup = scene.static_triangles(&split);
-    let auto = PsfParams::for_triangles(soup.len());
-    let params = PsfParams {
-        level: a.levels.unwrap_or(auto.level),
-        tiles: a.tiles.unwrap_or(auto.tiles),
-    };
-
-    let start = Instant::now();
-    let dirs = subfield::psf::subfield_directions(params.level).len() as u64;
-    let bar = Progress::new("subfields", dirs, a.quiet);
-    let psf = Psf::build_with_progress(&soup.positions, &params, &|done, _| {
-        bar.set(done as u64, "")
-    })
-    .with_context(|| format!("cannot bake {}", a.scene.display()))?;
-    bar.finish();
-    let baked = start.elapsed();
+    let (psf, baked) = bake_static(&scene, &a.scene, a.levels, a.tiles, a.quiet)?;
 
     let report = write_psf(
         &a.output,
@@ -84,14 +67,48 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         },
     )?;
     say(format!(
-        "wrote {}: {} triangles, {} subfields, {} bytes ({} raw), baked in {:.2} s, scene hash {}",
+        "wrote {}: {} triangles, {} subfields, {} bytes ({} raw), baked in {:.2} s, scene hash {}, content hash {}",
         a.output.display(),
         psf.triangles().len(),
         psf.subfields().len(),
         report.file_length,
         report.raw_length,
-        baked.as_secs_f64(),
-        report.scene_hash
+        baked,
+        report.scene_hash,
+        report.content_hash
     ));
+    // The content hash alone on stdout, for scripts (`H=$(subfield bake ... -q)`).
+    super::print_stdout(&format!("{}\n", report.content_hash))?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// Bakes the static part of `scene` (all clips playing), with `levels` and `tiles` or
+/// the automatic choice for its triangle count; progress on stderr unless `quiet`.
+/// Returns the tracer and the seconds it took.
+pub fn bake_static(
+    scene: &Scene,
+    label: &Path,
+    levels: Option<u32>,
+    tiles: Option<u32>,
+    quiet: bool,
+) -> anyhow::Result<(Psf, f64)> {
+    let split = scene.split(ClipSelection::All);
+    if !quiet {
+        eprintln!("{}: {}", label.display(), split.summary());
+    }
+    let soup = scene.static_triangles(&split);
+    let auto = PsfParams::for_triangles(soup.len());
+    let params = PsfParams {
+        level: levels.unwrap_or(auto.level),
+        tiles: tiles.unwrap_or(auto.tiles),
+    };
+    let start = Instant::now();
+    let dirs = subfield::psf::subfield_directions(params.level).len() as u64;
+    let bar = Progress::new("subfields", dirs, quiet);
+    let psf = Psf::build_with_progress(&soup.positions, &params, &|done, _| {
+        bar.set(done as u64, "")
+    })
+    .with_context(|| format!("cannot bake {}", label.display()))?;
+    bar.finish();
+    Ok((psf, start.elapsed().as_secs_f64()))
 }

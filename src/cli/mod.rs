@@ -5,9 +5,11 @@ mod bake;
 mod convert;
 mod demo;
 mod generate;
+mod guard;
 mod inspect;
 mod progress;
 mod render;
+mod submit;
 
 use std::process::ExitCode;
 
@@ -38,6 +40,8 @@ pub enum Command {
     Convert(convert::Args),
     /// Write a built-in scene to a file (museum as glTF, animart as AFF).
     Generate(generate::Args),
+    /// Render on a farm: a Slurm job array, or an Open Job Description template.
+    Submit(submit::Args),
 }
 
 /// Runs one command. Errors carry their context (file, section, accessor); `main`
@@ -50,6 +54,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Demo(a) => demo::run(a),
         Command::Generate(a) => generate::run(a),
         Command::Render(a) => render::run(*a),
+        Command::Submit(a) => submit::run(a),
     }
 }
 

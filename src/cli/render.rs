@@ -5,6 +5,8 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{bail, Context};
+use subfield::farm;
+use subfield::format::ContentHash;
 use subfield::render::{self, LookAt, PixelType, RenderEvent, RenderOptions};
 use subfield::scene::Scene;
 
@@ -82,6 +84,61 @@ pub struct Args {
     /// Per-frame times as a stacked bar chart.
     #[arg(long, value_name = "FILE.svg|png")]
     pub plot: Option<PathBuf>,
+    /// Refuse the baked file unless its content hash (printed by `bake`) is HASH; the
+    /// bake is then staged (see --stage-dir).
+    #[arg(long, value_name = "HASH", requires = "baked")]
+    pub baked_hash: Option<String>,
+    /// Refuse the scene file unless its content hash is HASH.
+    #[arg(long, value_name = "HASH")]
+    pub scene_file_hash: Option<String>,
+    /// Stage the baked file into this node-local cache (as <hash>.psf, copied once,
+    /// verified) and map the copy (default with --baked-hash: $TMPDIR/subfield-stage).
+    #[arg(long, value_name = "DIR")]
+    pub stage_dir: Option<PathBuf>,
+}
+
+/// A content hash given on the command line.
+pub fn parse_hash(flag: &str, s: &str) -> anyhow::Result<ContentHash> {
+    s.parse().with_context(|| flag.to_string())
+}
+
+/// Checks the scene file's hash and resolves the bake through the stage, as the flags
+/// ask; returns the path to map and a line saying what was done. A task on a farm
+/// gets here with both hashes and a stage.
+pub fn resolve_inputs(a: &Args) -> anyhow::Result<(Option<PathBuf>, Option<String>)> {
+    if let Some(h) = &a.scene_file_hash {
+        let want = parse_hash("--scene-file-hash", h)?;
+        farm::verify_file("scene file", &a.scene, want)?;
+    }
+    let Some(baked) = &a.baked else {
+        if a.stage_dir.is_some() {
+            bail!("--stage-dir stages a baked file: give it with --baked");
+        }
+        return Ok((None, None));
+    };
+    let want = a
+        .baked_hash
+        .as_deref()
+        .map(|h| parse_hash("--baked-hash", h))
+        .transpose()?;
+    if want.is_none() && a.stage_dir.is_none() {
+        return Ok((Some(baked.clone()), None));
+    }
+    let dir = a.stage_dir.clone().unwrap_or_else(farm::default_stage_dir);
+    let st = farm::stage_file(baked, want, &dir)?;
+    let line = format!(
+        "staged {} as {} ({}, {:.1} MiB in {:.2} s)",
+        baked.display(),
+        st.path.display(),
+        match (st.copied, st.replaced_bad_copy) {
+            (false, _) => "cached, verified",
+            (true, false) => "copied, verified",
+            (true, true) => "copied over a damaged cached copy, verified",
+        },
+        st.bytes as f64 / (1024.0 * 1024.0),
+        st.seconds
+    );
+    Ok((Some(st.path), Some(line)))
 }
 
 /// The library's options from the flags (every value checked, one error line each).
@@ -138,8 +195,16 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
-    let opts = options(&a)?;
+    let mut opts = options(&a)?;
     super::set_threads(a.threads)?;
+    let (baked, staged) = resolve_inputs(&a)?;
+    if let Some(p) = &baked {
+        super::guard::name_mapped_file(p);
+    }
+    opts.baked = baked;
+    if let (Some(line), false) = (&staged, a.quiet) {
+        eprintln!("{line}");
+    }
     let scene = Scene::load(&a.scene)?;
     drive(&scene, &a.scene, &opts, a.quiet)
         .with_context(|| format!("cannot render {}", a.scene.display()))?;

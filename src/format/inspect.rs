@@ -8,7 +8,8 @@ use std::path::Path;
 use serde::Serialize;
 
 use super::{
-    open_psf, BakedPsf, Codec, FormatError, Header, OpenOptions, SectionKind, PER_SUBFIELD,
+    open_psf, BakedPsf, Codec, ContentHash, FormatError, Header, OpenOptions, SectionKind,
+    PER_SUBFIELD,
 };
 use crate::psf::SharedBytes;
 
@@ -16,6 +17,9 @@ use crate::psf::SharedBytes;
 /// inspection is only made of a valid one.
 #[derive(Clone, Debug, Serialize)]
 pub struct Inspection {
+    /// The hash of the file's bytes (see [`ContentHash`]): what `subfield bake` prints
+    /// and a farm job stages the file under.
+    pub content_hash: ContentHash,
     pub header: Header,
     pub sections: Vec<SectionInfo>,
     /// Sums over the sections.
@@ -81,15 +85,20 @@ pub struct Occupancy {
 
 /// Opens, validates and describes a baked file.
 pub fn inspect(path: impl AsRef<Path>) -> Result<Inspection, FormatError> {
-    Ok(Inspection::of(&open_psf(path, &OpenOptions::default())?))
+    let path = path.as_ref();
+    let baked = open_psf(path, &OpenOptions::default())?;
+    // Validation read every byte already; the hash reads them once more.
+    let hash = super::hash_file(path).map_err(|e| FormatError::io(path, e))?;
+    Ok(Inspection::of(&baked, hash))
 }
 
 /// As [`inspect`], for a file held in memory.
 pub fn inspect_bytes(bytes: SharedBytes) -> Result<Inspection, FormatError> {
-    Ok(Inspection::of(&super::from_bytes(
-        bytes,
-        &OpenOptions::default(),
-    )?))
+    let hash = ContentHash::of((*bytes).as_ref());
+    Ok(Inspection::of(
+        &super::from_bytes(bytes, &OpenOptions::default())?,
+        hash,
+    ))
 }
 
 fn ratio(raw: u64, stored: u64) -> f64 {
@@ -101,8 +110,8 @@ fn ratio(raw: u64, stored: u64) -> f64 {
 }
 
 impl Inspection {
-    /// Describes an opened file.
-    pub fn of(baked: &BakedPsf) -> Inspection {
+    /// Describes an opened file whose bytes hash to `content_hash`.
+    pub fn of(baked: &BakedPsf, content_hash: ContentHash) -> Inspection {
         let sections: Vec<SectionInfo> = baked
             .sections
             .iter()
@@ -173,6 +182,7 @@ impl Inspection {
             .collect();
         let st = psf.stats();
         Inspection {
+            content_hash,
             header: baked.header.clone(),
             sections,
             stored_bytes,
@@ -212,6 +222,7 @@ impl fmt::Display for Inspection {
             "level {} ({} subfields), {} tiles per side, {} triangles, margin {:e}",
             h.level, h.subfield_count, h.tiles, h.triangle_count, h.margin
         )?;
+        writeln!(f, "content hash {}", self.content_hash)?;
         writeln!(f, "scene hash {}", h.scene_hash)?;
         writeln!(
             f,

@@ -11,9 +11,12 @@
 //!   from the mapping. [`Psf::from_parts`](crate::psf::Psf::from_parts) checks every index
 //!   the traversal follows.
 //! * [`inspect`]: what is inside a file, serialisable to JSON.
+//! * [`ContentHash`]: the hash of a whole file's bytes, under which a bake is shipped
+//!   and staged ([`crate::farm`]).
 //! * [`scene_hash`]: the hash of the static input recorded in the header, so that a file
 //!   baked from another scene is refused ([`FormatError::StaleScene`]).
 
+mod content;
 mod error;
 mod inspect;
 mod read;
@@ -25,6 +28,7 @@ use glam::Vec3;
 use serde::Serialize;
 use xxhash_rust::xxh3::{xxh3_64, Xxh3};
 
+pub use content::{hash_file, hash_reader, BadContentHash, ContentHash};
 pub use error::FormatError;
 pub use inspect::{inspect, inspect_bytes, DirectionInfo, Inspection, Occupancy, SectionInfo};
 pub use read::{from_bytes, open_psf, read_header, BakedPsf, OpenOptions};

@@ -9,8 +9,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::{
-    align_up, checksum, scene_hash, section_ids, Codec, FormatError, Header, SceneHash,
-    SectionEntry, SectionId, HEADER_LEN, MAX_RATIO, PER_SUBFIELD, TABLE_ENTRY_LEN, VERSION,
+    align_up, checksum, scene_hash, section_ids, Codec, ContentHash, FormatError, Header,
+    SceneHash, SectionEntry, SectionId, HEADER_LEN, MAX_RATIO, PER_SUBFIELD, TABLE_ENTRY_LEN,
+    VERSION,
 };
 use crate::psf::Psf;
 
@@ -46,6 +47,8 @@ pub struct WriteReport {
     /// exceed [`MAX_RATIO`]).
     pub stored_raw: usize,
     pub scene_hash: SceneHash,
+    /// The hash of the file's bytes (see [`ContentHash`]).
+    pub content_hash: ContentHash,
 }
 
 /// A section as stored: its codec, its bytes, and the checksum of its raw bytes.
@@ -164,6 +167,7 @@ fn encode(psf: &Psf, opts: &WriteOptions) -> Result<(Vec<u8>, WriteReport), Form
             .filter(|e| opts.codec == Codec::Zstd && e.codec == Codec::None)
             .count(),
         scene_hash: header.scene_hash,
+        content_hash: ContentHash::of(&out),
     };
     Ok((out, report))
 }

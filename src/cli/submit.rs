@@ -1,0 +1,503 @@
+//! `subfield submit slurm|openjd SCENE [--baked FILE.psf] -o PATTERN [render options]
+//! ...`: the render as farm work (DESIGN.md §4). The scene is planned here exactly as
+//! `render` plans it; the frames whose files are already complete are left out; the bake
+//! (made here when none is given) and the scene file are named by content hash; each
+//! task renders its share with `--resume` from the bake staged on its node.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
+use subfield::farm::{self, openjd::OpenJdJob, slurm::SlurmJob};
+use subfield::format::{self, ContentHash, WriteOptions};
+use subfield::render::{self, RenderOptions, RenderPlan};
+use subfield::scene::Scene;
+
+use super::progress::Progress;
+use super::render as render_cmd;
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(subcommand)]
+    pub engine: Engine,
+}
+
+#[derive(clap::Subcommand, Debug)]
+pub enum Engine {
+    /// Submit a Slurm job array (one task per shard) with sbatch and print its job id.
+    Slurm(Box<SlurmArgs>),
+    /// Write an Open Job Description job template (one task per chunk of frames).
+    Openjd(Box<OpenJdArgs>),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct SlurmArgs {
+    #[command(flatten)]
+    pub render: render_cmd::Args,
+    /// Array tasks, one shard of the frames each (default: the frame count, at most 8).
+    #[arg(long)]
+    pub tasks: Option<u32>,
+    /// Slurm partition (checked with sinfo before anything is submitted).
+    #[arg(long)]
+    pub partition: Option<String>,
+    /// Time limit per task, as Slurm spells it (30, 1:00:00, 1-0).
+    #[arg(long)]
+    pub time: Option<String>,
+    /// CPUs per task; each task renders with that many threads.
+    #[arg(long)]
+    pub cpus_per_task: Option<u32>,
+    /// Follow the job with a progress bar over the frames written; fail listing the
+    /// frames still missing if any task failed.
+    #[arg(long)]
+    pub wait: bool,
+    /// Print the job script instead of writing and submitting it.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Extra sbatch arguments, after `--`.
+    #[arg(last = true, value_name = "SBATCH ARGS")]
+    pub sbatch_args: Vec<String>,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct OpenJdArgs {
+    #[command(flatten)]
+    pub render: render_cmd::Args,
+    /// The job template to write (.yaml).
+    #[arg(long, value_name = "JOB.yaml")]
+    pub template: PathBuf,
+    /// Frames per task (default 8).
+    #[arg(long, default_value_t = 8)]
+    pub chunk: u32,
+}
+
+pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    match a.engine {
+        Engine::Slurm(s) => slurm(*s),
+        Engine::Openjd(o) => openjd(*o),
+    }
+}
+
+/// What both engines share: the plan, the frames still missing, the bake and the
+/// command every task runs.
+struct Work {
+    plan: RenderPlan,
+    missing: Vec<u32>,
+    /// The task's `subfield render ...` without the per-engine flags.
+    command: Vec<String>,
+    /// Where job files go: the output pattern's folder, and the name they share.
+    dir: PathBuf,
+    base: String,
+}
+
+fn absolute(p: &Path) -> anyhow::Result<PathBuf> {
+    std::path::absolute(p).with_context(|| format!("cannot make {} absolute", p.display()))
+}
+
+/// Flags `submit` sets itself or that make no sense per task.
+fn refuse_task_flags(r: &render_cmd::Args) -> anyhow::Result<()> {
+    let taken = [
+        (
+            r.shard.is_some(),
+            "--shard (submit shards the frames itself)",
+        ),
+        (
+            r.threads.is_some(),
+            "--threads (tasks use their CPUs: --cpus-per-task)",
+        ),
+        (r.resume, "--resume (tasks always resume)"),
+        (r.stats.is_some(), "--stats (one file per run)"),
+        (r.plot.is_some(), "--plot (one file per run)"),
+        (
+            r.baked_hash.is_some(),
+            "--baked-hash (submit hashes the bake)",
+        ),
+        (
+            r.scene_file_hash.is_some(),
+            "--scene-file-hash (submit hashes the scene)",
+        ),
+    ];
+    if let Some((_, what)) = taken.iter().find(|(given, _)| *given) {
+        bail!("submit does not take {what}");
+    }
+    Ok(())
+}
+
+/// The render flags a task repeats, each as one `--flag=value` word (so a value such
+/// as `-278,273,1000` is never read as a flag).
+fn render_flags(r: &render_cmd::Args) -> Vec<String> {
+    let mut v = Vec::new();
+    let mut opt = |flag: &str, val: Option<String>| {
+        if let Some(x) = val {
+            v.push(format!("--{flag}={x}"));
+        }
+    };
+    opt("fps", r.fps.map(|f| f.to_string()));
+    opt("animation", r.animation.clone());
+    opt("size", Some(r.size.clone()));
+    opt("spp", Some(r.spp.to_string()));
+    opt("max-depth", Some(r.max_depth.to_string()));
+    opt("camera", r.camera.clone());
+    opt("look-from", r.look_from.clone());
+    opt("look-at", r.look_at.clone());
+    opt("up", r.up.clone());
+    opt("yfov", r.yfov.map(|f| f.to_string()));
+    opt("aov", r.aov.clone());
+    if r.float {
+        v.push("--float".into());
+    }
+    v
+}
+
+/// The job files' shared name: the pattern's file name up to its `#` run, trimmed of
+/// separators (`frame.####.exr` → `frame`), else `subfield`.
+fn base_name(pattern: &Path) -> String {
+    let name = pattern
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let head = name.split('#').next().unwrap_or("");
+    let head = head.strip_suffix(".exr").unwrap_or(head);
+    let trimmed = head.trim_end_matches(['.', '_', '-', ' ']);
+    let clean: String = trimmed
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if clean.is_empty() {
+        "subfield".into()
+    } else {
+        clean
+    }
+}
+
+fn complete(plan: &RenderPlan, opts: &RenderOptions, frame: u32) -> bool {
+    render::is_complete(
+        &plan.pattern.path(frame),
+        opts.width,
+        opts.height,
+        opts.aovs,
+        opts.pixel_type,
+    )
+}
+
+/// Plans the work: checks every flag and input, makes the bake when none is given
+/// (unless `dry_run`: then it is made in memory, for its hash), and hashes both files.
+fn prepare(r: &render_cmd::Args, dry_run: bool) -> anyhow::Result<Work> {
+    refuse_task_flags(r)?;
+    if r.stage_dir.as_ref().is_some_and(|d| d.is_relative()) {
+        bail!(
+            "--stage-dir must be an absolute path: tasks run on other machines, in other folders"
+        );
+    }
+    let mut opts = render_cmd::options(r)?;
+    opts.output = absolute(&r.output)?;
+    let scene_path = absolute(&r.scene)?;
+    if let Some(b) = &r.baked {
+        if !b.is_file() {
+            bail!("{}: no such baked file", b.display());
+        }
+    }
+    let scene = Scene::load(&scene_path)?;
+    let plan = render::plan(&scene, &opts)
+        .with_context(|| format!("cannot render {}", r.scene.display()))?;
+    let missing: Vec<u32> = plan
+        .frames
+        .iter()
+        .copied()
+        .filter(|&f| !complete(&plan, &opts, f))
+        .collect();
+    let first = plan.pattern.path(plan.range.start);
+    let dir = subfield::atomic::folder_of(&first);
+    let base = base_name(&opts.output);
+
+    let (baked, baked_hash) = match &r.baked {
+        Some(b) => {
+            let b = absolute(b)?;
+            let h = format::hash_file(&b).with_context(|| b.display().to_string())?;
+            (b, h)
+        }
+        None => {
+            let out = dir.join(format!("{base}.psf"));
+            let (psf, secs) = super::bake::bake_static(&scene, &r.scene, None, None, r.quiet)?;
+            let hash = if dry_run {
+                ContentHash::of(&format::to_bytes(&psf, &WriteOptions::default())?)
+            } else {
+                std::fs::create_dir_all(&dir)
+                    .with_context(|| format!("cannot create {}", dir.display()))?;
+                format::write_psf(&out, &psf, &WriteOptions::default())?.content_hash
+            };
+            if !r.quiet {
+                eprintln!(
+                    "baked the static part in {secs:.2} s{} {} (content hash {hash})",
+                    if dry_run { ", would write" } else { " to" },
+                    out.display()
+                );
+            }
+            (out, hash)
+        }
+    };
+    let scene_hash =
+        format::hash_file(&scene_path).with_context(|| scene_path.display().to_string())?;
+
+    let exe = std::env::current_exe().context("cannot tell where this subfield binary is")?;
+    let mut command = vec![
+        exe.to_string_lossy().into_owned(),
+        "render".into(),
+        scene_path.to_string_lossy().into_owned(),
+        format!("--baked={}", baked.display()),
+        format!("--baked-hash={baked_hash}"),
+        format!("--scene-file-hash={scene_hash}"),
+        format!("--output={}", opts.output.display()),
+        "--resume".into(),
+    ];
+    command.extend(render_flags(r));
+    Ok(Work {
+        plan,
+        missing,
+        command,
+        dir,
+        base,
+    })
+}
+
+fn nothing_missing(w: &Work, quiet: bool) -> bool {
+    if w.missing.is_empty() {
+        if !quiet {
+            eprintln!(
+                "all {} frames are complete in {}; nothing to submit",
+                w.plan.frames.len(),
+                w.dir.display()
+            );
+        }
+        return true;
+    }
+    false
+}
+
+fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
+    let r = &a.render;
+    if a.tasks == Some(0) {
+        bail!("--tasks 0: a job needs at least one task");
+    }
+    if a.cpus_per_task == Some(0) {
+        bail!("--cpus-per-task 0: a task needs at least one CPU");
+    }
+    if !a.dry_run {
+        if !farm::slurm::on_path("sbatch") {
+            bail!("sbatch is not on the PATH: is Slurm installed here? (nothing submitted)");
+        }
+        if let Some(p) = &a.partition {
+            farm::slurm::check_partition(p)?;
+        }
+    }
+    let w = prepare(r, a.dry_run)?;
+    if nothing_missing(&w, r.quiet) {
+        return Ok(ExitCode::SUCCESS);
+    }
+    let range = w.plan.range;
+    let shards = a
+        .tasks
+        .unwrap_or_else(|| (range.end - range.start).min(8))
+        .min(range.end - range.start)
+        .max(1);
+    let mut array: Vec<u32> = w.missing.iter().map(|f| f % shards).collect();
+    array.sort_unstable();
+    array.dedup();
+    let mut command = w.command.clone();
+    command.push(format!("--frames={}..{}", range.start, range.end));
+    let job = SlurmJob {
+        name: format!("subfield-{}", w.base),
+        shards,
+        array,
+        partition: a.partition.clone(),
+        time: a.time.clone(),
+        cpus_per_task: a.cpus_per_task,
+        log_dir: w.dir.join(format!("{}.logs", w.base)),
+        command,
+        stage_dir: r.stage_dir.clone(),
+    };
+    let script = job.script();
+    if a.dry_run {
+        super::print_stdout(&script)?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    std::fs::create_dir_all(&job.log_dir)
+        .with_context(|| format!("cannot create {}", job.log_dir.display()))?;
+    let path = w.dir.join(format!("{}.slurm.sh", w.base));
+    subfield::atomic::write_atomically(&path, script.as_bytes())
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    let id = farm::slurm::sbatch(&path, &a.sbatch_args)?;
+    if !r.quiet {
+        eprintln!(
+            "submitted job {id}: {} of {} tasks for {} missing frames of {} ({}..{}), script {}, logs {}",
+            job.array.len(),
+            shards,
+            w.missing.len(),
+            w.plan.frames.len(),
+            range.start,
+            range.end,
+            path.display(),
+            job.log_dir.display()
+        );
+    }
+    super::print_stdout(&format!("{id}\n"))?;
+    if a.wait {
+        return follow(&id, &w, r, &job.log_dir);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `--wait`: a bar over the frames written until the job leaves the queue, then the
+/// verdict: every frame complete, or the missing ones and the errors the tasks logged.
+fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::Result<ExitCode> {
+    let opts = render_cmd::options(r)?;
+    let total = w.plan.frames.len() as u64;
+    let bar = Progress::new("frames", total, r.quiet);
+    let written = || {
+        w.plan
+            .frames
+            .iter()
+            .filter(|&&f| w.plan.pattern.path(f).is_file())
+            .count() as u64
+    };
+    let poll = if std::io::stderr().is_terminal() {
+        Duration::from_millis(500)
+    } else {
+        Duration::from_secs(2)
+    };
+    let start = Instant::now();
+    loop {
+        let queued = farm::slurm::queued_tasks(id)?;
+        let running = queued.iter().filter(|t| t.state == "RUNNING").count();
+        bar.set(
+            written(),
+            &format!("job {id}: {running} running, {} queued", queued.len()),
+        );
+        if queued.is_empty() {
+            break;
+        }
+        std::thread::sleep(poll);
+    }
+    bar.finish();
+    let missing: Vec<u32> = w
+        .plan
+        .frames
+        .iter()
+        .copied()
+        .filter(|&f| !complete(&w.plan, &opts, f))
+        .collect();
+    if missing.is_empty() {
+        if !r.quiet {
+            eprintln!(
+                "job {id} done: all {total} frames complete in {:.1} s",
+                start.elapsed().as_secs_f64()
+            );
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    for line in task_errors(log_dir, id) {
+        eprintln!("{line}");
+    }
+    let runs: Vec<String> = farm::frame_runs(&missing)
+        .iter()
+        .map(|&(a, b)| {
+            if b == a + 1 {
+                a.to_string()
+            } else {
+                format!("{a}..{b}")
+            }
+        })
+        .collect();
+    bail!(
+        "job {id} ended with {} of {total} frames missing: {}; submit the same command again to render them",
+        missing.len(),
+        runs.join(",")
+    )
+}
+
+/// The `error:` lines of the job's task logs, each prefixed with its log's name.
+fn task_errors(log_dir: &Path, id: &str) -> Vec<String> {
+    let mut logs: Vec<PathBuf> = std::fs::read_dir(log_dir)
+        .map(|d| {
+            d.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    p.file_name()
+                        .and_then(|n| n.to_str())
+                        .is_some_and(|n| n.starts_with(&format!("{id}_")))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    logs.sort();
+    let mut out = Vec::new();
+    for p in logs {
+        let Ok(text) = std::fs::read_to_string(&p) else {
+            continue;
+        };
+        for l in text.lines().filter(|l| l.starts_with("error:")) {
+            out.push(format!("{}: {l}", p.display()));
+        }
+    }
+    out
+}
+
+fn openjd(a: OpenJdArgs) -> anyhow::Result<ExitCode> {
+    let r = &a.render;
+    if a.chunk == 0 {
+        bail!("--chunk 0: a task needs at least one frame");
+    }
+    if a.template.extension().and_then(|e| e.to_str()) != Some("yaml") {
+        bail!(
+            "--template {}: a job template is a .yaml file",
+            a.template.display()
+        );
+    }
+    let w = prepare(r, false)?;
+    if nothing_missing(&w, r.quiet) {
+        return Ok(ExitCode::SUCCESS);
+    }
+    let job = OpenJdJob {
+        name: format!("subfield render {}", w.base),
+        chunks: farm::frame_chunks(&w.missing, a.chunk),
+        command: w.command.clone(),
+        stage_dir: r.stage_dir.clone(),
+    };
+    if let Some(parent) = a.template.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("cannot create {}", parent.display()))?;
+    }
+    subfield::atomic::write_atomically(&a.template, job.template().as_bytes())
+        .with_context(|| format!("cannot write {}", a.template.display()))?;
+    if !r.quiet {
+        eprintln!(
+            "wrote {}: {} tasks for {} missing frames of {}; run it with `openjd run {}`",
+            a.template.display(),
+            job.chunks.len(),
+            w.missing.len(),
+            w.plan.frames.len(),
+            a.template.display()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn job_files_are_named_after_the_pattern() {
+        assert_eq!(base_name(Path::new("out/frame.####.exr")), "frame");
+        assert_eq!(base_name(Path::new("out/shot_010_####.exr")), "shot_010");
+        assert_eq!(base_name(Path::new("out/####.exr")), "subfield");
+        assert_eq!(base_name(Path::new("still.exr")), "still");
+        assert_eq!(base_name(Path::new("a b$.####.exr")), "a_b_");
+    }
+}

@@ -1,0 +1,143 @@
+//! Render farms: the bake shipped once by content hash and rendered by scheduler tasks.
+//!
+//! * [`stage`]: a task never maps the shared bake in place; it resolves it through a
+//!   node-local cache, `<stage-dir>/<content hash>.psf`, copied there once per node,
+//!   atomically, verified, then mapped (see [`stage_file`]).
+//! * [`slurm`]: the job script of a Slurm job array (one task per shard), `sbatch`,
+//!   and the queue as `squeue` shows it.
+//! * [`openjd`]: the same work as an Open Job Description job template (frame chunks).
+//!
+//! Each task runs `subfield render --resume` on its share of the frames, so a task that
+//! dies, is cancelled or requeued loses at most the frame in flight, and submitting the
+//! same job again renders only what is missing. Temporaries carry the host's name
+//! ([`crate::atomic`]), so nodes sharing an output folder never remove each other's.
+
+pub mod openjd;
+pub mod slurm;
+pub mod stage;
+
+use std::path::PathBuf;
+
+pub use stage::{default_stage_dir, stage_file, verify_file, Staged};
+
+use crate::format::ContentHash;
+
+/// What can stop a farm operation. Every variant names the file or the program.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum FarmError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file is not the one the job was submitted with.
+    #[error("{what} {} has content hash {found}, but the job expects {expected}; it changed since the job was submitted: submit again", path.display())]
+    HashMismatch {
+        /// "baked file" or "scene file".
+        what: &'static str,
+        path: PathBuf,
+        expected: ContentHash,
+        found: ContentHash,
+    },
+    /// A scheduler program could not be started.
+    #[error("cannot run {program}: {source} (is it installed and on the PATH?)")]
+    Spawn {
+        program: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A scheduler program ran and failed.
+    #[error("{program} failed ({status}): {message}")]
+    Command {
+        program: String,
+        status: String,
+        message: String,
+    },
+    /// A job that cannot be described (the message says why).
+    #[error("{0}")]
+    Invalid(String),
+}
+
+impl FarmError {
+    pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> FarmError {
+        FarmError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+}
+
+/// `s` quoted for a POSIX shell: as it is when it is plainly safe, else in single
+/// quotes (a single quote inside becomes `'\''`).
+pub fn shell_quote(s: &str) -> String {
+    let plain = !s.is_empty()
+        && s.bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b"-_./=:,+@%".contains(&b));
+    if plain {
+        s.to_string()
+    } else {
+        format!("'{}'", s.replace('\'', r"'\''"))
+    }
+}
+
+/// The frames split into runs of consecutive numbers, as `A..B` spellings (B exclusive).
+pub fn frame_runs(frames: &[u32]) -> Vec<(u32, u32)> {
+    let mut runs: Vec<(u32, u32)> = Vec::new();
+    for &f in frames {
+        match runs.last_mut() {
+            Some((_, end)) if *end == f => *end = f + 1,
+            _ => runs.push((f, f + 1)),
+        }
+    }
+    runs
+}
+
+/// `frames` (ascending) cut into chunks of at most `k` consecutive frames each, as
+/// `(A, B)` ranges; a gap always starts a new chunk.
+pub fn frame_chunks(frames: &[u32], k: u32) -> Vec<(u32, u32)> {
+    let k = k.max(1);
+    let mut out = Vec::new();
+    for (a, b) in frame_runs(frames) {
+        let mut s = a;
+        while s < b {
+            let e = b.min(s.saturating_add(k));
+            out.push((s, e));
+            s = e;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quoting_survives_a_shell() {
+        assert_eq!(shell_quote("out/frame.####.exr"), "'out/frame.####.exr'");
+        assert_eq!(shell_quote("/a/b.glb"), "/a/b.glb");
+        assert_eq!(shell_quote(""), "''");
+        assert_eq!(shell_quote("it's"), r"'it'\''s'");
+        for s in ["a b", "$HOME", "x'y\"z", "-278,273,1000", "`ls`", "a\nb"] {
+            let out = std::process::Command::new("sh")
+                .arg("-c")
+                .arg(format!("printf %s {}", shell_quote(s)))
+                .output()
+                .unwrap();
+            assert_eq!(String::from_utf8_lossy(&out.stdout), s, "{s:?}");
+        }
+    }
+
+    #[test]
+    fn runs_and_chunks() {
+        assert_eq!(frame_runs(&[0, 1, 2, 5, 7, 8]), [(0, 3), (5, 6), (7, 9)]);
+        assert!(frame_runs(&[]).is_empty());
+        assert_eq!(
+            frame_chunks(&[0, 1, 2, 3, 4, 9, 10], 2),
+            [(0, 2), (2, 4), (4, 5), (9, 11)]
+        );
+        assert_eq!(frame_chunks(&[3], 0), [(3, 4)]);
+    }
+}

@@ -1,0 +1,305 @@
+//! Slurm: the job script of a job array (one task per shard of the frames), `sbatch`,
+//! and what `squeue` says of the job.
+//!
+//! The script is self-contained: absolute paths, the content hashes of the bake and the
+//! scene file, the shard count, and a task body that stages the bake and renders its
+//! shard with `--resume`. Running it again (or `subfield submit` again) renders only
+//! what is missing; a task requeued by Slurm starts over and skips what it wrote.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use super::{shell_quote, FarmError};
+
+/// A Slurm job array, ready to be written as a script.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SlurmJob {
+    /// `--job-name`.
+    pub name: String,
+    /// The shard count `N`: task `i` renders `--shard i/N`.
+    pub shards: u32,
+    /// The array indices to run (those shards with frames missing), ascending.
+    pub array: Vec<u32>,
+    pub partition: Option<String>,
+    /// `--time`, in any spelling Slurm takes (`30`, `1:00:00`, `1-0`).
+    pub time: Option<String>,
+    pub cpus_per_task: Option<u32>,
+    /// Where each task's log goes (`<log_dir>/<job>_<task>.log`).
+    pub log_dir: PathBuf,
+    /// The task's render command, without `--shard`, `--threads` and `--stage-dir`
+    /// (the script adds them from the task's environment).
+    pub command: Vec<String>,
+    /// The node-local stage; `None`: `$SUBFIELD_STAGE_DIR`, else `$TMPDIR/subfield-stage`.
+    pub stage_dir: Option<PathBuf>,
+}
+
+/// `0-3,7,9-10`: Slurm's spelling of an index list.
+pub fn array_spec(indices: &[u32]) -> String {
+    super::frame_runs(indices)
+        .iter()
+        .map(|&(a, b)| {
+            if b == a + 1 {
+                a.to_string()
+            } else {
+                format!("{a}-{}", b - 1)
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+impl SlurmJob {
+    /// The job script (bash, `#SBATCH` directives first).
+    pub fn script(&self) -> String {
+        let mut s = String::new();
+        let q = |p: &Path| shell_quote(&p.to_string_lossy());
+        let _ = writeln!(s, "#!/bin/bash");
+        let _ = writeln!(
+            s,
+            "# Written by `subfield submit slurm` ({} {}): a job array, task i renders",
+            env!("CARGO_PKG_NAME"),
+            env!("CARGO_PKG_VERSION")
+        );
+        let _ = writeln!(
+            s,
+            "# shard i/{} of the frames with --resume, from the bake staged by content hash.",
+            self.shards
+        );
+        let _ = writeln!(
+            s,
+            "# Submitting it again (sbatch FILE) renders only the frames still missing."
+        );
+        let _ = writeln!(s, "#SBATCH --job-name={}", self.name);
+        let _ = writeln!(s, "#SBATCH --array={}", array_spec(&self.array));
+        let _ = writeln!(
+            s,
+            "#SBATCH --output={}",
+            self.log_dir.join("%A_%a.log").display()
+        );
+        // A requeued task appends to its log rather than erasing it.
+        let _ = writeln!(s, "#SBATCH --open-mode=append");
+        let _ = writeln!(s, "#SBATCH --requeue");
+        if let Some(p) = &self.partition {
+            let _ = writeln!(s, "#SBATCH --partition={p}");
+        }
+        if let Some(t) = &self.time {
+            let _ = writeln!(s, "#SBATCH --time={t}");
+        }
+        if let Some(c) = self.cpus_per_task {
+            let _ = writeln!(s, "#SBATCH --cpus-per-task={c}");
+        }
+        let _ = writeln!(s, "set -eu");
+        match &self.stage_dir {
+            Some(d) => {
+                let _ = writeln!(s, "stage={}", q(d));
+            }
+            None => {
+                let _ = writeln!(
+                    s,
+                    "stage=\"${{SUBFIELD_STAGE_DIR:-${{TMPDIR:-/tmp}}/subfield-stage}}\""
+                );
+            }
+        }
+        let _ = writeln!(
+            s,
+            "echo \"subfield: task ${{SLURM_ARRAY_TASK_ID}} of job ${{SLURM_ARRAY_JOB_ID}} on $(hostname), shard ${{SLURM_ARRAY_TASK_ID}}/{} (restart ${{SLURM_RESTART_COUNT:-0}})\"",
+            self.shards
+        );
+        let mut line = String::from("exec");
+        for a in &self.command {
+            line.push(' ');
+            line.push_str(&shell_quote(a));
+        }
+        let _ = writeln!(
+            s,
+            "{line} \\\n  --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\" --threads \"${{SLURM_CPUS_PER_TASK:-1}}\" --stage-dir \"$stage\"",
+            self.shards
+        );
+        s
+    }
+}
+
+fn run(program: &str, args: &[String]) -> Result<String, FarmError> {
+    let out = Command::new(program)
+        .args(args)
+        .output()
+        .map_err(|source| FarmError::Spawn {
+            program: program.to_string(),
+            source,
+        })?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        let msg = err
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty())
+            .collect::<Vec<_>>()
+            .join("; ");
+        return Err(FarmError::Command {
+            program: program.to_string(),
+            status: out.status.to_string(),
+            message: if msg.is_empty() {
+                "no message".into()
+            } else {
+                msg
+            },
+        });
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// Whether a program can be found on the `PATH` (or is a path that exists).
+pub fn on_path(program: &str) -> bool {
+    if program.contains('/') {
+        return Path::new(program).is_file();
+    }
+    std::env::var_os("PATH")
+        .map(|p| std::env::split_paths(&p).any(|d| d.join(program).is_file()))
+        .unwrap_or(false)
+}
+
+/// Checks that a partition exists (`sinfo`), so a typo is one line before anything is
+/// submitted.
+pub fn check_partition(partition: &str) -> Result<(), FarmError> {
+    let out = run("sinfo", &["-h".into(), "-o".into(), "%R".into()])?;
+    let known: Vec<&str> = out
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect();
+    if known.contains(&partition) {
+        Ok(())
+    } else {
+        Err(FarmError::Invalid(format!(
+            "--partition {partition:?}: no such partition on this cluster; it has {}",
+            if known.is_empty() {
+                "none".to_string()
+            } else {
+                known.join(", ")
+            }
+        )))
+    }
+}
+
+/// Submits a script with `sbatch --parsable [extra...] SCRIPT` and returns the job id.
+pub fn sbatch(script: &Path, extra: &[String]) -> Result<String, FarmError> {
+    let mut args = vec!["--parsable".to_string()];
+    args.extend(extra.iter().cloned());
+    args.push(script.to_string_lossy().into_owned());
+    let out = run("sbatch", &args)?;
+    // `--parsable` prints `jobid` or `jobid;cluster`.
+    let id = out
+        .trim()
+        .split(';')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .to_string();
+    if id.is_empty() || !id.bytes().all(|b| b.is_ascii_digit()) {
+        return Err(FarmError::Command {
+            program: "sbatch".into(),
+            status: "exit status 0".into(),
+            message: format!("printed {:?}, not a job id", out.trim()),
+        });
+    }
+    Ok(id)
+}
+
+/// A task of the job that the queue still holds: its id (`123_4`) and state
+/// (`PENDING`, `RUNNING`, ...).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct QueuedTask {
+    pub id: String,
+    pub state: String,
+}
+
+/// The job's tasks still in the queue (pending, running, requeued, completing); empty
+/// when the whole job has left it.
+pub fn queued_tasks(job: &str) -> Result<Vec<QueuedTask>, FarmError> {
+    let args = [
+        "-h".to_string(),
+        "-r".into(),
+        "-j".into(),
+        job.to_string(),
+        "-o".into(),
+        "%i %T".into(),
+    ];
+    match run("squeue", &args) {
+        Ok(out) => Ok(parse_queue(&out)),
+        // A job that finished long enough ago is unknown to squeue.
+        Err(FarmError::Command { message, .. }) if message.contains("Invalid job id") => {
+            Ok(Vec::new())
+        }
+        Err(e) => Err(e),
+    }
+}
+
+fn parse_queue(out: &str) -> Vec<QueuedTask> {
+    out.lines()
+        .filter_map(|l| {
+            let mut it = l.split_whitespace();
+            Some(QueuedTask {
+                id: it.next()?.to_string(),
+                state: it.next()?.to_string(),
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn array_specs() {
+        assert_eq!(array_spec(&[0, 1, 2, 3]), "0-3");
+        assert_eq!(array_spec(&[1, 3, 4, 7]), "1,3-4,7");
+        assert_eq!(array_spec(&[5]), "5");
+    }
+
+    #[test]
+    fn queue_lines() {
+        let q = parse_queue("12_0 RUNNING\n12_[1-3] PENDING\n\n");
+        assert_eq!(q.len(), 2);
+        assert_eq!(q[1].state, "PENDING");
+    }
+
+    #[test]
+    fn script_is_valid_bash_with_the_directives_first() {
+        let job = SlurmJob {
+            name: "subfield-frame".into(),
+            shards: 4,
+            array: vec![0, 2, 3],
+            partition: Some("debug".into()),
+            time: Some("10:00".into()),
+            cpus_per_task: Some(2),
+            log_dir: "/farm/out/frame.logs".into(),
+            command: vec![
+                "/opt/subfield".into(),
+                "render".into(),
+                "/farm/my scene.glb".into(),
+                "-o".into(),
+                "/farm/out/frame.####.exr".into(),
+            ],
+            stage_dir: None,
+        };
+        let s = job.script();
+        assert!(s.starts_with("#!/bin/bash\n"));
+        assert!(s.contains("#SBATCH --array=0,2-3\n"), "{s}");
+        assert!(s.contains("#SBATCH --cpus-per-task=2\n"));
+        assert!(s.contains("#SBATCH --output=/farm/out/frame.logs/%A_%a.log\n"));
+        assert!(s.contains("'/farm/my scene.glb'"));
+        assert!(s.contains("--shard \"${SLURM_ARRAY_TASK_ID}/4\""));
+        // sbatch reads directives only before the first command.
+        let first_cmd = s.lines().position(|l| !l.starts_with('#')).unwrap();
+        assert!(s.lines().skip(first_cmd).all(|l| !l.starts_with("#SBATCH")));
+        let check = Command::new("bash")
+            .arg("-n")
+            .arg("-c")
+            .arg(&s)
+            .status()
+            .unwrap();
+        assert!(check.success());
+    }
+}

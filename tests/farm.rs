@@ -1,0 +1,466 @@
+//! The farm's pieces that need no scheduler: content hashes printed and checked, the
+//! node-local stage, a raw bake cut short under a render, two hosts sharing an output
+//! folder, `submit`'s refusals, and an Open Job Description template run by `openjd`.
+
+mod farm_common;
+mod render_scene;
+
+use std::path::Path;
+use std::process::Command;
+
+use farm_common::{frames, need, ok, on_path, s, stderr, subfield, temporaries};
+use render_scene::{temp_dir, write_scene};
+
+const SIZE: &str = "40x30";
+
+fn bake(scene: &Path, out: &Path, extra: &[&str]) -> String {
+    let mut args = vec!["bake", s(scene), "-o", s(out), "--quiet"];
+    args.extend_from_slice(extra);
+    let o = ok(&args);
+    String::from_utf8(o.stdout).unwrap().trim().to_string()
+}
+
+#[test]
+fn bake_prints_the_content_hash_inspect_reports_and_the_bytes_give() {
+    let dir = temp_dir("farm-hash");
+    let scene = write_scene(&dir);
+    let psf = dir.join("scene.psf");
+    let printed = bake(&scene, &psf, &[]);
+    assert_eq!(printed.len(), 32, "{printed:?}");
+    let bytes = std::fs::read(&psf).unwrap();
+    assert_eq!(
+        printed,
+        subfield::format::ContentHash::of(&bytes).to_string()
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&ok(&["inspect", s(&psf), "--json"]).stdout).unwrap();
+    assert_eq!(json["content_hash"], printed.as_str());
+    let text = String::from_utf8(ok(&["inspect", s(&psf)]).stdout).unwrap();
+    assert!(text.contains(&format!("content hash {printed}")), "{text}");
+    // Another bake of the same scene: the same bytes, so the same hash.
+    assert_eq!(bake(&scene, &dir.join("again.psf"), &[]), printed);
+    assert_ne!(
+        bake(&scene, &dir.join("raw.psf"), &["--codec", "none"]),
+        printed
+    );
+}
+
+#[test]
+fn a_render_refuses_a_bake_or_scene_file_of_another_hash_and_writes_nothing() {
+    let dir = temp_dir("farm-refuse");
+    let scene = write_scene(&dir);
+    let psf = dir.join("scene.psf");
+    let good = bake(&scene, &psf, &[]);
+    let wrong = "0123456789abcdef0123456789abcdef";
+    let out = dir.join("out/f.##.exr");
+    let stage = dir.join("stage");
+    for (flag, named) in [
+        ("--baked-hash", "baked file"),
+        ("--scene-file-hash", "scene file"),
+    ] {
+        let o = subfield(&[
+            "render",
+            s(&scene),
+            "--baked",
+            s(&psf),
+            "-o",
+            s(&out),
+            "--frames",
+            "0..2",
+            "--size",
+            SIZE,
+            "--stage-dir",
+            s(&stage),
+            flag,
+            wrong,
+        ]);
+        let e = stderr(&o);
+        assert!(!o.status.success());
+        assert_eq!(e.lines().count(), 1, "{e}");
+        assert!(e.contains(named) && e.contains(wrong), "{e}");
+        assert!(!dir.join("out").exists(), "{flag}: wrote output");
+    }
+    // The right hash goes through; the stage then holds the bake under its hash.
+    let bad_hash = subfield(&[
+        "render",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&out),
+        "--baked-hash",
+        "xyz",
+    ]);
+    assert!(
+        stderr(&bad_hash).contains("is not a content hash"),
+        "{}",
+        stderr(&bad_hash)
+    );
+    ok(&[
+        "render",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&out),
+        "--frames",
+        "0..2",
+        "--size",
+        SIZE,
+        "--stage-dir",
+        s(&stage),
+        "--baked-hash",
+        &good,
+        "--quiet",
+    ]);
+    assert!(stage.join(format!("{good}.psf")).is_file());
+    assert_eq!(frames(&dir.join("out")).len(), 2);
+}
+
+#[test]
+fn a_staged_render_equals_a_direct_one_and_a_damaged_cache_is_replaced() {
+    let dir = temp_dir("farm-stage");
+    let scene = write_scene(&dir);
+    let psf = dir.join("scene.psf");
+    let hash = bake(&scene, &psf, &[]);
+    let stage = dir.join("stage");
+    let render = |sub: &str, staged: bool| {
+        let out = dir.join(format!("{sub}/f.##.exr"));
+        let mut args = vec![
+            "render",
+            s(&scene),
+            "--baked",
+            s(&psf),
+            "-o",
+            s(&out),
+            "--frames",
+            "0..4",
+            "--size",
+            SIZE,
+            "--quiet",
+        ];
+        if staged {
+            args.extend(["--baked-hash", &hash, "--stage-dir", s(&stage)]);
+        }
+        ok(&args);
+        frames(&dir.join(sub))
+    };
+    let direct = render("direct", false);
+    assert_eq!(direct.len(), 4);
+    assert_eq!(render("staged", true), direct);
+    let cached = stage.join(format!("{hash}.psf"));
+    assert_eq!(
+        std::fs::read(&cached).unwrap(),
+        std::fs::read(&psf).unwrap()
+    );
+    // The right name, the wrong bytes: replaced before use, the frames unchanged.
+    std::fs::remove_file(&cached).unwrap();
+    std::fs::write(&cached, b"not the bake").unwrap();
+    assert_eq!(render("again", true), direct);
+    assert_eq!(
+        std::fs::read(&cached).unwrap(),
+        std::fs::read(&psf).unwrap()
+    );
+    assert!(temporaries(&stage).is_empty());
+}
+
+#[test]
+fn a_raw_bake_truncated_under_a_render_ends_it_with_one_line_not_a_signal() {
+    let dir = temp_dir("farm-sigbus");
+    let scene = write_scene(&dir);
+    let psf = dir.join("raw.psf");
+    bake(&scene, &psf, &["--codec", "none"]);
+    let out = dir.join("out/f.#####.exr");
+    let child = Command::new(env!("CARGO_BIN_EXE_subfield"))
+        .args([
+            "render",
+            s(&scene),
+            "--baked",
+            s(&psf),
+            "-o",
+            s(&out),
+            "--frames",
+            "0..20000",
+            "--fps",
+            "20000",
+            "--size",
+            "16x12",
+            "--quiet",
+        ])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Once it is under way, cut the file in place, as `cp other.psf raw.psf` would.
+    let t0 = std::time::Instant::now();
+    while frames(&dir.join("out")).is_empty() && t0.elapsed().as_secs() < 60 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    std::fs::File::create(&psf).unwrap();
+    let o = child.wait_with_output().unwrap();
+    let e = stderr(&o);
+    use std::os::unix::process::ExitStatusExt;
+    assert_eq!(o.status.signal(), None, "killed by a signal: {e}");
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("raw.psf") && e.contains("truncated or overwritten"),
+        "{e}"
+    );
+}
+
+#[test]
+fn hosts_sharing_an_output_folder_remove_only_their_own_dead_temporaries() {
+    let dir = temp_dir("farm-hosts");
+    let scene = write_scene(&dir);
+    let out = dir.join("out/f.##.exr");
+    std::fs::create_dir_all(dir.join("out")).unwrap();
+    // A pid above Linux's largest: dead on every host.
+    let dead = 4_194_304 + 11;
+    let a_tmp = dir.join(format!("out/.f.03.exr.{dead}-0-nodea.tmp"));
+    let b_tmp = dir.join(format!("out/.f.03.exr.{dead}-0-nodeb.tmp"));
+    // Node b's live writer: our own pid is alive here, but it is b's number, not ours.
+    let b_live = dir.join(format!("out/.f.02.exr.{}-0-nodeb.tmp", std::process::id()));
+    for p in [&a_tmp, &b_tmp, &b_live] {
+        std::fs::write(p, b"half a frame").unwrap();
+    }
+    let run_as = |host: &str| {
+        let o = Command::new(env!("CARGO_BIN_EXE_subfield"))
+            .env("SUBFIELD_HOSTNAME", host)
+            .args([
+                "render",
+                s(&scene),
+                "-o",
+                s(&out),
+                "--frames",
+                "0..4",
+                "--size",
+                SIZE,
+                "--resume",
+                "--quiet",
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+    };
+    run_as("nodea");
+    assert!(!a_tmp.exists(), "node a's dead temporary is left");
+    assert!(
+        b_tmp.exists() && b_live.exists(),
+        "node a removed node b's temporaries"
+    );
+    run_as("nodeb");
+    assert!(!b_tmp.exists(), "node b's dead temporary is left");
+    if Path::new("/proc/self").exists() {
+        // Node b cannot see node a's processes, but this pid runs here, so b keeps it.
+        assert!(b_live.exists());
+    }
+    assert_eq!(frames(&dir.join("out")).len(), 4);
+}
+
+#[test]
+fn submit_refuses_bad_input_with_one_line_and_submits_nothing() {
+    let dir = temp_dir("farm-submit-bad");
+    let scene = write_scene(&dir);
+    let out = dir.join("out/f.##.exr");
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (vec!["--tasks".into(), "0".into()], "--tasks 0"),
+        (
+            vec!["--cpus-per-task".into(), "0".into()],
+            "--cpus-per-task 0",
+        ),
+        (vec!["--shard".into(), "0/2".into()], "--shard"),
+        (
+            vec!["--baked".into(), s(&dir.join("missing.psf")).into()],
+            "missing.psf",
+        ),
+    ];
+    for (extra, want) in cases {
+        let mut args: Vec<String> = ["submit", "slurm", s(&scene), "-o", s(&out)]
+            .iter()
+            .map(|x| x.to_string())
+            .collect();
+        args.extend(extra);
+        args.push("--dry-run".into());
+        let refs: Vec<&str> = args.iter().map(|a| a.as_str()).collect();
+        let o = subfield(&refs);
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{refs:?}");
+        assert_eq!(e.lines().count(), 1, "{refs:?}: {e}");
+        assert!(e.contains(want), "{refs:?}: {e}");
+        assert!(o.stdout.is_empty(), "{refs:?} printed a script");
+    }
+    // A scene that does not exist.
+    let o = subfield(&[
+        "submit",
+        "slurm",
+        s(&dir.join("nope.glb")),
+        "-o",
+        s(&out),
+        "--dry-run",
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("nope.glb"),
+        "{}",
+        stderr(&o)
+    );
+    // No sbatch on the PATH: one line, and no job files written.
+    let o = Command::new(env!("CARGO_BIN_EXE_subfield"))
+        .env("PATH", "/nonexistent")
+        .args(["submit", "slurm", s(&scene), "-o", s(&out)])
+        .output()
+        .unwrap();
+    let e = stderr(&o);
+    assert!(
+        !o.status.success() && e.contains("sbatch is not on the PATH"),
+        "{e}"
+    );
+    assert_eq!(e.lines().count(), 1, "{e}");
+    assert!(!dir.join("out").exists(), "job files written");
+}
+
+#[test]
+fn a_dry_run_prints_a_script_naming_both_hashes_and_the_missing_shards() {
+    let dir = temp_dir("farm-dry");
+    let scene = write_scene(&dir);
+    let psf = dir.join("scene.psf");
+    let hash = bake(&scene, &psf, &[]);
+    let out = dir.join("out/f.##.exr");
+    // Frames 0..8 with 4 shards; shard 1's frames (1, 5) already rendered.
+    ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&out),
+        "--frames",
+        "0..8",
+        "--size",
+        SIZE,
+        "--shard",
+        "1/4",
+        "--quiet",
+    ]);
+    let o = ok(&[
+        "submit",
+        "slurm",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&out),
+        "--frames",
+        "0..8",
+        "--size",
+        SIZE,
+        "--tasks",
+        "4",
+        "--look-from=-1,2,6",
+        "--look-at",
+        "0,0,0",
+        "--dry-run",
+    ]);
+    let script = String::from_utf8(o.stdout).unwrap();
+    assert!(script.contains("#SBATCH --array=0,2-3\n"), "{script}");
+    assert!(script.contains(&format!("--baked-hash={hash}")), "{script}");
+    let scene_hash = subfield::format::hash_file(&scene).unwrap().to_string();
+    assert!(
+        script.contains(&format!("--scene-file-hash={scene_hash}")),
+        "{script}"
+    );
+    assert!(script.contains("--look-from=-1,2,6"), "{script}");
+    assert!(
+        script.contains("--shard \"${SLURM_ARRAY_TASK_ID}/4\""),
+        "{script}"
+    );
+    // Nothing written by a dry run.
+    assert!(!dir.join("out/f.slurm.sh").exists());
+}
+
+#[test]
+fn an_openjd_template_run_by_openjd_gives_the_frames_of_a_local_render() {
+    if !need(
+        "an_openjd_template_run_by_openjd_gives_the_frames_of_a_local_render",
+        on_path("openjd"),
+        "openjd (pip install openjd-cli)",
+    ) {
+        return;
+    }
+    let dir = temp_dir("farm-openjd");
+    let scene = write_scene(&dir);
+    let psf = dir.join("scene.psf");
+    bake(&scene, &psf, &[]);
+    let frames_of = |sub: &str| frames(&dir.join(sub));
+    ok(&[
+        "render",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&dir.join("local/f.##.exr")),
+        "--frames",
+        "0..10",
+        "--size",
+        SIZE,
+        "--quiet",
+    ]);
+    let job = dir.join("job/render.yaml");
+    let stage = dir.join("stage");
+    ok(&[
+        "submit",
+        "openjd",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&dir.join("farm/f.##.exr")),
+        "--frames",
+        "0..10",
+        "--size",
+        SIZE,
+        "--template",
+        s(&job),
+        "--chunk",
+        "4",
+        "--stage-dir",
+        s(&stage),
+        "--quiet",
+    ]);
+    let text = std::fs::read_to_string(&job).unwrap();
+    assert!(
+        text.contains("\"0..4\"") && text.contains("\"8..10\""),
+        "{text}"
+    );
+    let run = Command::new("openjd")
+        .arg("run")
+        .arg(&job)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "openjd run failed: {}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert_eq!(frames_of("farm"), frames_of("local"));
+    assert_eq!(frames_of("farm").len(), 10);
+    assert!(temporaries(&dir.join("farm")).is_empty());
+    // Everything is there: writing the template again has nothing to do.
+    let again = ok(&[
+        "submit",
+        "openjd",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&dir.join("farm/f.##.exr")),
+        "--frames",
+        "0..10",
+        "--size",
+        SIZE,
+        "--template",
+        s(&job),
+    ]);
+    assert!(
+        stderr(&again).contains("nothing to submit"),
+        "{}",
+        stderr(&again)
+    );
+}
