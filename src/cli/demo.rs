@@ -85,7 +85,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         }),
         ..RenderOptions::default()
     };
-    let summary = super::render::drive(&scene, &scene_path, &opts, a.quiet)?;
+    let summary = super::render::drive(&scene, &scene_path, &opts, a.quiet, Vec::new())?;
     if !a.quiet {
         if let Some(p) = &summary.preview {
             eprintln!("preview: {}", p.display());

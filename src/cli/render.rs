@@ -202,11 +202,15 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         super::guard::name_mapped_file(p);
     }
     opts.baked = baked;
-    if let (Some(line), false) = (&staged, a.quiet) {
-        eprintln!("{line}");
-    }
+    let clock = std::time::Instant::now();
     let scene = Scene::load(&a.scene)?;
-    drive(&scene, &a.scene, &opts, a.quiet)
+    let mut preface: Vec<String> = staged.into_iter().collect();
+    preface.push(format!(
+        "imported {} in {:.2} s",
+        a.scene.display(),
+        clock.elapsed().as_secs_f64()
+    ));
+    drive(&scene, &a.scene, &opts, a.quiet, preface)
         .with_context(|| format!("cannot render {}", a.scene.display()))?;
     Ok(ExitCode::SUCCESS)
 }
@@ -217,14 +221,13 @@ pub fn drive(
     label: &Path,
     opts: &RenderOptions,
     quiet: bool,
+    preface: Vec<String>,
 ) -> anyhow::Result<render::RenderSummary> {
     let mut bar: Option<Progress> = None;
-    // Messages wait until every check has passed, so that an error is the only line.
-    let mut pending: Vec<String> = scene
-        .warnings
-        .iter()
-        .map(|w| format!("warning: {w}"))
-        .collect();
+    // Messages wait until every check has passed, so that an error is the only line;
+    // `preface` comes first (what was done before the scene was planned).
+    let mut pending = preface;
+    pending.extend(scene.warnings.iter().map(|w| format!("warning: {w}")));
     let mut done = 0u64;
     // The sequence runs on a pool thread (this one waits): each of its parallel loops
     // then starts at once on that thread, where from outside the pool each would park its

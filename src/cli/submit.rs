@@ -4,7 +4,6 @@
 //! (made here when none is given) and the scene file are named by content hash; each
 //! task renders its share with `--resume` from the bake staged on its node.
 
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -367,11 +366,8 @@ fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::R
             .filter(|&&f| w.plan.pattern.path(f).is_file())
             .count() as u64
     };
-    let poll = if std::io::stderr().is_terminal() {
-        Duration::from_millis(500)
-    } else {
-        Duration::from_secs(2)
-    };
+    // squeue is cheap; a coarse poll would add its period to every wait.
+    let poll = Duration::from_millis(250);
     let start = Instant::now();
     loop {
         let queued = farm::slurm::queued_tasks(id)?;
