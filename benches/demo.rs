@@ -7,7 +7,7 @@
 use std::time::Instant;
 
 use subfield::format::{write_psf, WriteOptions};
-use subfield::museum::{write_museum, MuseumParams};
+use subfield::gen::museum::{write_museum, MuseumParams};
 use subfield::render::{render_sequence, RenderOptions, Shard};
 use subfield::scene::{ClipSelection, Scene};
 use subfield::{Psf, PsfParams};

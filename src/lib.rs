@@ -7,12 +7,16 @@
 pub mod aff;
 pub mod atomic;
 pub mod format;
+pub mod gen;
 pub mod geometry;
-pub mod museum;
 pub mod psf;
 pub mod render;
 pub mod scene;
-pub mod synth;
+
+// The psf unit tests scatter triangles with `crate::synth` (src/psf/ is edited by others;
+// their two `use` lines can move to `crate::gen::synth` later). Private and test-only.
+#[cfg(test)]
+use gen::synth;
 
 pub use geometry::{Aabb, BruteForce, Hit, Intersector, Ray};
 pub use psf::{DynamicLayer, Psf, PsfError, PsfParams};

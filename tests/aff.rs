@@ -6,7 +6,8 @@ use std::path::{Path, PathBuf};
 
 use glam::{Quat, Vec3};
 use subfield::aff::shapes;
-use subfield::aff::{generate_animart, AffError, AffScene, AnimartParams};
+use subfield::aff::{AffError, AffScene};
+use subfield::gen::animart::{generate_animart, AnimartParams};
 use subfield::scene::{ClipSelection, Scene, TriangleSoup};
 
 /// A fresh folder under the target directory for one test.

@@ -11,7 +11,7 @@ use subfield::scene::{
     AnimationDesc, ChannelDesc, ClipSelection, GltfBuilder, Interpolation, MeshDesc, NodeDesc,
     PrimitiveDesc, Property, Scene,
 };
-use subfield::synth::{self, Rng};
+use subfield::gen::synth::{self, Rng};
 use subfield::{Intersector, Psf, PsfParams, Ray};
 
 fn temp_dir(name: &str) -> PathBuf {

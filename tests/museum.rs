@@ -9,7 +9,7 @@ use std::process::Command;
 
 use glam::Vec3;
 use gltf::animation::util::{MorphTargetWeights, ReadOutputs};
-use subfield::museum::{museum_glb, MuseumError, MuseumParams, MIN_STATIC_TRIS};
+use subfield::gen::museum::{museum_glb, MuseumError, MuseumParams, MIN_STATIC_TRIS};
 use subfield::scene::{ClipSelection, LightKind, Scene, TriangleSoup};
 
 fn load(bytes: &[u8]) -> Scene {

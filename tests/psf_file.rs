@@ -17,7 +17,7 @@ use subfield::format::{
     WriteOptions,
 };
 use subfield::geometry::{Intersector, Ray};
-use subfield::synth::{self, Rng};
+use subfield::gen::synth::{self, Rng};
 use subfield::{Psf, PsfParams};
 
 // ---------------------------------------------------------------------------------------

@@ -39,7 +39,6 @@
 //! * Materials (`f`, `fm`) map to metallic-roughness (see [`material_desc`]); the exact AFF
 //!   numbers are kept in each material's `extras.aff`.
 
-pub mod animart;
 mod error;
 mod gltf;
 mod parse;
@@ -51,7 +50,6 @@ use std::path::{Path, PathBuf};
 
 use glam::{DMat4, DQuat, DVec3, Mat4, Vec2, Vec3};
 
-pub use animart::{generate_animart, AnimartParams};
 pub use error::AffError;
 pub use gltf::material_desc;
 

@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use subfield::format::{write_psf, WriteOptions};
-use subfield::museum::{write_museum, MuseumParams};
+use subfield::gen::museum::{write_museum, MuseumParams};
 use subfield::render::{self, FrameRange, PreviewOptions, RenderOptions};
 use subfield::scene::{ClipSelection, Scene};
 use subfield::{Psf, PsfParams};

@@ -36,7 +36,7 @@ use crate::scene::{
     AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, Interpolation, LightDef, LightKind,
     MaterialDesc, MeshDesc, NodeDesc, PrimitiveDesc, Property, SceneError,
 };
-use crate::synth::Rng;
+use super::synth::Rng;
 
 /// Morph keys of the dynamic part (one morph target each). 13 keys over 10 s: a formation
 /// every 0.8 s, and 7.7 MB of targets at the default 16,384 triangles.
