@@ -6,6 +6,7 @@ mod convert;
 mod demo;
 mod generate;
 mod inspect;
+mod parse;
 mod progress;
 mod render;
 

@@ -8,6 +8,7 @@ use anyhow::{bail, Context};
 use subfield::render::{self, LookAt, PixelType, RenderEvent, RenderOptions};
 use subfield::scene::Scene;
 
+use super::parse;
 use super::progress::Progress;
 
 #[derive(clap::Args, Debug)]
@@ -86,13 +87,13 @@ pub struct Args {
 
 /// The library's options from the flags (every value checked, one error line each).
 pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
-    let (width, height) = render::parse_size(&a.size)?;
+    let (width, height) = parse::parse_size(&a.size)?;
     let look_at = match (&a.look_from, &a.look_at) {
         (Some(f), Some(t)) => Some(LookAt {
-            from: render::parse_vec3("--look-from", f)?,
-            at: render::parse_vec3("--look-at", t)?,
+            from: parse::parse_vec3("--look-from", f)?,
+            at: parse::parse_vec3("--look-at", t)?,
             up: match &a.up {
-                Some(u) => render::parse_vec3("--up", u)?,
+                Some(u) => parse::parse_vec3("--up", u)?,
                 None => glam::Vec3::Y,
             },
             yfov_deg: a.yfov.unwrap_or(45.0),
@@ -108,7 +109,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
     Ok(RenderOptions {
         output: a.output.clone(),
         baked: a.baked.clone(),
-        frames: a.frames.as_deref().map(render::parse_frames).transpose()?,
+        frames: a.frames.as_deref().map(parse::parse_frames).transpose()?,
         fps: a.fps,
         animation: a.animation.clone(),
         width,
@@ -120,7 +121,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         aovs: a
             .aov
             .as_deref()
-            .map(render::parse_aovs)
+            .map(parse::parse_aovs)
             .transpose()?
             .unwrap_or_default(),
         pixel_type: if a.float {
@@ -129,7 +130,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
             PixelType::Half
         },
         resume: a.resume,
-        shard: a.shard.as_deref().map(render::parse_shard).transpose()?,
+        shard: a.shard.as_deref().map(parse::parse_shard).transpose()?,
         stats: a.stats.clone(),
         plot: a.plot.clone(),
         preview: None,

@@ -33,8 +33,8 @@ use glam::Vec3;
 
 pub use camera::{animation_bounds, CameraModel};
 pub use options::{
-    parse_aovs, parse_frames, parse_shard, parse_size, parse_vec3, Aovs, FrameRange, LookAt,
-    PixelType, PreviewOptions, RenderOptions, ShadingOptions, Shard, MAX_SIDE,
+    Aovs, FrameRange, LookAt, PixelType, PreviewOptions, RenderOptions, ShadingOptions, Shard,
+    MAX_SIDE,
 };
 pub use output::{channel_names, encode_exr, encode_preview, is_complete, linear_to_srgb8};
 pub use shade::{render_frame, sample_offset, FrameBuffers, FrameWork, RayCounts, ShadeContext};
