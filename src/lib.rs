@@ -1,14 +1,23 @@
 //! subfield: ray tracing of animated scenes with unstructured motion by parallel subfields.
 //!
-//! The data flows one way (see README): `scene` → `psf` (bake, dynamic, traverse) →
-//! `format` (write, open) → `render` (camera, shading, EXR sequences). A module does not
-//! reach back up.
+//! The data flows one way (DESIGN.md §2); each layer uses only those before it:
+//!
+//! * `geometry` (rays, boxes, triangles) → `psf` (bake, dynamic layer, traversal) →
+//!   `format` (the `.psf` file: write, open);
+//! * `scene`: the one Scene model (animation sampling, the static/dynamic split);
+//! * `import` → `scene`: the glTF and AFF / NFF readers ([`import::load`]) and the glTF
+//!   writer;
+//! * `gen` → `import`, `scene`: scenes made in code (museum, animart, synthetic sets);
+//! * `render` → `psf`, `format`, `scene`: camera, shading, EXR sequences.
+//!
+//! A module does not reach back up: `scene` knows no file format, `import` knows no
+//! renderer, and nothing below `gen` uses it.
 
-pub mod aff;
 pub mod atomic;
 pub mod format;
 pub mod gen;
 pub mod geometry;
+pub mod import;
 pub mod psf;
 pub mod render;
 pub mod scene;

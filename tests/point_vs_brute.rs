@@ -11,8 +11,8 @@
 
 use glam::Vec3;
 use proptest::prelude::*;
-use subfield::geometry::{BruteForce, Intersector, Ray};
 use subfield::gen::synth::{self, Rng};
+use subfield::geometry::{BruteForce, Intersector, Ray};
 use subfield::{DynamicLayer, Psf, PsfParams};
 
 #[derive(Clone, Debug)]

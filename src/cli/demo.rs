@@ -10,8 +10,9 @@ use std::time::Instant;
 use anyhow::Context;
 use subfield::format::{write_psf, WriteOptions};
 use subfield::gen::museum::{write_museum, MuseumParams};
+use subfield::import;
 use subfield::render::{FrameRange, PreviewOptions, RenderOptions};
-use subfield::scene::{ClipSelection, Scene};
+use subfield::scene::ClipSelection;
 use subfield::{Psf, PsfParams};
 
 use super::parse;
@@ -50,7 +51,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let params = MuseumParams::default();
     write_museum(&params, &scene_path)
         .with_context(|| format!("cannot write {}", scene_path.display()))?;
-    let scene = Scene::load(&scene_path)?;
+    let scene = import::load(&scene_path)?;
     let statics = scene.static_triangles(&scene.split(ClipSelection::All));
     let psf = Psf::build(&statics.positions, &PsfParams::for_triangles(statics.len()))?;
     let psf_path = dir.join("museum.psf");

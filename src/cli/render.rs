@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{bail, Context};
+use subfield::import;
 use subfield::render::{self, LookAt, PixelType, RenderEvent, RenderOptions};
 use subfield::scene::Scene;
 
@@ -141,7 +142,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let opts = options(&a)?;
     super::set_threads(a.threads)?;
-    let scene = Scene::load(&a.scene)?;
+    let scene = import::load(&a.scene)?;
     drive(&scene, &a.scene, &opts, a.quiet)
         .with_context(|| format!("cannot render {}", a.scene.display()))?;
     Ok(ExitCode::SUCCESS)

@@ -32,11 +32,12 @@ use std::path::Path;
 
 use glam::{Quat, Vec2, Vec3, Vec4};
 
-use crate::scene::{
-    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, Interpolation, LightDef, LightKind,
-    MaterialDesc, MeshDesc, NodeDesc, PrimitiveDesc, Property, SceneError,
-};
 use super::synth::Rng;
+use crate::import::{
+    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, ImportError, MaterialDesc, MeshDesc,
+    NodeDesc, PrimitiveDesc,
+};
+use crate::scene::{Interpolation, LightDef, LightKind, Property};
 
 /// Morph keys of the dynamic part (one morph target each). 13 keys over 10 s: a formation
 /// every 0.8 s, and 7.7 MB of targets at the default 16,384 triangles.
@@ -150,7 +151,7 @@ pub enum MuseumError {
     },
     /// The glTF writer refused the scene or could not write the file.
     #[error(transparent)]
-    Scene(#[from] SceneError),
+    Gltf(#[from] ImportError),
 }
 
 /// The museum as a glTF builder (add to it, or write it with [`GltfBuilder::write`] /

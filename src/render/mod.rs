@@ -3,8 +3,7 @@
 //!
 //! ```no_run
 //! # use subfield::render::{render_sequence, RenderOptions, RenderEvent};
-//! # use subfield::scene::Scene;
-//! let scene = Scene::load("scene.glb".as_ref())?;
+//! let scene = subfield::import::load("scene.glb".as_ref())?;
 //! let opts = RenderOptions { output: "out/frame.####.exr".into(), ..Default::default() };
 //! let summary = render_sequence(&scene, &opts, &mut |e: RenderEvent<'_>| {
 //!     if let RenderEvent::Frame(f) = e { println!("frame {} done", f.frame) }

@@ -11,7 +11,7 @@ use glam::{DVec3, Vec2, Vec3};
 use super::shapes::{self, Tessellation};
 use super::spline::{self, RotKey, Tcb, VecKey};
 use super::{
-    AffError, AffLight, AffMaterial, AffNode, AffScene, AffTexture, AffTransform, Batch,
+    AffLight, AffMaterial, AffNode, AffScene, AffTexture, AffTransform, Batch, ImportError,
     MorphBatch, TimeRange, Tracks, View, MAX_FRAMES,
 };
 
@@ -20,15 +20,19 @@ const MAX_INCLUDE_DEPTH: usize = 32;
 /// Largest count accepted for a list (`p`, `m` sections, `tpa` keys, track keys).
 const MAX_COUNT: u64 = 1 << 26;
 
-pub(super) fn parse_file(path: &Path) -> Result<AffScene, AffError> {
-    let bytes = std::fs::read(path).map_err(|source| AffError::Io {
+pub(super) fn parse_file(path: &Path) -> Result<AffScene, ImportError> {
+    let bytes = std::fs::read(path).map_err(|source| ImportError::Io {
         path: path.to_path_buf(),
         source,
     })?;
     parse_text(&bytes, path, &crate::atomic::folder_of(path))
 }
 
-pub(super) fn parse_text(bytes: &[u8], path: &Path, folder: &Path) -> Result<AffScene, AffError> {
+pub(super) fn parse_text(
+    bytes: &[u8],
+    path: &Path,
+    folder: &Path,
+) -> Result<AffScene, ImportError> {
     let mut p = Parser::new(path, folder);
     p.parse_source(bytes, path, 0)?;
     p.finish()
@@ -101,15 +105,15 @@ struct Src<'a> {
 }
 
 impl<'a> Src<'a> {
-    fn err(&self, line: u32, message: impl Into<String>) -> AffError {
-        AffError::Syntax {
+    fn err(&self, line: u32, message: impl Into<String>) -> ImportError {
+        ImportError::Syntax {
             path: self.path.to_path_buf(),
             line,
             message: message.into(),
         }
     }
 
-    fn token(&mut self, what: &str) -> Result<(&'a str, u32), AffError> {
+    fn token(&mut self, what: &str) -> Result<(&'a str, u32), ImportError> {
         match self.lex.next() {
             None => Err(self.err(
                 self.line,
@@ -125,7 +129,7 @@ impl<'a> Src<'a> {
         }
     }
 
-    fn num(&mut self, what: &str) -> Result<f64, AffError> {
+    fn num(&mut self, what: &str) -> Result<f64, ImportError> {
         let (tok, line) = self.token(what)?;
         match tok.parse::<f64>() {
             Ok(v) if v.is_finite() => Ok(v),
@@ -133,7 +137,7 @@ impl<'a> Src<'a> {
         }
     }
 
-    fn f(&mut self, what: &str) -> Result<f32, AffError> {
+    fn f(&mut self, what: &str) -> Result<f32, ImportError> {
         let v = self.num(what)?;
         let f = v as f32;
         if f.is_finite() {
@@ -143,11 +147,11 @@ impl<'a> Src<'a> {
         }
     }
 
-    fn vec3(&mut self, what: &str) -> Result<Vec3, AffError> {
+    fn vec3(&mut self, what: &str) -> Result<Vec3, ImportError> {
         Ok(Vec3::new(self.f(what)?, self.f(what)?, self.f(what)?))
     }
 
-    fn dvec3(&mut self, what: &str) -> Result<DVec3, AffError> {
+    fn dvec3(&mut self, what: &str) -> Result<DVec3, ImportError> {
         Ok(DVec3::new(
             self.num(what)?,
             self.num(what)?,
@@ -155,7 +159,7 @@ impl<'a> Src<'a> {
         ))
     }
 
-    fn count(&mut self, what: &str) -> Result<usize, AffError> {
+    fn count(&mut self, what: &str) -> Result<usize, ImportError> {
         let (tok, line) = self.token(what)?;
         match tok.parse::<u64>() {
             Ok(n) if n <= MAX_COUNT => Ok(n as usize),
@@ -164,13 +168,13 @@ impl<'a> Src<'a> {
         }
     }
 
-    fn int(&mut self, what: &str) -> Result<i64, AffError> {
+    fn int(&mut self, what: &str) -> Result<i64, ImportError> {
         let (tok, line) = self.token(what)?;
         tok.parse::<i64>()
             .map_err(|_| self.err(line, format!("expected an integer ({what}), found {tok:?}")))
     }
 
-    fn expect(&mut self, want: &str, context: &str) -> Result<(), AffError> {
+    fn expect(&mut self, want: &str, context: &str) -> Result<(), ImportError> {
         let (tok, line) = self.token(want)?;
         if tok == want {
             Ok(())
@@ -277,9 +281,9 @@ impl Parser {
         }
     }
 
-    fn finish(self) -> Result<AffScene, AffError> {
+    fn finish(self) -> Result<AffScene, ImportError> {
         if let Some(open) = self.stack.get(1) {
-            return Err(AffError::Syntax {
+            return Err(ImportError::Syntax {
                 path: open.path.clone(),
                 line: open.line,
                 message: "this '{' is never closed".into(),
@@ -356,11 +360,11 @@ impl Parser {
         i
     }
 
-    fn texture(&mut self, src: &Src, line: u32, name: &str) -> Result<u32, AffError> {
+    fn texture(&mut self, src: &Src, line: u32, name: &str) -> Result<u32, ImportError> {
         if let Some(&i) = self.texture_index.get(name) {
             return Ok(i);
         }
-        let bad = |reason: String| AffError::Texture {
+        let bad = |reason: String| ImportError::Texture {
             path: src.path.to_path_buf(),
             line,
             name: name.to_string(),
@@ -468,7 +472,7 @@ impl Parser {
         i
     }
 
-    fn parse_source(&mut self, bytes: &[u8], path: &Path, depth: usize) -> Result<(), AffError> {
+    fn parse_source(&mut self, bytes: &[u8], path: &Path, depth: usize) -> Result<(), ImportError> {
         let mut src = Src {
             lex: Lexer::new(bytes),
             path,
@@ -490,7 +494,7 @@ impl Parser {
         kw: &str,
         line: u32,
         depth: usize,
-    ) -> Result<(), AffError> {
+    ) -> Result<(), ImportError> {
         match kw {
             "v" => self.view(src)?,
             "b" => self.scene.background = src.vec3("background colour")?,
@@ -668,7 +672,7 @@ impl Parser {
         Ok(())
     }
 
-    fn view(&mut self, src: &mut Src) -> Result<(), AffError> {
+    fn view(&mut self, src: &mut Src) -> Result<(), ImportError> {
         let mut v = self.scene.view.clone().unwrap_or(View {
             from: Vec3::ZERO,
             at: Vec3::NEG_Z,
@@ -712,7 +716,13 @@ impl Parser {
         Ok(())
     }
 
-    fn include(&mut self, src: &Src, line: u32, name: &str, depth: usize) -> Result<(), AffError> {
+    fn include(
+        &mut self,
+        src: &Src,
+        line: u32,
+        name: &str,
+        depth: usize,
+    ) -> Result<(), ImportError> {
         if depth >= MAX_INCLUDE_DEPTH {
             return Err(src.err(
                 line,
@@ -729,7 +739,7 @@ impl Parser {
         self.parse_source(&bytes, &file, depth + 1)
     }
 
-    fn mesh(&mut self, src: &mut Src, line: u32) -> Result<(), AffError> {
+    fn mesh(&mut self, src: &mut Src, line: u32) -> Result<(), ImportError> {
         src.expect("vertices", "m")?;
         let nv = src.count("number of vertices")?;
         let mut verts = Vec::new();
@@ -870,7 +880,7 @@ impl Parser {
         Ok(())
     }
 
-    fn tpa(&mut self, src: &mut Src, line: u32) -> Result<(), AffError> {
+    fn tpa(&mut self, src: &mut Src, line: u32) -> Result<(), ImportError> {
         let n = src.count("number of keys")?;
         if n == 0 {
             return Err(src.err(line, "tpa with no keys"));
@@ -928,14 +938,14 @@ impl Parser {
         Ok(())
     }
 
-    fn keyframes(&mut self, src: &mut Src, line: u32) -> Result<(), AffError> {
+    fn keyframes(&mut self, src: &mut Src, line: u32) -> Result<(), ImportError> {
         let (name, _) = src.token("keyframe block name")?;
         let name = name.to_string();
         src.expect("{", "k")?;
         let mut tracks = Tracks::default();
         loop {
             let (word, wline) = src.token("a track or '}'")?;
-            let tcb = |src: &mut Src| -> Result<Tcb, AffError> {
+            let tcb = |src: &mut Src| -> Result<Tcb, ImportError> {
                 Ok(Tcb {
                     tension: src.num("tension")?,
                     continuity: src.num("continuity")?,
