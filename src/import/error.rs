@@ -113,8 +113,8 @@ pub enum ImportError {
         reason: String,
     },
 
-    /// Something in the model itself is inconsistent (raised by [`crate::import::validate`],
-    /// which every importer calls before handing a scene out).
+    /// Something in the model itself is inconsistent (raised by [`super::validate`], which
+    /// every importer calls before handing a scene out).
     #[error("{path}: inconsistent scene: {reason}")]
     Model { path: PathBuf, reason: String },
 

@@ -43,7 +43,8 @@ impl Check<'_> {
         }
     }
 
-    /// Primitives: finite attributes of matching counts, indices and materials in range, skin influences and morph targets consistent.
+    /// Primitives: finite attributes of matching counts, indices and materials in range,
+    /// skin influences and morph targets consistent.
     fn meshes(&self) -> Result<(), ImportError> {
         let scene = self.scene;
         for (mi, mesh) in scene.meshes.iter().enumerate() {
@@ -103,7 +104,8 @@ impl Check<'_> {
         Ok(())
     }
 
-    /// Textures name existing images, images hold their pixels, materials name existing textures.
+    /// Textures name existing images, images hold their pixels, materials name existing
+    /// textures.
     fn textures(&self) -> Result<(), ImportError> {
         let scene = self.scene;
         for (ti, t) in scene.textures.iter().enumerate() {
@@ -162,7 +164,8 @@ impl Check<'_> {
         Ok(())
     }
 
-    /// Nodes: references in range, parent and children agree, finite transforms and weights, skinned meshes use only their skin's joints.
+    /// Nodes: references in range, parent and children agree, finite transforms and
+    /// weights, skinned meshes use only their skin's joints.
     fn nodes(&self) -> Result<(), ImportError> {
         let scene = self.scene;
         let n_nodes = scene.nodes.len();
@@ -232,7 +235,8 @@ impl Check<'_> {
         Ok(())
     }
 
-    /// The hierarchy is a forest: every node reached once from a parentless node; roots exist and have no parent.
+    /// The hierarchy is a forest: every node reached once from a parentless node; roots
+    /// exist and have no parent.
     fn forest(&self) -> Result<(), ImportError> {
         let scene = self.scene;
         let n_nodes = scene.nodes.len();
@@ -320,7 +324,8 @@ impl Check<'_> {
         Ok(())
     }
 
-    /// Channels: target node exists, keyframes finite and non-decreasing, value count matching the property's width.
+    /// Channels: target node exists, keyframes finite and non-decreasing, value count
+    /// matching the property's width.
     fn animations(&self) -> Result<(), ImportError> {
         let scene = self.scene;
         let n_nodes = scene.nodes.len();

@@ -1,4 +1,4 @@
-//! Typed errors of the scene model (importing has its own, `crate::import::ImportError`).
+//! Typed errors of the scene model (the import layer has its own, `ImportError`).
 
 /// What can go wrong while choosing what to sample from a scene.
 #[derive(Debug, thiserror::Error)]

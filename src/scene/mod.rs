@@ -1,11 +1,11 @@
 //! The one Scene model: geometry, materials, hierarchy, cameras, lights, animation
 //! sampling, and the static/dynamic split.
 //!
-//! The model is format-neutral and knows no file format: the readers in `crate::import`
-//! (glTF, AFF / NFF) and the generators in `crate::gen` produce it, and every importer runs
-//! `crate::import::validate` before handing a scene out. Past that border the rest of the
-//! crate relies on the invariants it checks (every index in range, every float finite, the
-//! node hierarchy a forest). Nothing here uses `crate::import`.
+//! The model is format-neutral and knows no file format: the readers of the `import`
+//! layer (glTF, AFF / NFF) and the generators of `gen` produce it, and every importer runs
+//! the import layer's `validate` before handing a scene out. Past that border the rest of
+//! the crate relies on the invariants it checks (every index in range, every float finite,
+//! the node hierarchy a forest). Nothing in this module uses the import layer.
 //!
 //! Data flow: `Scene` → [`Scene::split`] → [`Scene::static_triangles`] (baked) and
 //! [`Scene::dynamic_triangles_at`] (per frame, inserted into the dynamic layer).

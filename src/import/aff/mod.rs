@@ -2,9 +2,9 @@
 //! evaluation of that scene at any time (splines, visibility, animated triangles), and its
 //! conversion to glTF ([`AffScene::to_gltf`]).
 //!
-//! `import::load` accepts `.aff` / `.nff` through [`load_scene`]: the file is parsed, turned
-//! into a glTF document in memory and imported like any `.glb`, so `bake`, `render` and a
-//! file written by `subfield convert` see the same scene by construction.
+//! `import::load` accepts `.aff` / `.nff` through [`load_scene`]: the file is parsed,
+//! turned into a glTF document in memory and imported like any `.glb`, so `bake`, `render`
+//! and a file written by `subfield convert` see the same scene by construction.
 //!
 //! # Time
 //! AFF frame `i` of `a t0 t1 n` is at `t0 + i·(t1−t0)/(n−1)`. The glTF clock starts at

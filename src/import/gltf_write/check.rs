@@ -4,11 +4,33 @@
 use super::{GltfBuilder, ImportError};
 use crate::scene::{Interpolation, Property};
 
+/// The writer's refusal, as the result of a check.
+fn bad(reason: String) -> Result<(), ImportError> {
+    Err(ImportError::Write { reason })
+}
+
+fn finite(v: &[f32]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+/// An optional index is absent or below `len`.
+fn in_range(i: Option<u32>, len: usize) -> bool {
+    i.is_none_or(|i| (i as usize) < len)
+}
+
 impl GltfBuilder {
+    /// Refuses inconsistent input (the first problem found, in the order below).
     pub(super) fn check(&self) -> Result<(), ImportError> {
-        let bad = |reason: String| Err(ImportError::Write { reason });
-        let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
-        let in_range = |i: Option<u32>, len: usize| i.is_none_or(|i| (i as usize) < len);
+        self.check_meshes()?;
+        self.check_materials()?;
+        self.check_nodes()?;
+        self.check_animations()?;
+        self.check_fps()
+    }
+
+    /// Primitives: positions present and finite, attribute counts, whole triangles, indices
+    /// and materials in range, morph targets and weights consistent.
+    fn check_meshes(&self) -> Result<(), ImportError> {
         for (mi, m) in self.meshes.iter().enumerate() {
             for (pi, p) in m.primitives.iter().enumerate() {
                 let at = format!("mesh {mi} primitive {pi}");
@@ -56,6 +78,11 @@ impl GltfBuilder {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// Materials name existing textures, textures existing images; images are PNG or JPEG.
+    fn check_materials(&self) -> Result<(), ImportError> {
         for (mi, m) in self.materials.iter().enumerate() {
             if !in_range(m.base_color_texture, self.textures.len()) {
                 return bad(format!("material {mi}: texture missing"));
@@ -74,6 +101,12 @@ impl GltfBuilder {
                 return bad(format!("image {ii}: empty, or not image/png or image/jpeg"));
             }
         }
+        Ok(())
+    }
+
+    /// Nodes: references in range, finite transforms, one parent at most; roots exist and
+    /// have none.
+    fn check_nodes(&self) -> Result<(), ImportError> {
         let mut parent = vec![None; self.nodes.len()];
         for (ni, n) in self.nodes.iter().enumerate() {
             if !in_range(n.mesh, self.meshes.len())
@@ -101,6 +134,12 @@ impl GltfBuilder {
                 Some(None) => {}
             }
         }
+        Ok(())
+    }
+
+    /// Channels: node exists, value count matching the property's width, finite increasing
+    /// times.
+    fn check_animations(&self) -> Result<(), ImportError> {
         for (ai, a) in self.animations.iter().enumerate() {
             for (ci, c) in a.channels.iter().enumerate() {
                 let at = format!("animation {ai} channel {ci}");
@@ -141,6 +180,11 @@ impl GltfBuilder {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// `fps`, when set, is positive.
+    fn check_fps(&self) -> Result<(), ImportError> {
         if let Some(fps) = self.fps {
             if !(fps.is_finite() && fps > 0.0) {
                 return bad(format!("fps {fps} is not positive"));
