@@ -719,7 +719,7 @@ fn mutated_input_never_panics() {
         let text = String::from_utf8_lossy(&text).into_owned();
         // Parse, convert, write and import again: errors are fine, panics are not.
         match AffScene::parse_str(&text, &name, &folder) {
-            Ok(s) => match s.to_gltf().and_then(|g| Ok(g.to_glb()?)) {
+            Ok(s) => match s.to_gltf().and_then(|g| g.to_glb()) {
                 Ok(glb) => {
                     let _ = s.triangles_at(0.5);
                     match import::from_gltf_slice(&glb, &name, &folder) {
