@@ -169,7 +169,7 @@ impl Check<'_> {
     fn nodes(&self) -> Result<(), ImportError> {
         let scene = self.scene;
         let n_nodes = scene.nodes.len();
-        // Hierarchy: parent/children agree, every node reachable once from a parentless node.
+        // Parent and children must agree (reachability is `forest`).
         for (ni, node) in scene.nodes.iter().enumerate() {
             let check = |i: Option<usize>, len: usize, what: &str| match i {
                 Some(i) if i >= len => Err(self.node(ni, format!("{what} {i} does not exist"))),

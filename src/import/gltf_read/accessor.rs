@@ -115,51 +115,7 @@ impl Importer<'_> {
             ));
         }
         if let Some(sparse) = acc.sparse() {
-            let n = sparse.count();
-            let idx = sparse.indices();
-            let vals = sparse.values();
-            let isize = match idx.index_type() {
-                gltf::accessor::sparse::IndexType::U8 => 1,
-                gltf::accessor::sparse::IndexType::U16 => 2,
-                gltf::accessor::sparse::IndexType::U32 => 4,
-            };
-            let ibytes = self.view_bytes(&idx.view(), ai, usage)?;
-            let vbytes = self.view_bytes(&vals.view(), ai, usage)?;
-            let ifits = n
-                .checked_mul(isize)
-                .and_then(|x| x.checked_add(idx.offset()))
-                .is_some_and(|end| end <= ibytes.len());
-            let vfits = n
-                .checked_mul(elem)
-                .and_then(|x| x.checked_add(vals.offset()))
-                .is_some_and(|end| end <= vbytes.len());
-            if !ifits || !vfits {
-                return Err(self.acc_err(ai, usage, "sparse data runs past its buffer view"));
-            }
-            for k in 0..n {
-                let at = idx.offset() + k * isize;
-                let target = match isize {
-                    1 => usize::from(ibytes[at]),
-                    2 => usize::from(u16::from_le_bytes([ibytes[at], ibytes[at + 1]])),
-                    _ => u32::from_le_bytes([
-                        ibytes[at],
-                        ibytes[at + 1],
-                        ibytes[at + 2],
-                        ibytes[at + 3],
-                    ]) as usize,
-                };
-                if target >= count {
-                    return Err(self.acc_err(
-                        ai,
-                        usage,
-                        format!("sparse index {target} past the count {count}"),
-                    ));
-                }
-                for c in 0..comps {
-                    let at = vals.offset() + k * elem + c * csize;
-                    values[target * comps + c] = component(&vbytes[at..at + csize], data_type);
-                }
-            }
+            self.apply_sparse(acc, usage, &sparse, &mut values)?;
         }
         Ok(Raw {
             values,
@@ -167,6 +123,66 @@ impl Importer<'_> {
             data_type,
             normalized: acc.normalized(),
         })
+    }
+
+    /// Overwrites the elements that sparse storage names (after the dense or zero data).
+    fn apply_sparse(
+        &self,
+        acc: &gltf::Accessor,
+        usage: &str,
+        sparse: &gltf::accessor::sparse::Sparse,
+        values: &mut [f64],
+    ) -> Result<(), ImportError> {
+        let ai = acc.index();
+        let data_type = acc.data_type();
+        let comps = acc.dimensions().multiplicity();
+        let csize = data_type.size();
+        let elem = csize * comps;
+        let count = acc.count();
+        let n = sparse.count();
+        let idx = sparse.indices();
+        let vals = sparse.values();
+        let isize = match idx.index_type() {
+            gltf::accessor::sparse::IndexType::U8 => 1,
+            gltf::accessor::sparse::IndexType::U16 => 2,
+            gltf::accessor::sparse::IndexType::U32 => 4,
+        };
+        let ibytes = self.view_bytes(&idx.view(), ai, usage)?;
+        let vbytes = self.view_bytes(&vals.view(), ai, usage)?;
+        let ifits = n
+            .checked_mul(isize)
+            .and_then(|x| x.checked_add(idx.offset()))
+            .is_some_and(|end| end <= ibytes.len());
+        let vfits = n
+            .checked_mul(elem)
+            .and_then(|x| x.checked_add(vals.offset()))
+            .is_some_and(|end| end <= vbytes.len());
+        if !ifits || !vfits {
+            return Err(self.acc_err(ai, usage, "sparse data runs past its buffer view"));
+        }
+        for k in 0..n {
+            let at = idx.offset() + k * isize;
+            let target = match isize {
+                1 => usize::from(ibytes[at]),
+                2 => usize::from(u16::from_le_bytes([ibytes[at], ibytes[at + 1]])),
+                _ => {
+                    u32::from_le_bytes([ibytes[at], ibytes[at + 1], ibytes[at + 2], ibytes[at + 3]])
+                        as usize
+                }
+            };
+            if target >= count {
+                return Err(self.acc_err(
+                    ai,
+                    usage,
+                    format!("sparse index {target} past the count {count}"),
+                ));
+            }
+            for c in 0..comps {
+                let at = vals.offset() + k * elem + c * csize;
+                values[target * comps + c] = component(&vbytes[at..at + csize], data_type);
+            }
+        }
+        Ok(())
     }
 
     /// Floats, with integer components normalised when the accessor says so or

@@ -7,6 +7,9 @@ use gltf::mesh::Mode;
 use super::{ImportError, Importer};
 use crate::scene::{Mesh, MorphTarget, Primitive};
 
+/// Per-vertex skin influences: joints and weights, `sets` entries per vertex.
+type Influences = (Vec<[u16; 4]>, Vec<[f32; 4]>);
+
 impl Importer<'_> {
     pub(super) fn meshes(&mut self) -> Result<Vec<Mesh>, ImportError> {
         let mut skipped = Vec::new();
@@ -42,6 +45,7 @@ impl Importer<'_> {
         Ok(meshes)
     }
 
+    /// One triangle primitive; its accessors must agree with the POSITION count.
     pub(super) fn primitive(
         &mut self,
         prim: &gltf::Primitive,
@@ -57,21 +61,10 @@ impl Importer<'_> {
         })?;
         let positions = self.vec3s(&pos_acc, &format!("{at}.POSITION"))?;
         let nv = positions.len();
-        let same_count = |this: &Self, acc: &gltf::Accessor, usage: &str| {
-            if acc.count() != nv {
-                Err(this.acc_err(
-                    acc.index(),
-                    usage,
-                    format!("count {} differs from the POSITION count {nv}", acc.count()),
-                ))
-            } else {
-                Ok(())
-            }
-        };
         let normals = match get(gltf::Semantic::Normals) {
             Some(acc) => {
                 let usage = format!("{at}.NORMAL");
-                same_count(self, &acc, &usage)?;
+                self.same_count(&acc, &usage, nv)?;
                 Some(self.vec3s(&acc, &usage)?)
             }
             None => None,
@@ -79,25 +72,58 @@ impl Importer<'_> {
         let uvs = match get(gltf::Semantic::TexCoords(0)) {
             Some(acc) => {
                 let usage = format!("{at}.TEXCOORD_0");
-                same_count(self, &acc, &usage)?;
+                self.same_count(&acc, &usage, nv)?;
                 let f = self.floats(&acc, &usage, 2, true)?;
                 Some(f.chunks_exact(2).map(Vec2::from_slice).collect())
             }
             None => None,
         };
+        let (joints, weights) = self.skin_influences(prim, &at, nv)?;
+        let triangles = self.triangles(prim, &at, nv, mode)?;
+        let morph_targets = self.morph_targets(prim, &at, nv)?;
+        Ok(Primitive {
+            positions,
+            normals,
+            uvs,
+            triangles,
+            material: prim.material().index().map_or(u32::MAX, |m| m as u32),
+            joints,
+            weights,
+            morph_targets,
+        })
+    }
 
-        // Skin influences, every JOINTS_n/WEIGHTS_n pair, interleaved per vertex.
+    /// An attribute accessor must have one element per vertex.
+    fn same_count(&self, acc: &gltf::Accessor, usage: &str, nv: usize) -> Result<(), ImportError> {
+        if acc.count() != nv {
+            Err(self.acc_err(
+                acc.index(),
+                usage,
+                format!("count {} differs from the POSITION count {nv}", acc.count()),
+            ))
+        } else {
+            Ok(())
+        }
+    }
+
+    /// Skin influences, every JOINTS_n/WEIGHTS_n pair, interleaved per vertex.
+    fn skin_influences(
+        &self,
+        prim: &gltf::Primitive,
+        at: &str,
+        nv: usize,
+    ) -> Result<Influences, ImportError> {
         let mut sets: Vec<(Vec<u32>, Vec<f32>)> = Vec::new();
         for s in 0u32.. {
             let (Some(j), Some(w)) = (
-                get(gltf::Semantic::Joints(s)),
-                get(gltf::Semantic::Weights(s)),
+                prim.get(&gltf::Semantic::Joints(s)),
+                prim.get(&gltf::Semantic::Weights(s)),
             ) else {
                 break;
             };
             let (ju, wu) = (format!("{at}.JOINTS_{s}"), format!("{at}.WEIGHTS_{s}"));
-            same_count(self, &j, &ju)?;
-            same_count(self, &w, &wu)?;
+            self.same_count(&j, &ju, nv)?;
+            self.same_count(&w, &wu, nv)?;
             let joints = self.uints(&j, &ju, 4)?;
             if let Some(big) = joints.iter().find(|&&x| x > u32::from(u16::MAX)) {
                 return Err(self.acc_err(j.index(), &ju, format!("joint {big} out of range")));
@@ -113,7 +139,18 @@ impl Importer<'_> {
                 weights.push([w[v * 4], w[v * 4 + 1], w[v * 4 + 2], w[v * 4 + 3]]);
             }
         }
+        Ok((joints, weights))
+    }
 
+    /// The indices (or `0..nv`), checked against the vertex count, as triangles: strips
+    /// and fans unrolled, a trailing partial triangle dropped with a warning.
+    fn triangles(
+        &mut self,
+        prim: &gltf::Primitive,
+        at: &str,
+        nv: usize,
+        mode: Mode,
+    ) -> Result<Vec<[u32; 3]>, ImportError> {
         let indices: Vec<u32> = match prim.indices() {
             Some(acc) => {
                 let usage = format!("{at}.indices");
@@ -129,7 +166,7 @@ impl Importer<'_> {
             }
             None => (0..nv as u32).collect(),
         };
-        let triangles = match mode {
+        Ok(match mode {
             Mode::Triangles => {
                 if indices.len() % 3 != 0 {
                     self.warn(format!(
@@ -155,8 +192,16 @@ impl Importer<'_> {
                 .map(|i| [indices[i + 1], indices[i + 2], indices[0]])
                 .collect(),
             _ => Vec::new(),
-        };
+        })
+    }
 
+    /// Morph targets: POSITION and NORMAL displacements (empty when absent).
+    fn morph_targets(
+        &self,
+        prim: &gltf::Primitive,
+        at: &str,
+        nv: usize,
+    ) -> Result<Vec<MorphTarget>, ImportError> {
         let mut morph_targets = Vec::new();
         for (ti, target) in prim.morph_targets().enumerate() {
             let read =
@@ -164,7 +209,7 @@ impl Importer<'_> {
                     match acc {
                         Some(acc) => {
                             let usage = format!("{at}.targets[{ti}].{what}");
-                            same_count(self, &acc, &usage)?;
+                            self.same_count(&acc, &usage, nv)?;
                             self.vec3s(&acc, &usage)
                         }
                         None => Ok(Vec::new()),
@@ -174,16 +219,6 @@ impl Importer<'_> {
             let normals = read(target.normals(), "NORMAL")?;
             morph_targets.push(MorphTarget { positions, normals });
         }
-
-        Ok(Primitive {
-            positions,
-            normals,
-            uvs,
-            triangles,
-            material: prim.material().index().map_or(u32::MAX, |m| m as u32),
-            joints,
-            weights,
-            morph_targets,
-        })
+        Ok(morph_targets)
     }
 }
