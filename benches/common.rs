@@ -2,7 +2,7 @@
 #![allow(dead_code)]
 
 use glam::Vec3;
-use subfield::synth::{self, Rng};
+use subfield::gen::synth::{self, Rng};
 use subfield::Ray;
 
 /// The museum-like room of `n` triangles.

@@ -7,9 +7,10 @@
 use std::time::Instant;
 
 use subfield::format::{write_psf, WriteOptions};
-use subfield::museum::{write_museum, MuseumParams};
+use subfield::gen::museum::{write_museum, MuseumParams};
+use subfield::import;
 use subfield::render::{render_sequence, RenderOptions, Shard};
-use subfield::scene::{ClipSelection, Scene};
+use subfield::scene::ClipSelection;
 use subfield::{Psf, PsfParams};
 
 fn stats(v: &[f64]) -> (f64, f64, f64) {
@@ -34,7 +35,7 @@ fn main() {
     let params = MuseumParams::default();
     let glb = dir.join("museum.glb");
     write_museum(&params, &glb).expect("museum");
-    let scene = Scene::load(&glb).expect("load museum");
+    let scene = import::load(&glb).expect("load museum");
     let statics = scene.static_triangles(&scene.split(ClipSelection::All));
     let t = Instant::now();
     let psf = Psf::build(&statics.positions, &PsfParams::for_triangles(statics.len())).unwrap();

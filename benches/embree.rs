@@ -42,9 +42,10 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
+use subfield::import;
 use subfield::psf::RayStats;
 use subfield::render::CameraModel;
-use subfield::scene::{ClipSelection, LightKind, Scene, TriangleSoup};
+use subfield::scene::{ClipSelection, LightKind, TriangleSoup};
 use subfield::{DynamicLayer, Hit, Intersector, Psf, PsfParams, Ray};
 
 /// Untimed, on the warm-up frame: the work per ray of each kind in each layer (tiles
@@ -243,7 +244,7 @@ impl FrameRow {
 
 fn main() {
     let a = parse_args();
-    let scene = Scene::load(&a.scene)
+    let scene = import::load(&a.scene)
         .unwrap_or_else(|e| fail(&format!("cannot load {}: {e}", a.scene.display())));
     let split = scene.split(ClipSelection::All);
     let statics = scene.static_triangles(&split);

@@ -7,7 +7,7 @@
 use std::time::Instant;
 
 use glam::Vec3;
-use subfield::synth::{self, Rng};
+use subfield::gen::synth::{self, Rng};
 use subfield::{Intersector, Psf, PsfParams, Ray};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -5,8 +5,11 @@
 use std::path::{Path, PathBuf};
 
 use glam::{Quat, Vec3};
-use subfield::aff::shapes;
-use subfield::aff::{generate_animart, AffError, AffScene, AnimartParams};
+use subfield::gen::animart::{generate_animart, AnimartParams};
+use subfield::import;
+use subfield::import::aff::shapes;
+use subfield::import::aff::AffScene;
+use subfield::import::ImportError;
 use subfield::scene::{ClipSelection, Scene, TriangleSoup};
 
 /// A fresh folder under the target directory for one test.
@@ -76,7 +79,7 @@ fn polygons_are_fanned_and_patch_normals_normalised() {
     );
 
     // Through glTF: same triangles; the patch's normals arrive unit length.
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     let mut soup = TriangleSoup::new();
     scene.triangles_into(&scene.instances(), ClipSelection::All, 0.0, &mut soup);
     assert_eq!(soup.positions, tris);
@@ -114,7 +117,7 @@ fn static_transforms_compose_scale_rotate_translate_and_nest() {
     for (got, want) in tris[0].iter().zip(&outer).chain(tris[1].iter().zip(&inner)) {
         assert_close(*got, *want, 1e-5, "AFF evaluation");
     }
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     let via_gltf = soup_at(&scene, 0.0);
     for (got, want) in via_gltf.iter().flatten().zip(outer.iter().chain(&inner)) {
         assert_close(*got, *want, 1e-5, "through glTF");
@@ -217,7 +220,7 @@ fn keyframe_splines_match_an_independent_kochanek_bartels_evaluation() {
     assert_eq!(tr.translation_at(1.0).unwrap().x, 1.0);
 
     // Through glTF at the frames: glTF time i / fps is AFF frame i.
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     let fps = scene.fps.unwrap();
     assert!((fps - 2.0).abs() < 1e-6, "fps {fps}");
     for i in 0..9 {
@@ -261,7 +264,7 @@ fn animated_triangles_interpolate_linearly_and_clamp() {
     };
     let aff = AffScene::load(&path).unwrap();
     assert_eq!(aff.animated_triangle_count(), 1);
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     let fps = scene.fps.unwrap();
     for i in 0..9 {
         let t = -1.0 + i as f32;
@@ -418,7 +421,7 @@ fn camera_follows_view_then_keyframes() {
         )],
     );
     let aff = AffScene::load(&path).unwrap();
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     let fps = scene.fps.unwrap();
     for i in 0..3 {
         let t = f64::from(i);
@@ -469,7 +472,7 @@ fn textures_materials_lights_and_visibility_convert() {
     let path = d.join("s.aff");
     let aff = AffScene::load(&path).unwrap();
     assert_eq!(aff.textures[0].rgb8, vec![255, 0, 0, 0, 0, 255]);
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     assert_eq!(scene.images.len(), 1);
     assert_eq!(scene.images[0].rgba8, vec![255, 0, 0, 255, 0, 0, 255, 255]);
     let m = scene
@@ -544,8 +547,8 @@ fn error_of(test: &str, text: &str, extra: &[(&str, &[u8])]) -> String {
     }
     std::fs::write(d.join("bad.aff"), text).unwrap();
     let e = AffScene::load(&d.join("bad.aff")).unwrap_err();
-    // Scene::load reports the same problem.
-    let s = Scene::load(&d.join("bad.aff")).unwrap_err().to_string();
+    // import::load reports the same problem.
+    let s = import::load(&d.join("bad.aff")).unwrap_err().to_string();
     assert_eq!(s, e.to_string());
     e.to_string()
 }
@@ -662,7 +665,7 @@ fn keyframes_naming_nothing_are_a_warning_not_an_error() {
     let aff = AffScene::load(&path).unwrap();
     assert_eq!(aff.warnings.len(), 1);
     assert!(aff.warnings[0].contains("o.aff:3:") && aff.warnings[0].contains("ghost"));
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     assert!(scene.warnings.iter().any(|w| w.0.contains("ghost")));
 }
 
@@ -716,10 +719,10 @@ fn mutated_input_never_panics() {
         let text = String::from_utf8_lossy(&text).into_owned();
         // Parse, convert, write and import again: errors are fine, panics are not.
         match AffScene::parse_str(&text, &name, &folder) {
-            Ok(s) => match s.to_gltf().and_then(|g| Ok(g.to_glb()?)) {
+            Ok(s) => match s.to_gltf().and_then(|g| g.to_glb()) {
                 Ok(glb) => {
                     let _ = s.triangles_at(0.5);
-                    match Scene::from_gltf_slice(&glb, &name, &folder) {
+                    match import::from_gltf_slice(&glb, &name, &folder) {
                         Ok(_) => ok += 1,
                         Err(_) => failed += 1,
                     }
@@ -728,7 +731,7 @@ fn mutated_input_never_panics() {
             },
             Err(e) => {
                 assert!(
-                    matches!(e, AffError::Syntax { .. } | AffError::Texture { .. }),
+                    matches!(e, ImportError::Syntax { .. } | ImportError::Texture { .. }),
                     "{e}"
                 );
                 assert!(e.to_string().contains("fuzz.aff:"), "{e}");
@@ -788,7 +791,7 @@ fn animart_generator_is_deterministic_and_parses() {
 }
 
 /// A plain NFF file (the AFF subset Eric Haines' SPD scenes use): viewpoint, background,
-/// lights, a fill material, a polygon, a sphere and a cone load through `Scene::load` by
+/// lights, a fill material, a polygon, a sphere and a cone load through `import::load` by
 /// its `.nff` extension, with the camera where `v` puts it, the lights, and the geometry;
 /// `subfield render` takes it like any scene.
 #[test]
@@ -807,7 +810,7 @@ fn plain_nff_loads_and_renders() {
              c 1.5 0 0 0.4 1.5 0 1.2 0.1\n",
         )],
     );
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     let tris = soup_at(&scene, 0.0);
     let aff = AffScene::load(&path).unwrap();
     assert_eq!(tris.len(), aff.triangle_count());

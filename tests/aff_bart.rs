@@ -1,6 +1,6 @@
 //! The BART scenes (museum5, kitchen, robots) through `subfield convert`: the written
 //! `.glb` passes the Khronos glTF validator with zero errors, and loaded back with
-//! `Scene::load` gives the same triangles and camera, at several frames, as the AFF file
+//! `import::load` gives the same triangles and camera, at several frames, as the AFF file
 //! loaded directly and as the AFF model evaluated on its own (splines, `tpa` keys).
 //! Also `subfield generate animart` end to end.
 //!
@@ -13,7 +13,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use glam::Vec3;
-use subfield::aff::AffScene;
+use subfield::import;
+use subfield::import::aff::AffScene;
 use subfield::scene::{ClipSelection, Scene, TriangleSoup};
 
 fn bart() -> Option<PathBuf> {
@@ -106,8 +107,8 @@ fn check_scene(rel: &str, expect_triangles: usize, expect_animated: usize) -> Op
     let aff = AffScene::load(&src).unwrap();
     assert_eq!(aff.triangle_count(), expect_triangles);
     assert_eq!(aff.animated_triangle_count(), expect_animated);
-    let from_glb = Scene::load(&glb).unwrap();
-    let from_aff = Scene::load(&src).unwrap();
+    let from_glb = import::load(&glb).unwrap();
+    let from_aff = import::load(&src).unwrap();
     let times = aff.frame_times();
     let n = times.len();
     let fps = from_glb.fps.unwrap();
@@ -214,7 +215,7 @@ fn museum_with_generated_animart_pairs_with_the_static_part() {
     convert_ok(&path, &glb);
     let (errors, warnings, report) = validate(&glb);
     assert_eq!((errors, warnings), (0, 0), "{report}");
-    let scene = Scene::load(&glb).unwrap();
+    let scene = import::load(&glb).unwrap();
     let split = scene.split(ClipSelection::All).summary();
     assert_eq!(split.dynamic_triangles, 16_384, "{split}");
 }

@@ -7,11 +7,12 @@ use std::process::{Command, Output};
 
 use glam::{Quat, Vec3};
 use subfield::format::{open_psf, scene_hash, OpenOptions};
-use subfield::scene::{
-    AnimationDesc, ChannelDesc, ClipSelection, GltfBuilder, Interpolation, MeshDesc, NodeDesc,
-    PrimitiveDesc, Property, Scene,
+use subfield::gen::synth::{self, Rng};
+use subfield::import;
+use subfield::import::{
+    AnimationDesc, ChannelDesc, GltfBuilder, MeshDesc, NodeDesc, PrimitiveDesc,
 };
-use subfield::synth::{self, Rng};
+use subfield::scene::{ClipSelection, Interpolation, Property};
 use subfield::{Intersector, Psf, PsfParams, Ray};
 
 fn temp_dir(name: &str) -> PathBuf {
@@ -89,7 +90,7 @@ fn bake_then_inspect_then_trace() {
     );
 
     // The file traces exactly as an in-memory bake of the same static triangles.
-    let scene = Scene::load(&scene_path).unwrap();
+    let scene = import::load(&scene_path).unwrap();
     let split = scene.split(ClipSelection::All);
     let soup = scene.static_triangles(&split);
     let baked = open_psf(

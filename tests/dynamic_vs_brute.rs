@@ -9,8 +9,8 @@
 
 use glam::Vec3;
 use proptest::prelude::*;
+use subfield::gen::synth::{self, Rng};
 use subfield::geometry::{BruteForce, Intersector, Ray};
-use subfield::synth::{self, Rng};
 use subfield::{DynamicLayer, Psf, PsfParams};
 
 #[derive(Clone, Debug)]

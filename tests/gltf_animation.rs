@@ -7,10 +7,11 @@ mod common;
 
 use common::{max_dist, RawGltf};
 use glam::{Mat4, Quat, Vec3};
-use subfield::scene::{
-    AnimationDesc, ChannelDesc, ClipSelection, GltfBuilder, Interpolation, MeshDesc, NodeDesc,
-    PrimitiveDesc, Property, Scene, TriangleSoup,
+use subfield::import;
+use subfield::import::{
+    AnimationDesc, ChannelDesc, GltfBuilder, MeshDesc, NodeDesc, PrimitiveDesc,
 };
+use subfield::scene::{ClipSelection, Interpolation, Property, Scene, TriangleSoup};
 
 /// The library's posed vertices, recovered from its triangles through the file's own
 /// index list (each corner of triangle `t` is vertex `indices[3t + k]`).
@@ -85,7 +86,7 @@ fn simple_skin_by_hand() {
         return;
     };
     let path = dir.join("SimpleSkin/SimpleSkin.gltf");
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     let raw = RawGltf::open(&path);
     let prim = &raw.json["meshes"][0]["primitives"][0];
     let idx = raw_indices(&raw, prim);
@@ -138,7 +139,7 @@ fn rigged_figure_and_other_skins_match_independent_skinning() {
         ("CesiumMan/CesiumMan.glb", 2, vec![0.1, 0.9, 1.7]),
     ] {
         let path = dir.join(file);
-        let scene = Scene::load(&path).unwrap();
+        let scene = import::load(&path).unwrap();
         let raw = RawGltf::open(&path);
         let node = &raw.json["nodes"][mesh_node];
         assert!(
@@ -164,7 +165,7 @@ fn animated_morph_cube_matches_weights_by_hand() {
         return;
     };
     let path = dir.join("AnimatedMorphCube/AnimatedMorphCube.gltf");
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     let raw = RawGltf::open(&path);
     let prim = &raw.json["meshes"][0]["primitives"][0];
     let idx = raw_indices(&raw, prim);
@@ -203,7 +204,7 @@ fn box_animated_hierarchy() {
         return;
     };
     let path = dir.join("BoxAnimated/BoxAnimated.gltf");
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     let raw = RawGltf::open(&path);
     // Node 2 (mesh 0) rotates under node 0, which translates: dynamic. Node 3 (mesh 1)
     // is not animated: static.
@@ -240,7 +241,7 @@ fn cubic_spline_camera_and_light() {
         return;
     };
     let path = dir.join("AnimatedCameraAndLight/animated_camera_and_light.glb");
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     let raw = RawGltf::open(&path);
     let anim = &raw.json["animations"][1];
     assert_eq!(anim["name"], "CameraAnimation");
@@ -303,7 +304,7 @@ fn built(b: &GltfBuilder, name: &str) -> Scene {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join(name);
     b.write(&path).unwrap();
-    Scene::load(&path).unwrap()
+    import::load(&path).unwrap()
 }
 
 /// A triangle translated by a CUBICSPLINE channel; expected positions by hand.

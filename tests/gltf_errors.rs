@@ -8,10 +8,13 @@ use std::path::{Path, PathBuf};
 
 use glam::{Quat, Vec3};
 use serde_json::{json, Value};
+use subfield::import;
+use subfield::import::{
+    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, ImportError, MaterialDesc, MeshDesc,
+    NodeDesc, PrimitiveDesc,
+};
 use subfield::scene::{
-    AnimationDesc, CameraDesc, ChannelDesc, ClipSelection, GltfBuilder, Interpolation, LightDef,
-    LightKind, MaterialDesc, MeshDesc, NodeDesc, PrimitiveDesc, Property, Scene, SceneError,
-    TriangleSoup,
+    ClipSelection, Interpolation, LightDef, LightKind, Property, Scene, TriangleSoup,
 };
 
 fn temp_dir(name: &str) -> PathBuf {
@@ -52,12 +55,12 @@ fn triangle_files(name: &str, positions: [f32; 9], indices: [u16; 3]) -> (PathBu
 
 const TRI: [f32; 9] = [0., 0., 0., 1., 0., 0., 0., 1., 0.];
 
-fn load_json(path: &Path, json: &Value) -> Result<Scene, SceneError> {
+fn load_json(path: &Path, json: &Value) -> Result<Scene, ImportError> {
     std::fs::write(path, serde_json::to_vec(json).unwrap()).unwrap();
-    Scene::load(path)
+    import::load(path)
 }
 
-fn assert_names(e: &SceneError, path: &Path, parts: &[&str]) {
+fn assert_names(e: &ImportError, path: &Path, parts: &[&str]) {
     let msg = e.to_string();
     assert!(
         msg.contains(&path.display().to_string()),
@@ -82,8 +85,8 @@ fn truncated_glb() {
     let path = dir.join("cut.glb");
     for cut in [glb.len() - 1, glb.len() / 2, 30, 13, 5] {
         std::fs::write(&path, &glb[..cut]).unwrap();
-        let e = Scene::load(&path).unwrap_err();
-        assert!(matches!(e, SceneError::Glb { .. }), "cut {cut}: {e}");
+        let e = import::load(&path).unwrap_err();
+        assert!(matches!(e, ImportError::Glb { .. }), "cut {cut}: {e}");
         assert_names(&e, &path, &["GLB"]);
     }
 }
@@ -93,7 +96,10 @@ fn accessor_outside_its_buffer() {
     let (path, mut json) = triangle_files("accessor", TRI, [0, 1, 2]);
     json["accessors"][0]["count"] = json!(4);
     let e = load_json(&path, &json).unwrap_err();
-    assert!(matches!(e, SceneError::Accessor { accessor: 0, .. }), "{e}");
+    assert!(
+        matches!(e, ImportError::Accessor { accessor: 0, .. }),
+        "{e}"
+    );
     assert_names(
         &e,
         &path,
@@ -121,7 +127,10 @@ fn accessor_outside_its_buffer() {
 fn index_past_the_vertex_count() {
     let (path, json) = triangle_files("index", TRI, [0, 1, 7]);
     let e = load_json(&path, &json).unwrap_err();
-    assert!(matches!(e, SceneError::Accessor { accessor: 1, .. }), "{e}");
+    assert!(
+        matches!(e, ImportError::Accessor { accessor: 1, .. }),
+        "{e}"
+    );
     assert_names(&e, &path, &["accessors[1]", "index 7", "vertex count 3"]);
 }
 
@@ -136,7 +145,10 @@ fn non_finite_positions() {
         p[4] = bad;
         let (path, json) = triangle_files(name, p, [0, 1, 2]);
         let e = load_json(&path, &json).unwrap_err();
-        assert!(matches!(e, SceneError::Accessor { accessor: 0, .. }), "{e}");
+        assert!(
+            matches!(e, ImportError::Accessor { accessor: 0, .. }),
+            "{e}"
+        );
         assert_names(
             &e,
             &path,
@@ -155,7 +167,7 @@ fn missing_buffer_file() {
     let (path, mut json) = triangle_files("missing", TRI, [0, 1, 2]);
     json["buffers"][0]["uri"] = json!("nowhere.bin");
     let e = load_json(&path, &json).unwrap_err();
-    assert!(matches!(e, SceneError::MissingFile { .. }), "{e}");
+    assert!(matches!(e, ImportError::MissingFile { .. }), "{e}");
     assert_names(&e, &path, &["buffers[0]", "nowhere.bin"]);
 }
 
@@ -177,7 +189,7 @@ fn uri_leaving_the_folder_is_refused() {
         j["buffers"][0]["uri"] = json!(uri);
         let e = load_json(&path, &j).unwrap_err();
         assert!(
-            matches!(e, SceneError::UriOutsideFolder { .. }),
+            matches!(e, ImportError::UriOutsideFolder { .. }),
             "{uri}: {e}"
         );
         assert_names(&e, &path, &["buffers[0]", uri, "leaves the scene's folder"]);
@@ -195,7 +207,7 @@ fn skin_with_a_missing_joint() {
     json["nodes"][0]["skin"] = json!(0);
     json["skins"] = json!([{"joints": [0, 9]}]);
     let e = load_json(&path, &json).unwrap_err();
-    assert!(matches!(e, SceneError::Invalid { .. }), "{e}");
+    assert!(matches!(e, ImportError::Invalid { .. }), "{e}");
     assert_names(&e, &path, &["skins[0].joints[1]"]);
 
     // JOINTS_0 using a joint number the skin does not have: names the node.
@@ -228,7 +240,7 @@ fn skin_with_a_missing_joint() {
     json["scenes"] = json!([{"nodes": [0, 1]}]);
     json["skins"] = json!([{"joints": [1]}]);
     let e = load_json(&path, &json).unwrap_err();
-    assert!(matches!(e, SceneError::Node { node: 0, .. }), "{e}");
+    assert!(matches!(e, ImportError::Node { node: 0, .. }), "{e}");
     assert_names(&e, &path, &["nodes[0]", "joint 3", "skins[0] has 1 joints"]);
 }
 
@@ -237,7 +249,7 @@ fn broken_hierarchies() {
     let (path, mut json) = triangle_files("cycle", TRI, [0, 1, 2]);
     json["nodes"] = json!([{"mesh": 0, "children": [1]}, {"children": [0], "name": "loop"}]);
     let e = load_json(&path, &json).unwrap_err();
-    assert!(matches!(e, SceneError::Node { .. }), "{e}");
+    assert!(matches!(e, ImportError::Node { .. }), "{e}");
     assert_names(&e, &path, &["nodes["]);
 
     let (path, mut json) = triangle_files("two-parents", TRI, [0, 1, 2]);
@@ -253,16 +265,16 @@ fn bad_json_and_unsupported_extensions() {
     let path = dir.join("x.gltf");
     std::fs::write(&path, b"{ not json").unwrap();
     assert!(matches!(
-        Scene::load(&path).unwrap_err(),
-        SceneError::Json { .. }
+        import::load(&path).unwrap_err(),
+        ImportError::Json { .. }
     ));
     let (path, mut json) = triangle_files("draco", TRI, [0, 1, 2]);
     json["extensionsRequired"] = json!(["KHR_draco_mesh_compression"]);
     json["extensionsUsed"] = json!(["KHR_draco_mesh_compression"]);
     let e = load_json(&path, &json).unwrap_err();
     assert_names(&e, &path, &["KHR_draco_mesh_compression"]);
-    let e = Scene::load(&dir.join("absent.glb")).unwrap_err();
-    assert!(matches!(e, SceneError::Io { .. }), "{e}");
+    let e = import::load(&dir.join("absent.glb")).unwrap_err();
+    assert!(matches!(e, ImportError::Io { .. }), "{e}");
 }
 
 /// A scene using most of what the writer can express.
@@ -484,7 +496,7 @@ fn fuzz_mutated_files_never_panic() {
             .filter(|p| p.is_dir())
             .unwrap_or(&dir)
             .to_path_buf();
-        Scene::from_gltf_slice(bytes, path, &folder)
+        import::from_gltf_slice(bytes, path, &folder)
             .unwrap_or_else(|e| panic!("unmutated {name}: {e}"));
     }
     let (mut ok, mut err) = (0, 0);
@@ -508,7 +520,7 @@ fn fuzz_mutated_files_never_panic() {
             .unwrap_or(&dir)
             .to_path_buf();
         let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| {
-            match Scene::from_gltf_slice(&bytes, path, &folder) {
+            match import::from_gltf_slice(&bytes, path, &folder) {
                 Ok(scene) => {
                     let split = scene.split(ClipSelection::All);
                     let _ = scene.static_triangles(&split);

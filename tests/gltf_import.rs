@@ -6,11 +6,12 @@ mod common;
 use std::path::Path;
 
 use glam::Vec3;
+use subfield::import;
 use subfield::scene::{ClipSelection, LightKind, Projection, Scene, TriangleSoup};
 
 fn load(dir: &Path, rel: &str) -> Scene {
     let p = dir.join(rel);
-    Scene::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+    import::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
 #[test]
@@ -25,7 +26,7 @@ fn every_shared_file_imports_and_samples() {
         files.len()
     );
     for path in files {
-        let scene = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        let scene = import::load(&path).unwrap_or_else(|e| panic!("{e}"));
         let split = scene.split(ClipSelection::All);
         let sum = split.summary();
         let stat = scene.static_triangles(&split);

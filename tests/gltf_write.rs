@@ -1,10 +1,13 @@
 //! The writer: build a scene in code, write `.glb` and `.gltf`, load it back, compare.
 
 use glam::{Quat, Vec2, Vec3, Vec4};
+use subfield::import;
+use subfield::import::{
+    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, ImportError, MaterialDesc, MeshDesc,
+    NodeDesc, PrimitiveDesc,
+};
 use subfield::scene::{
-    AnimationDesc, CameraDesc, ChannelDesc, ClipSelection, GltfBuilder, Interpolation, LightDef,
-    LightKind, MaterialDesc, MeshDesc, NodeDesc, NodeTransform, PrimitiveDesc, Projection,
-    Property, Scene, SceneError,
+    ClipSelection, Interpolation, LightDef, LightKind, NodeTransform, Projection, Property, Scene,
 };
 
 fn temp_dir(name: &str) -> std::path::PathBuf {
@@ -247,7 +250,7 @@ fn glb_round_trip() {
     let b = builder();
     let path = temp_dir("glb").join("scene.glb");
     b.write(&path).unwrap();
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     check_round_trip(&scene, &b);
     // The posed scene behaves: the spot light points down, the camera starts at (0,1,5).
     let lights = scene.lights_at(ClipSelection::All, 0.0);
@@ -271,7 +274,7 @@ fn gltf_round_trip_with_embedded_buffer() {
     b.write(&path).unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
     assert!(text.contains("data:application/octet-stream;base64,"));
-    check_round_trip(&Scene::load(&path).unwrap(), &b);
+    check_round_trip(&import::load(&path).unwrap(), &b);
 }
 
 #[test]
@@ -289,6 +292,6 @@ fn writes_atomically() {
     assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
     let missing = dir.join("no/such/folder/out.glb");
     let e = builder().write(&missing).unwrap_err();
-    assert!(matches!(e, SceneError::WriteIo { .. }));
+    assert!(matches!(e, ImportError::WriteIo { .. }));
     assert!(e.to_string().contains("no/such/folder/out.glb"), "{e}");
 }

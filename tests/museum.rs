@@ -9,11 +9,12 @@ use std::process::Command;
 
 use glam::Vec3;
 use gltf::animation::util::{MorphTargetWeights, ReadOutputs};
-use subfield::museum::{museum_glb, MuseumError, MuseumParams, MIN_STATIC_TRIS};
+use subfield::gen::museum::{museum_glb, MuseumError, MuseumParams, MIN_STATIC_TRIS};
+use subfield::import;
 use subfield::scene::{ClipSelection, LightKind, Scene, TriangleSoup};
 
 fn load(bytes: &[u8]) -> Scene {
-    Scene::from_gltf_slice(bytes, Path::new("museum.glb"), Path::new(".")).unwrap()
+    import::from_gltf_slice(bytes, Path::new("museum.glb"), Path::new(".")).unwrap()
 }
 
 fn small(static_tris: usize, dynamic_tris: usize) -> MuseumParams {
@@ -333,7 +334,7 @@ fn cli_writes_a_museum_that_loads() {
     );
     let report = String::from_utf8_lossy(&run.stdout);
     assert!(report.contains("3000 static + 500 dynamic"), "{report}");
-    let scene = Scene::load(&out).unwrap();
+    let scene = import::load(&out).unwrap();
     let s = scene.split(ClipSelection::All).summary();
     assert_eq!((s.static_triangles, s.dynamic_triangles), (3_000, 500));
     assert_eq!(scene.fps, Some(24.0));

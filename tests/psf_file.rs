@@ -16,8 +16,8 @@ use subfield::format::{
     self, from_bytes, open_psf, scene_hash, to_bytes, write_psf, Codec, FormatError, OpenOptions,
     WriteOptions,
 };
+use subfield::gen::synth::{self, Rng};
 use subfield::geometry::{Intersector, Ray};
-use subfield::synth::{self, Rng};
 use subfield::{Psf, PsfParams};
 
 // ---------------------------------------------------------------------------------------

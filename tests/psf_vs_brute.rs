@@ -7,9 +7,9 @@
 
 use glam::Vec3;
 use proptest::prelude::*;
+use subfield::gen::synth::{self, Rng};
 use subfield::geometry::{BruteForce, Intersector, Ray};
 use subfield::psf::{subfield_directions, GridFrame};
-use subfield::synth::{self, Rng};
 use subfield::{Aabb, Psf, PsfParams};
 
 #[derive(Clone, Debug)]

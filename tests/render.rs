@@ -10,6 +10,7 @@ use std::process::Command;
 
 use glam::{Mat3, Vec3, Vec4};
 use render_scene::{temp_dir, write_scene};
+use subfield::import;
 use subfield::render::{self, Aovs, FrameRange, PixelType, RenderOptions};
 use subfield::scene::{ClipSelection, Scene, TriangleSoup};
 use subfield::{BruteForce, Intersector, Ray};
@@ -101,7 +102,7 @@ fn check_depth(
 fn depth_matches_brute_force_at_every_pixel() {
     let dir = temp_dir("depth");
     let scene_path = write_scene(&dir);
-    let scene = Scene::load(&scene_path).unwrap();
+    let scene = import::load(&scene_path).unwrap();
     let (w, h) = (80usize, 60usize);
     let opts = RenderOptions {
         output: dir.join("out/f.###.exr"),
@@ -256,7 +257,7 @@ fn openexr_reads_our_files_and_agrees() {
          (python3 -m pip install OpenEXR), which CI always runs"
     );
     let dir = temp_dir("openexr");
-    let scene = Scene::load(&write_scene(&dir)).unwrap();
+    let scene = import::load(&write_scene(&dir)).unwrap();
     let aovs = Aovs {
         depth: true,
         normal: true,
@@ -376,7 +377,8 @@ fn rgb(chans: &[(String, Vec<f32>)], i: usize) -> Vec3 {
 
 #[test]
 fn shading_follows_the_model() {
-    use subfield::scene::{GltfBuilder, LightDef, LightKind, MaterialDesc, MeshDesc, NodeDesc};
+    use subfield::import::{GltfBuilder, MaterialDesc, MeshDesc, NodeDesc};
+    use subfield::scene::{LightDef, LightKind};
     let dir = temp_dir("shading");
     // A floor lit by a directional light straight down (E = 2 lux), a blocker casting
     // a shadow, a mirror facing the camera with a red emitter behind the camera.
@@ -447,7 +449,7 @@ fn shading_follows_the_model() {
     b.add_root(l);
     let path = dir.join("s.glb");
     b.write(&path).unwrap();
-    let scene = Scene::load(&path).unwrap();
+    let scene = import::load(&path).unwrap();
     let ambient = 0.05;
     let down = |x: f32| render::LookAt {
         from: Vec3::new(x, 3.0, 0.0),
@@ -538,7 +540,7 @@ fn shading_follows_the_model() {
 fn textures_glass_and_alpha() {
     use subfield::scene::{AlphaMode, Image, Texture, TextureRef, Wrap};
     let dir = temp_dir("texture");
-    let mut scene = Scene::load(&write_scene(&dir)).unwrap();
+    let mut scene = import::load(&write_scene(&dir)).unwrap();
     // A 2×2 checker (sRGB 255 / 0) on the floor, nearest filtering, repeated 1×.
     scene.images.push(Image {
         name: None,
@@ -603,7 +605,7 @@ fn every_shared_gltf_renders_two_frames() {
     let out = temp_dir("shared");
     let mut rendered = 0;
     for path in common::gltf_files(&dir) {
-        let scene = match Scene::load(&path) {
+        let scene = match import::load(&path) {
             Ok(s) => s,
             // Import errors are the importer's tests' business (some samples are
             // deliberately broken); the renderer must render whatever imports.

@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use subfield::format::{write_psf, Codec, WriteOptions};
+use subfield::import;
 use subfield::scene::{ClipSelection, Scene};
 use subfield::{Psf, PsfParams};
 
@@ -47,7 +48,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         tiles: a.tiles.unwrap_or(1),
     }
     .validate()?;
-    let scene = Scene::load(&a.scene)?;
+    let scene = import::load(&a.scene)?;
     let say = |s: String| {
         if !a.quiet {
             eprintln!("{s}");

@@ -1,11 +1,11 @@
 //! `subfield convert INPUT.aff -o OUTPUT.glb|.gltf`: a BART AFF / NFF scene to glTF 2.0,
-//! keyframes included (see `subfield::aff` for the mapping), written atomically.
+//! keyframes included (see `subfield::import::aff` for the mapping), written atomically.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
-use subfield::aff::AffScene;
+use subfield::import::aff::AffScene;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {

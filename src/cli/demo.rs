@@ -9,10 +9,13 @@ use std::time::Instant;
 
 use anyhow::Context;
 use subfield::format::{write_psf, WriteOptions};
-use subfield::museum::{write_museum, MuseumParams};
-use subfield::render::{self, FrameRange, PreviewOptions, RenderOptions};
-use subfield::scene::{ClipSelection, Scene};
+use subfield::gen::museum::{write_museum, MuseumParams};
+use subfield::import;
+use subfield::render::{FrameRange, PreviewOptions, RenderOptions};
+use subfield::scene::ClipSelection;
 use subfield::{Psf, PsfParams};
+
+use super::parse;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -37,8 +40,8 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
-    let frames = a.frames.as_deref().map(render::parse_frames).transpose()?;
-    let (width, height) = render::parse_size(&a.size)?;
+    let frames = a.frames.as_deref().map(parse::parse_frames).transpose()?;
+    let (width, height) = parse::parse_size(&a.size)?;
     super::set_threads(a.threads)?;
     let dir = &a.output;
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -48,7 +51,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let params = MuseumParams::default();
     write_museum(&params, &scene_path)
         .with_context(|| format!("cannot write {}", scene_path.display()))?;
-    let scene = Scene::load(&scene_path)?;
+    let scene = import::load(&scene_path)?;
     let statics = scene.static_triangles(&scene.split(ClipSelection::All));
     let psf = Psf::build(&statics.positions, &PsfParams::for_triangles(statics.len()))?;
     let psf_path = dir.join("museum.psf");

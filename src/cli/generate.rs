@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
-use subfield::aff::{generate_animart, AnimartParams};
-use subfield::museum::{write_museum, MuseumParams, MUSEUM_KEYS};
+use subfield::gen::animart::{generate_animart, AnimartParams};
+use subfield::gen::museum::{write_museum, MuseumParams, MUSEUM_KEYS};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {

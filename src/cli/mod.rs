@@ -7,6 +7,7 @@ mod demo;
 mod generate;
 mod guard;
 mod inspect;
+mod parse;
 mod progress;
 mod render;
 mod submit;

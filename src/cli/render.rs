@@ -7,9 +7,11 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use subfield::farm;
 use subfield::format::ContentHash;
+use subfield::import;
 use subfield::render::{self, LookAt, PixelType, RenderEvent, RenderOptions};
 use subfield::scene::Scene;
 
+use super::parse;
 use super::progress::Progress;
 
 #[derive(clap::Args, Debug)]
@@ -143,13 +145,13 @@ pub fn resolve_inputs(a: &Args) -> anyhow::Result<(Option<PathBuf>, Option<Strin
 
 /// The library's options from the flags (every value checked, one error line each).
 pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
-    let (width, height) = render::parse_size(&a.size)?;
+    let (width, height) = parse::parse_size(&a.size)?;
     let look_at = match (&a.look_from, &a.look_at) {
         (Some(f), Some(t)) => Some(LookAt {
-            from: render::parse_vec3("--look-from", f)?,
-            at: render::parse_vec3("--look-at", t)?,
+            from: parse::parse_vec3("--look-from", f)?,
+            at: parse::parse_vec3("--look-at", t)?,
             up: match &a.up {
-                Some(u) => render::parse_vec3("--up", u)?,
+                Some(u) => parse::parse_vec3("--up", u)?,
                 None => glam::Vec3::Y,
             },
             yfov_deg: a.yfov.unwrap_or(45.0),
@@ -165,7 +167,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
     Ok(RenderOptions {
         output: a.output.clone(),
         baked: a.baked.clone(),
-        frames: a.frames.as_deref().map(render::parse_frames).transpose()?,
+        frames: a.frames.as_deref().map(parse::parse_frames).transpose()?,
         fps: a.fps,
         animation: a.animation.clone(),
         width,
@@ -177,7 +179,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         aovs: a
             .aov
             .as_deref()
-            .map(render::parse_aovs)
+            .map(parse::parse_aovs)
             .transpose()?
             .unwrap_or_default(),
         pixel_type: if a.float {
@@ -186,7 +188,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
             PixelType::Half
         },
         resume: a.resume,
-        shard: a.shard.as_deref().map(render::parse_shard).transpose()?,
+        shard: a.shard.as_deref().map(parse::parse_shard).transpose()?,
         stats: a.stats.clone(),
         plot: a.plot.clone(),
         preview: None,
@@ -203,7 +205,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     }
     opts.baked = baked;
     let clock = std::time::Instant::now();
-    let scene = Scene::load(&a.scene)?;
+    let scene = import::load(&a.scene)?;
     let mut preface: Vec<String> = staged.into_iter().collect();
     preface.push(format!(
         "imported {} in {:.2} s",

@@ -12,7 +12,6 @@ use anyhow::{bail, Context};
 use subfield::farm::{self, openjd::OpenJdJob, slurm::SlurmJob};
 use subfield::format::{self, ContentHash, WriteOptions};
 use subfield::render::{self, RenderOptions, RenderPlan};
-use subfield::scene::Scene;
 
 use super::progress::Progress;
 use super::render as render_cmd;
@@ -203,7 +202,7 @@ fn prepare(r: &render_cmd::Args, dry_run: bool) -> anyhow::Result<Work> {
             bail!("{}: no such baked file", b.display());
         }
     }
-    let scene = Scene::load(&scene_path)?;
+    let scene = subfield::import::load(&scene_path)?;
     let plan = render::plan(&scene, &opts)
         .with_context(|| format!("cannot render {}", r.scene.display()))?;
     let missing: Vec<u32> = plan

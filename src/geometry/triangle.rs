@@ -354,7 +354,7 @@ mod tests {
         ] {
             dirs.push(Vec3::new(x, y, z));
         }
-        let mut rng = crate::synth::Rng::new(7);
+        let mut rng = crate::gen::synth::Rng::new(7);
         dirs.extend((0..2000).map(|_| rng.in_box(Vec3::splat(-1.0), Vec3::ONE)));
         for d in dirs {
             let rows = reference_rows(d);

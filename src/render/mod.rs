@@ -3,8 +3,7 @@
 //!
 //! ```no_run
 //! # use subfield::render::{render_sequence, RenderOptions, RenderEvent};
-//! # use subfield::scene::Scene;
-//! let scene = Scene::load("scene.glb".as_ref())?;
+//! let scene = subfield::import::load("scene.glb".as_ref())?;
 //! let opts = RenderOptions { output: "out/frame.####.exr".into(), ..Default::default() };
 //! let summary = render_sequence(&scene, &opts, &mut |e: RenderEvent<'_>| {
 //!     if let RenderEvent::Frame(f) = e { println!("frame {} done", f.frame) }
@@ -33,8 +32,8 @@ use glam::Vec3;
 
 pub use camera::{animation_bounds, CameraModel};
 pub use options::{
-    parse_aovs, parse_frames, parse_shard, parse_size, parse_vec3, Aovs, FrameRange, LookAt,
-    PixelType, PreviewOptions, RenderOptions, ShadingOptions, Shard, MAX_SIDE,
+    Aovs, FrameRange, LookAt, PixelType, PreviewOptions, RenderOptions, ShadingOptions, Shard,
+    MAX_SIDE,
 };
 pub use output::{channel_names, encode_exr, encode_preview, is_complete, linear_to_srgb8};
 pub use shade::{render_frame, sample_offset, FrameBuffers, FrameWork, RayCounts, ShadeContext};

@@ -1,9 +1,11 @@
-//! Scene model, glTF import/export, animation sampling, static/dynamic split.
+//! The one Scene model: geometry, materials, hierarchy, cameras, lights, animation
+//! sampling, and the static/dynamic split.
 //!
-//! The model is format-neutral: the glTF importer ([`Scene::load`]) and any other importer
-//! (AFF) produce the same [`Scene`], and call [`Scene::validate`] before handing it out.
-//! Past that border the rest of the crate relies on the invariants it checks (every index
-//! in range, every float finite, the node hierarchy a forest).
+//! The model is format-neutral and knows no file format: the readers of the `import`
+//! layer (glTF, AFF / NFF) and the generators of `gen` produce it, and every importer runs
+//! the import layer's `validate` before handing a scene out. Past that border the rest of
+//! the crate relies on the invariants it checks (every index in range, every float finite,
+//! the node hierarchy a forest). Nothing in this module uses the import layer.
 //!
 //! Data flow: `Scene` → [`Scene::split`] → [`Scene::static_triangles`] (baked) and
 //! [`Scene::dynamic_triangles_at`] (per frame, inserted into the dynamic layer).
@@ -11,22 +13,15 @@
 mod animation;
 mod error;
 mod geometry;
-mod gltf_import;
-mod gltf_write;
 mod split;
-mod validate;
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
 
 pub use animation::{ClipSelection, Pose};
 pub use error::SceneError;
 pub use geometry::TriangleSoup;
-pub use gltf_write::{
-    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, ImageDesc, MaterialDesc, MeshDesc,
-    NodeDesc, PrimitiveDesc, TextureDesc,
-};
 pub use split::{Instance, Split, SplitSummary};
 
 /// A non-fatal problem found while importing (a skipped primitive, an ignored feature).
@@ -450,38 +445,6 @@ pub struct Animation {
 }
 
 impl Scene {
-    /// Imports a `.gltf` (external or data-URI buffers and images) or `.glb` file: the
-    /// default scene's hierarchy, triangle primitives (strips and fans unrolled; points
-    /// and lines skipped with one warning), normals, `TEXCOORD_0`, skins, morph targets,
-    /// materials (with emissive strength, transmission, ior), textures decoded to RGBA8,
-    /// cameras, `KHR_lights_punctual` lights, animation clips and `extras.fps`.
-    /// Every problem is a [`SceneError`] naming the file and the accessor, node or URI.
-    ///
-    /// A BART `.aff` or `.nff` file (by extension, any case) is parsed and converted to
-    /// glTF in memory first ([`crate::aff::load_scene`]), so it imports exactly as the file
-    /// `subfield convert` writes would.
-    pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let is_aff = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .is_some_and(|e| e.eq_ignore_ascii_case("aff") || e.eq_ignore_ascii_case("nff"));
-        if is_aff {
-            return crate::aff::load_scene(path);
-        }
-        gltf_import::load(path)
-    }
-
-    /// Imports glTF or GLB bytes; external URIs resolve against `folder`.
-    /// `path` is only used to name the input in errors.
-    pub fn from_gltf_slice(bytes: &[u8], path: &Path, folder: &Path) -> Result<Scene, SceneError> {
-        gltf_import::from_slice(bytes, path, folder)
-    }
-
-    /// Checks the model's invariants; importers call it before returning a scene.
-    pub fn validate(&self) -> Result<(), SceneError> {
-        validate::validate(self)
-    }
-
     /// Index of the material that primitives without one use; appends it when missing.
     pub fn default_material_index(&mut self) -> u32 {
         if let Some(i) = self

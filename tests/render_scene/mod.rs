@@ -6,10 +6,11 @@
 use std::path::{Path, PathBuf};
 
 use glam::{Quat, Vec3, Vec4};
-use subfield::scene::{
-    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, Interpolation, LightDef, LightKind,
-    MaterialDesc, MeshDesc, NodeDesc, PrimitiveDesc, Property,
+use subfield::import::{
+    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, MaterialDesc, MeshDesc, NodeDesc,
+    PrimitiveDesc,
 };
+use subfield::scene::{Interpolation, LightDef, LightKind, Property};
 
 /// A fresh, empty folder under the system temp dir for one test.
 pub fn temp_dir(name: &str) -> PathBuf {

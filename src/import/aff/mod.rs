@@ -2,9 +2,9 @@
 //! evaluation of that scene at any time (splines, visibility, animated triangles), and its
 //! conversion to glTF ([`AffScene::to_gltf`]).
 //!
-//! `Scene::load` accepts `.aff` / `.nff` through [`load_scene`]: the file is parsed, turned
-//! into a glTF document in memory and imported like any `.glb`, so `bake`, `render` and a
-//! file written by `subfield convert` see the same scene by construction.
+//! `import::load` accepts `.aff` / `.nff` through [`load_scene`]: the file is parsed,
+//! turned into a glTF document in memory and imported like any `.glb`, so `bake`, `render`
+//! and a file written by `subfield convert` see the same scene by construction.
 //!
 //! # Time
 //! AFF frame `i` of `a t0 t1 n` is at `t0 + i·(t1−t0)/(n−1)`. The glTF clock starts at
@@ -39,8 +39,6 @@
 //! * Materials (`f`, `fm`) map to metallic-roughness (see [`material_desc`]); the exact AFF
 //!   numbers are kept in each material's `extras.aff`.
 
-pub mod animart;
-mod error;
 mod gltf;
 mod parse;
 pub mod shapes;
@@ -51,11 +49,11 @@ use std::path::{Path, PathBuf};
 
 use glam::{DMat4, DQuat, DVec3, Mat4, Vec2, Vec3};
 
-pub use animart::{generate_animart, AnimartParams};
-pub use error::AffError;
+use super::ImportError;
 pub use gltf::material_desc;
 
-use crate::scene::{Scene, SceneError};
+use super::GltfBuilder;
+use crate::scene::{Scene, Warning};
 use spline::{RotKey, VecKey};
 
 /// Largest `n` accepted in `a t0 t1 n` (every animated node is sampled at every frame).
@@ -309,13 +307,13 @@ const DEFAULT_YFOV_DEG: f32 = 45.0;
 
 impl AffScene {
     /// Parses `path` and everything it includes (relative to its folder).
-    pub fn load(path: &Path) -> Result<AffScene, AffError> {
+    pub fn load(path: &Path) -> Result<AffScene, ImportError> {
         parse::parse_file(path)
     }
 
     /// Parses AFF text; includes and textures resolve against `folder`, `path` names the
     /// input in errors.
-    pub fn parse_str(text: &str, path: &Path, folder: &Path) -> Result<AffScene, AffError> {
+    pub fn parse_str(text: &str, path: &Path, folder: &Path) -> Result<AffScene, ImportError> {
         parse::parse_text(text.as_bytes(), path, folder)
     }
 
@@ -466,7 +464,7 @@ impl AffScene {
     }
 
     /// The glTF document of this scene (see the module docs for the mapping).
-    pub fn to_gltf(&self) -> Result<crate::scene::GltfBuilder, AffError> {
+    pub fn to_gltf(&self) -> Result<GltfBuilder, ImportError> {
         gltf::to_gltf(self)
     }
 }
@@ -487,13 +485,11 @@ pub fn look_rotation(v: &View) -> DQuat {
 }
 
 /// Parses an AFF / NFF file and imports it as a [`Scene`] through an in-memory GLB.
-pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
+pub fn load_scene(path: &Path) -> Result<Scene, ImportError> {
     let aff = AffScene::load(path)?;
     let glb = aff.to_gltf()?.to_glb()?;
     let folder = path.parent().unwrap_or(Path::new("."));
-    let mut scene = Scene::from_gltf_slice(&glb, path, folder)?;
-    scene
-        .warnings
-        .extend(aff.warnings.into_iter().map(crate::scene::Warning));
+    let mut scene = super::from_gltf_slice(&glb, path, folder)?;
+    scene.warnings.extend(aff.warnings.into_iter().map(Warning));
     Ok(scene)
 }

@@ -1,16 +1,17 @@
 //! [`AffScene`] → glTF ([`GltfBuilder`]). The mapping is described in the module docs of
-//! [`crate::aff`]; materials in [`material_desc`].
+//! [`crate::import::aff`]; materials in [`material_desc`].
 
 use std::collections::HashMap;
 
 use glam::{DQuat, DVec3, Quat, Vec3, Vec4};
 use serde_json::json;
 
-use super::{AffError, AffMaterial, AffScene, AffTexture, AffTransform, MorphBatch, Tracks};
-use crate::scene::{
-    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, ImageDesc, Interpolation, LightDef,
-    LightKind, MaterialDesc, MeshDesc, NodeDesc, PrimitiveDesc, Property, TextureDesc,
+use super::{AffMaterial, AffScene, AffTexture, AffTransform, ImportError, MorphBatch, Tracks};
+use crate::import::{
+    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, ImageDesc, MaterialDesc, MeshDesc,
+    NodeDesc, PrimitiveDesc, TextureDesc,
 };
+use crate::scene::{Interpolation, LightDef, LightKind, Property};
 
 /// The glTF material of an AFF material (with an optional base colour texture index):
 ///
@@ -81,8 +82,8 @@ struct Conv<'a> {
     textures: HashMap<u32, u32>,
 }
 
-pub(super) fn to_gltf(aff: &AffScene) -> Result<GltfBuilder, AffError> {
-    let bad = |reason: String| AffError::Convert {
+pub(super) fn to_gltf(aff: &AffScene) -> Result<GltfBuilder, ImportError> {
+    let bad = |reason: String| ImportError::Convert {
         path: aff.source.clone(),
         reason,
     };
@@ -163,7 +164,7 @@ fn png(t: &AffTexture) -> Result<Vec<u8>, String> {
 }
 
 impl Conv<'_> {
-    fn material(&mut self, material: u32, texture: Option<u32>) -> Result<u32, AffError> {
+    fn material(&mut self, material: u32, texture: Option<u32>) -> Result<u32, ImportError> {
         if let Some(&m) = self.materials.get(&(material, texture)) {
             return Ok(m);
         }
@@ -173,7 +174,7 @@ impl Conv<'_> {
                 Some(&g) => g,
                 None => {
                     let src = &self.aff.textures[t as usize];
-                    let bytes = png(src).map_err(|reason| AffError::Convert {
+                    let bytes = png(src).map_err(|reason| ImportError::Convert {
                         path: self.aff.source.clone(),
                         reason: format!("texture {:?}: {reason}", src.name),
                     })?;
@@ -268,7 +269,7 @@ impl Conv<'_> {
 
     /// One glTF node per AFF block (two with a visibility track), its batches as one mesh,
     /// its animated batches as child nodes with morph targets, then its sub-blocks.
-    fn node(&mut self, index: usize) -> Result<u32, AffError> {
+    fn node(&mut self, index: usize) -> Result<u32, ImportError> {
         let aff = self.aff;
         let an = &aff.nodes[index];
         let mut desc = NodeDesc::default();
@@ -356,7 +357,7 @@ impl Conv<'_> {
 
     /// A node whose mesh morphs through the keys of `mb`: target `k` is key `k+1` minus
     /// key 0, and weights `e_{j-1}·(1−f) + e_j·f` between keys `j` and `j+1`.
-    fn morph(&mut self, mb: &MorphBatch) -> Result<u32, AffError> {
+    fn morph(&mut self, mb: &MorphBatch) -> Result<u32, ImportError> {
         let keys = mb.times.len();
         let base = &mb.positions[0];
         let base_n = &mb.normals[0];

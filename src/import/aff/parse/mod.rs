@@ -3,15 +3,20 @@
 //! in place when their detail level allows. Geometry is appended to per-block batches
 //! found through hash maps, so a file of any size is read in linear time.
 
+mod keyframes;
+mod lexer;
+mod mesh;
+
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
-use glam::{DVec3, Vec2, Vec3};
+use glam::{Vec2, Vec3};
 
+use self::lexer::{Lexer, Src};
 use super::shapes::{self, Tessellation};
 use super::spline::{self, RotKey, Tcb, VecKey};
 use super::{
-    AffError, AffLight, AffMaterial, AffNode, AffScene, AffTexture, AffTransform, Batch,
+    AffLight, AffMaterial, AffNode, AffScene, AffTexture, AffTransform, Batch, ImportError,
     MorphBatch, TimeRange, Tracks, View, MAX_FRAMES,
 };
 
@@ -20,180 +25,22 @@ const MAX_INCLUDE_DEPTH: usize = 32;
 /// Largest count accepted for a list (`p`, `m` sections, `tpa` keys, track keys).
 const MAX_COUNT: u64 = 1 << 26;
 
-pub(super) fn parse_file(path: &Path) -> Result<AffScene, AffError> {
-    let bytes = std::fs::read(path).map_err(|source| AffError::Io {
+pub(super) fn parse_file(path: &Path) -> Result<AffScene, ImportError> {
+    let bytes = std::fs::read(path).map_err(|source| ImportError::Io {
         path: path.to_path_buf(),
         source,
     })?;
     parse_text(&bytes, path, &crate::atomic::folder_of(path))
 }
 
-pub(super) fn parse_text(bytes: &[u8], path: &Path, folder: &Path) -> Result<AffScene, AffError> {
+pub(super) fn parse_text(
+    bytes: &[u8],
+    path: &Path,
+    folder: &Path,
+) -> Result<AffScene, ImportError> {
     let mut p = Parser::new(path, folder);
     p.parse_source(bytes, path, 0)?;
     p.finish()
-}
-
-/// Tokens of one file, with line numbers.
-struct Lexer<'a> {
-    src: &'a [u8],
-    pos: usize,
-    line: u32,
-}
-
-impl<'a> Lexer<'a> {
-    fn new(src: &'a [u8]) -> Self {
-        Lexer {
-            src,
-            pos: 0,
-            line: 1,
-        }
-    }
-
-    /// The next token and its line (raw bytes).
-    fn next(&mut self) -> Option<(&'a [u8], u32)> {
-        let s = self.src;
-        loop {
-            let c = *s.get(self.pos)?;
-            match c {
-                b'\n' => {
-                    self.line += 1;
-                    self.pos += 1;
-                }
-                b'#' | b'%' => {
-                    while self.pos < s.len() && s[self.pos] != b'\n' {
-                        self.pos += 1;
-                    }
-                }
-                c if c.is_ascii_whitespace() => self.pos += 1,
-                b'{' | b'}' => {
-                    self.pos += 1;
-                    return Some((&s[self.pos - 1..self.pos], self.line));
-                }
-                _ => break,
-            }
-        }
-        let start = self.pos;
-        while let Some(&c) = s.get(self.pos) {
-            if c.is_ascii_whitespace() || matches!(c, b'#' | b'%' | b'{' | b'}') {
-                break;
-            }
-            self.pos += 1;
-        }
-        Some((&s[start..self.pos], self.line))
-    }
-
-    fn peek(&mut self) -> Option<(&'a [u8], u32)> {
-        let (pos, line) = (self.pos, self.line);
-        let t = self.next();
-        self.pos = pos;
-        self.line = line;
-        t
-    }
-}
-
-/// One file being read: its tokens and its name (for errors).
-struct Src<'a> {
-    lex: Lexer<'a>,
-    path: &'a Path,
-    /// Line of the last token read (where "unexpected end" is reported).
-    line: u32,
-}
-
-impl<'a> Src<'a> {
-    fn err(&self, line: u32, message: impl Into<String>) -> AffError {
-        AffError::Syntax {
-            path: self.path.to_path_buf(),
-            line,
-            message: message.into(),
-        }
-    }
-
-    fn token(&mut self, what: &str) -> Result<(&'a str, u32), AffError> {
-        match self.lex.next() {
-            None => Err(self.err(
-                self.line,
-                format!("unexpected end of file: expected {what}"),
-            )),
-            Some((raw, line)) => {
-                self.line = line;
-                let s = std::str::from_utf8(raw).map_err(|_| {
-                    self.err(line, format!("expected {what}, found non-UTF-8 text"))
-                })?;
-                Ok((s, line))
-            }
-        }
-    }
-
-    fn num(&mut self, what: &str) -> Result<f64, AffError> {
-        let (tok, line) = self.token(what)?;
-        match tok.parse::<f64>() {
-            Ok(v) if v.is_finite() => Ok(v),
-            _ => Err(self.err(line, format!("expected a number ({what}), found {tok:?}"))),
-        }
-    }
-
-    fn f(&mut self, what: &str) -> Result<f32, AffError> {
-        let v = self.num(what)?;
-        let f = v as f32;
-        if f.is_finite() {
-            Ok(f)
-        } else {
-            Err(self.err(self.line, format!("{what}: {v} is out of range")))
-        }
-    }
-
-    fn vec3(&mut self, what: &str) -> Result<Vec3, AffError> {
-        Ok(Vec3::new(self.f(what)?, self.f(what)?, self.f(what)?))
-    }
-
-    fn dvec3(&mut self, what: &str) -> Result<DVec3, AffError> {
-        Ok(DVec3::new(
-            self.num(what)?,
-            self.num(what)?,
-            self.num(what)?,
-        ))
-    }
-
-    fn count(&mut self, what: &str) -> Result<usize, AffError> {
-        let (tok, line) = self.token(what)?;
-        match tok.parse::<u64>() {
-            Ok(n) if n <= MAX_COUNT => Ok(n as usize),
-            Ok(n) => Err(self.err(line, format!("{what}: {n} is too large"))),
-            Err(_) => Err(self.err(line, format!("expected a count ({what}), found {tok:?}"))),
-        }
-    }
-
-    fn int(&mut self, what: &str) -> Result<i64, AffError> {
-        let (tok, line) = self.token(what)?;
-        tok.parse::<i64>()
-            .map_err(|_| self.err(line, format!("expected an integer ({what}), found {tok:?}")))
-    }
-
-    fn expect(&mut self, want: &str, context: &str) -> Result<(), AffError> {
-        let (tok, line) = self.token(want)?;
-        if tok == want {
-            Ok(())
-        } else {
-            Err(self.err(
-                line,
-                format!("expected {want:?} after {context}, found {tok:?}"),
-            ))
-        }
-    }
-
-    /// Whether the next token is a number (without consuming it).
-    fn next_is_number(&mut self) -> bool {
-        self.lex.peek().is_some_and(|(raw, _)| {
-            std::str::from_utf8(raw).is_ok_and(|s| s.parse::<f64>().is_ok())
-        })
-    }
-
-    fn peek_str(&mut self) -> Option<&'a str> {
-        self.lex
-            .peek()
-            .and_then(|(raw, _)| std::str::from_utf8(raw).ok())
-    }
 }
 
 /// Where a `k` block was read (to report one that names nothing).
@@ -277,9 +124,9 @@ impl Parser {
         }
     }
 
-    fn finish(self) -> Result<AffScene, AffError> {
+    fn finish(self) -> Result<AffScene, ImportError> {
         if let Some(open) = self.stack.get(1) {
-            return Err(AffError::Syntax {
+            return Err(ImportError::Syntax {
                 path: open.path.clone(),
                 line: open.line,
                 message: "this '{' is never closed".into(),
@@ -356,11 +203,11 @@ impl Parser {
         i
     }
 
-    fn texture(&mut self, src: &Src, line: u32, name: &str) -> Result<u32, AffError> {
+    fn texture(&mut self, src: &Src, line: u32, name: &str) -> Result<u32, ImportError> {
         if let Some(&i) = self.texture_index.get(name) {
             return Ok(i);
         }
-        let bad = |reason: String| AffError::Texture {
+        let bad = |reason: String| ImportError::Texture {
             path: src.path.to_path_buf(),
             line,
             name: name.to_string(),
@@ -468,7 +315,7 @@ impl Parser {
         i
     }
 
-    fn parse_source(&mut self, bytes: &[u8], path: &Path, depth: usize) -> Result<(), AffError> {
+    fn parse_source(&mut self, bytes: &[u8], path: &Path, depth: usize) -> Result<(), ImportError> {
         let mut src = Src {
             lex: Lexer::new(bytes),
             path,
@@ -490,7 +337,7 @@ impl Parser {
         kw: &str,
         line: u32,
         depth: usize,
-    ) -> Result<(), AffError> {
+    ) -> Result<(), ImportError> {
         match kw {
             "v" => self.view(src)?,
             "b" => self.scene.background = src.vec3("background colour")?,
@@ -668,7 +515,7 @@ impl Parser {
         Ok(())
     }
 
-    fn view(&mut self, src: &mut Src) -> Result<(), AffError> {
+    fn view(&mut self, src: &mut Src) -> Result<(), ImportError> {
         let mut v = self.scene.view.clone().unwrap_or(View {
             from: Vec3::ZERO,
             at: Vec3::NEG_Z,
@@ -712,7 +559,13 @@ impl Parser {
         Ok(())
     }
 
-    fn include(&mut self, src: &Src, line: u32, name: &str, depth: usize) -> Result<(), AffError> {
+    fn include(
+        &mut self,
+        src: &Src,
+        line: u32,
+        name: &str,
+        depth: usize,
+    ) -> Result<(), ImportError> {
         if depth >= MAX_INCLUDE_DEPTH {
             return Err(src.err(
                 line,
@@ -727,301 +580,5 @@ impl Parser {
             )
         })?;
         self.parse_source(&bytes, &file, depth + 1)
-    }
-
-    fn mesh(&mut self, src: &mut Src, line: u32) -> Result<(), AffError> {
-        src.expect("vertices", "m")?;
-        let nv = src.count("number of vertices")?;
-        let mut verts = Vec::new();
-        for _ in 0..nv {
-            verts.push(src.vec3("mesh vertex")?);
-        }
-        let mut normals: Option<Vec<Vec3>> = None;
-        let mut uvs: Option<Vec<Vec2>> = None;
-        let mut texture = None;
-        loop {
-            let (word, wline) = src.token("'normals', 'texturecoords' or 'triangles'")?;
-            match word {
-                "normals" if normals.is_none() && uvs.is_none() => {
-                    let n = src.count("number of normals")?;
-                    let mut v = Vec::new();
-                    for _ in 0..n {
-                        v.push(src.vec3("mesh normal")?);
-                    }
-                    normals = Some(v);
-                }
-                "texturecoords" if uvs.is_none() => {
-                    let n = src.count("number of texture coordinates")?;
-                    let (name, tline) = src.token("texture name")?;
-                    let name = name.to_string();
-                    let mut v = Vec::new();
-                    for _ in 0..n {
-                        v.push(Vec2::new(src.f("texture u")?, src.f("texture v")?));
-                    }
-                    texture = Some(self.texture(src, tline, &name)?);
-                    uvs = Some(v);
-                }
-                "triangles" => break,
-                other => {
-                    return Err(src.err(
-                        wline,
-                        format!("unexpected {other:?} in mesh 'm' (sections: vertices, normals, texturecoords, triangles)"),
-                    ))
-                }
-            }
-        }
-        let nt = src.count("number of triangles")?;
-        // Normalised normals; `None` where a normal has no length (the face normal is used).
-        let unit: Option<Vec<Option<Vec3>>> = normals.as_ref().map(|ns| {
-            ns.iter()
-                .map(|n| Some(n.normalize_or_zero()).filter(|u| *u != Vec3::ZERO))
-                .collect()
-        });
-        let per = 3 + if unit.is_some() { 3 } else { 0 } + if uvs.is_some() { 3 } else { 0 };
-        let mut rec = [0usize; 9];
-        let mut remap: HashMap<(usize, usize, usize), u32> = HashMap::new();
-        let mut positions = Vec::new();
-        let mut out_normals = Vec::new();
-        let mut out_uvs = Vec::new();
-        let mut indices = Vec::new();
-        for ti in 0..nt {
-            for (k, slot) in rec.iter_mut().enumerate().take(per) {
-                *slot = src.count(&format!("index {} of triangle {ti}", k + 1))?;
-            }
-            let check = |i: usize, len: usize, what: &str| {
-                if i < len {
-                    Ok(())
-                } else {
-                    Err(src.err(
-                        src.line,
-                        format!("mesh triangle {ti}: {what} index {i} out of range (mesh 'm' at line {line} has {len})"),
-                    ))
-                }
-            };
-            let mut cursor = 3;
-            let vi = [rec[0], rec[1], rec[2]];
-            for &i in &vi {
-                check(i, verts.len(), "vertex")?;
-            }
-            let ni = if let Some(u) = &unit {
-                let ni = [rec[cursor], rec[cursor + 1], rec[cursor + 2]];
-                cursor += 3;
-                for &i in &ni {
-                    check(i, u.len(), "normal")?;
-                }
-                Some(ni)
-            } else {
-                None
-            };
-            let ui = if let Some(t) = &uvs {
-                let ui = [rec[cursor], rec[cursor + 1], rec[cursor + 2]];
-                for &i in &ui {
-                    check(i, t.len(), "texture coordinate")?;
-                }
-                Some(ui)
-            } else {
-                None
-            };
-            let face = face_normal(verts[vi[0]], verts[vi[1]], verts[vi[2]]);
-            for k in 0..3 {
-                let n_idx = ni.map_or(usize::MAX, |n| n[k]);
-                let u_idx = ui.map_or(usize::MAX, |u| u[k]);
-                let normal = match (&unit, ni) {
-                    (Some(u), Some(n)) => Some(u[n[k]]),
-                    _ => None,
-                };
-                // A vertex whose normal has no length takes this face's normal: not shared.
-                let shared = normal != Some(None);
-                let key = (vi[k], n_idx, u_idx);
-                if shared {
-                    if let Some(&i) = remap.get(&key) {
-                        indices.push(i);
-                        continue;
-                    }
-                }
-                let i = positions.len() as u32;
-                positions.push(verts[vi[k]]);
-                if let Some(n) = normal {
-                    out_normals.push(n.unwrap_or(face));
-                }
-                if let (Some(t), Some(u)) = (&uvs, ui) {
-                    out_uvs.push(t[u[k]]);
-                }
-                if shared {
-                    remap.insert(key, i);
-                }
-                indices.push(i);
-            }
-        }
-        if indices.is_empty() {
-            return Ok(());
-        }
-        let has_normals = unit.is_some();
-        let b = self.batch(texture, has_normals);
-        let base = b.positions.len() as u32;
-        b.positions.extend_from_slice(&positions);
-        if let Some(n) = b.normals.as_mut() {
-            n.extend_from_slice(&out_normals);
-        }
-        if let Some(u) = b.uvs.as_mut() {
-            u.extend_from_slice(&out_uvs);
-        }
-        b.indices.extend(indices.iter().map(|i| base + i));
-        Ok(())
-    }
-
-    fn tpa(&mut self, src: &mut Src, line: u32) -> Result<(), AffError> {
-        let n = src.count("number of keys")?;
-        if n == 0 {
-            return Err(src.err(line, "tpa with no keys"));
-        }
-        let mut times = Vec::new();
-        let mut pos: Vec<[Vec3; 3]> = Vec::new();
-        let mut nor: Vec<[Vec3; 3]> = Vec::new();
-        for k in 0..n {
-            let t = src.num(&format!("time of tpa key {}", k + 1))?;
-            if let Some(&prev) = times.last() {
-                if t <= prev {
-                    return Err(src.err(
-                        src.line,
-                        format!("tpa key times must increase ({t} after {prev})"),
-                    ));
-                }
-            }
-            times.push(t);
-            let mut p = [Vec3::ZERO; 3];
-            let mut q = [Vec3::ZERO; 3];
-            for j in 0..3 {
-                p[j] = src.vec3("tpa vertex")?;
-                q[j] = src.vec3("tpa normal")?;
-            }
-            let face = face_normal(p[0], p[1], p[2]);
-            for v in &mut q {
-                let u = v.normalize_or_zero();
-                *v = if u == Vec3::ZERO { face } else { u };
-            }
-            pos.push(p);
-            nor.push(q);
-        }
-        if n == 1 {
-            self.add_triangles(None, &pos[0], Some(&nor[0]), None);
-            return Ok(());
-        }
-        let node = self.current();
-        let material = self.material();
-        let key = (node, material, times.iter().map(|t| t.to_bits()).collect());
-        let nodes = &mut self.scene.nodes;
-        let i = *self.morph_index.entry(key).or_insert_with(|| {
-            nodes[node].morphs.push(MorphBatch {
-                material,
-                times: times.clone(),
-                positions: vec![Vec::new(); n],
-                normals: vec![Vec::new(); n],
-            });
-            nodes[node].morphs.len() - 1
-        });
-        let m = &mut nodes[node].morphs[i];
-        for k in 0..n {
-            m.positions[k].extend_from_slice(&pos[k]);
-            m.normals[k].extend_from_slice(&nor[k]);
-        }
-        Ok(())
-    }
-
-    fn keyframes(&mut self, src: &mut Src, line: u32) -> Result<(), AffError> {
-        let (name, _) = src.token("keyframe block name")?;
-        let name = name.to_string();
-        src.expect("{", "k")?;
-        let mut tracks = Tracks::default();
-        loop {
-            let (word, wline) = src.token("a track or '}'")?;
-            let tcb = |src: &mut Src| -> Result<Tcb, AffError> {
-                Ok(Tcb {
-                    tension: src.num("tension")?,
-                    continuity: src.num("continuity")?,
-                    bias: src.num("bias")?,
-                })
-            };
-            match word {
-                "}" => break,
-                "transl" | "scale" => {
-                    let n = src.count("number of keys")?;
-                    let mut keys = Vec::new();
-                    for _ in 0..n {
-                        let time = src.num("key time")?;
-                        let value = src.dvec3(word)?;
-                        keys.push(VecKey {
-                            time,
-                            value,
-                            tcb: tcb(src)?,
-                        });
-                    }
-                    if n < spline::MIN_KEYS {
-                        return Err(src.err(wline, format!("{word} track of 'k {name}' has {n} keys; a spline needs at least {}", spline::MIN_KEYS)));
-                    }
-                    if word == "transl" {
-                        tracks.translation = keys;
-                    } else {
-                        tracks.scale = keys;
-                    }
-                }
-                "rot" => {
-                    let n = src.count("number of keys")?;
-                    let mut keys = Vec::new();
-                    for _ in 0..n {
-                        let time = src.num("key time")?;
-                        let axis = src.dvec3("rotation axis")?;
-                        let angle = src.num("rotation angle")?.to_radians();
-                        keys.push(RotKey {
-                            time,
-                            axis,
-                            angle,
-                            tcb: tcb(src)?,
-                        });
-                    }
-                    if n < spline::MIN_KEYS {
-                        return Err(src.err(
-                            wline,
-                            format!(
-                                "rot track of 'k {name}' has {n} keys; a spline needs at least {}",
-                                spline::MIN_KEYS
-                            ),
-                        ));
-                    }
-                    tracks.rotation = keys;
-                }
-                "visibility" => {
-                    let n = src.count("number of keys")?;
-                    let mut keys = Vec::new();
-                    for _ in 0..n {
-                        let time = src.num("key time")?;
-                        let flag = src.num("visibility flag")?;
-                        keys.push((time, flag != 0.0));
-                    }
-                    if keys.windows(2).any(|w| w[1].0 < w[0].0) {
-                        return Err(src.err(
-                            wline,
-                            format!("visibility keys of 'k {name}' go back in time"),
-                        ));
-                    }
-                    tracks.visibility = keys;
-                }
-                other => {
-                    return Err(src.err(
-                        wline,
-                        format!(
-                        "unknown track {other:?} in 'k {name}' (transl, rot, scale, visibility)"
-                    ),
-                    ))
-                }
-            }
-        }
-        self.key_sites.push(Site {
-            name: name.clone(),
-            path: src.path.to_path_buf(),
-            line,
-        });
-        self.scene.tracks.insert(name, tracks);
-        Ok(())
     }
 }

@@ -1,0 +1,168 @@
+//! Typed errors of the import layer (glTF reader, AFF / NFF reader, glTF writer). Each
+//! variant carries the evidence: the file, and the accessor, node, buffer, image, URI or
+//! line at fault, so the CLI can print one clear line.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong while reading a scene file or writing a glTF one.
+#[derive(Debug, thiserror::Error)]
+pub enum ImportError {
+    /// The file (or a file it refers to) could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// A buffer or image file named by a URI could not be read.
+    #[error("{path}: {what} URI {uri:?}: cannot read {resolved}: {source}")]
+    MissingFile {
+        path: PathBuf,
+        /// `"buffers[2]"` or `"images[0]"`.
+        what: String,
+        uri: String,
+        resolved: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// A URI that would leave the scene's folder (absolute, `..` above the folder, or a
+    /// scheme such as `http:`): refused, never followed.
+    #[error("{path}: {what} URI {uri:?} leaves the scene's folder; refused")]
+    UriOutsideFolder {
+        path: PathBuf,
+        what: String,
+        uri: String,
+    },
+
+    /// A `data:` URI that cannot be decoded.
+    #[error("{path}: {what}: {reason}")]
+    BadUri {
+        path: PathBuf,
+        what: String,
+        reason: String,
+    },
+
+    /// The binary container (GLB) is malformed.
+    #[error("{path}: malformed GLB: {reason}")]
+    Glb { path: PathBuf, reason: String },
+
+    /// The JSON could not be parsed as glTF.
+    #[error("{path}: not valid glTF JSON: {reason}")]
+    Json { path: PathBuf, reason: String },
+
+    /// The glTF failed structural validation (bad indices, missing required fields).
+    /// Each entry names the JSON path, e.g. `skins[0].joints[1]: Index out of range`.
+    #[error("{path}: invalid glTF: {}", .problems.join("; "))]
+    Invalid {
+        path: PathBuf,
+        problems: Vec<String>,
+    },
+
+    /// A buffer's data is unusable (too short, bad data URI).
+    #[error("{path}: buffers[{buffer}]: {reason}")]
+    Buffer {
+        path: PathBuf,
+        buffer: usize,
+        reason: String,
+    },
+
+    /// An accessor's data is unusable: outside its buffer view, wrong type for its use,
+    /// a non-finite float, an index past the vertex count.
+    #[error("{path}: accessors[{accessor}] ({usage}): {reason}")]
+    Accessor {
+        path: PathBuf,
+        accessor: usize,
+        /// What the accessor was read for, e.g. `"meshes[0].primitives[1].POSITION"`.
+        usage: String,
+        reason: String,
+    },
+
+    /// A node is unusable (cycle, two parents, a skin whose joints cannot deform its mesh).
+    #[error("{path}: nodes[{node}]{}: {reason}", name_suffix(.name))]
+    Node {
+        path: PathBuf,
+        node: usize,
+        name: Option<String>,
+        reason: String,
+    },
+
+    /// A skin is unusable (joint missing, too few inverse bind matrices).
+    #[error("{path}: skins[{skin}]: {reason}")]
+    Skin {
+        path: PathBuf,
+        skin: usize,
+        reason: String,
+    },
+
+    /// An animation channel or sampler is unusable.
+    #[error("{path}: animations[{animation}].channels[{channel}]: {reason}")]
+    Animation {
+        path: PathBuf,
+        animation: usize,
+        channel: usize,
+        reason: String,
+    },
+
+    /// An image could not be decoded.
+    #[error("{path}: images[{image}]: {reason}")]
+    Image {
+        path: PathBuf,
+        image: usize,
+        reason: String,
+    },
+
+    /// Something in the model itself is inconsistent (raised by [`super::validate`], which
+    /// every importer calls before handing a scene out).
+    #[error("{path}: inconsistent scene: {reason}")]
+    Model { path: PathBuf, reason: String },
+
+    /// A feature the importer does not handle.
+    #[error("{path}: unsupported: {what}")]
+    Unsupported { path: PathBuf, what: String },
+
+    /// The glTF writer was given inconsistent input (it refuses to write a file that the
+    /// importer would reject).
+    #[error("glTF writer: {reason}")]
+    Write { reason: String },
+
+    /// Malformed AFF / NFF input: unknown keyword, too few numbers, a missing include, a
+    /// `k` block naming nothing, an index out of range... (the line of an included file
+    /// where the problem is there).
+    #[error("{path}:{line}: {message}")]
+    Syntax {
+        path: PathBuf,
+        line: u32,
+        message: String,
+    },
+
+    /// An AFF texture named at `path:line` could not be read or decoded.
+    #[error("{path}:{line}: texture {name:?}: {reason}")]
+    Texture {
+        path: PathBuf,
+        line: u32,
+        name: String,
+        reason: String,
+    },
+
+    /// The scene is fine as AFF but cannot be written as glTF (too large, degenerate time
+    /// range...).
+    #[error("{path}: cannot convert to glTF: {reason}")]
+    Convert { path: PathBuf, reason: String },
+
+    /// The glTF writer could not write its output.
+    #[error("{path}: cannot write: {source}")]
+    WriteIo {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+fn name_suffix(name: &Option<String>) -> String {
+    match name {
+        Some(n) => format!(" ({n:?})"),
+        None => String::new(),
+    }
+}

@@ -1,0 +1,166 @@
+//! Buffers and URIs: the GLB binary chunk, `data:` URIs (base64 or percent-encoded) and
+//! files beside the scene, refusing any URI that leaves the scene's folder.
+
+use std::path::{Component, Path, PathBuf};
+
+use super::{ImportError, Importer};
+
+impl Importer<'_> {
+    pub(super) fn load_buffers(&self, bin: Option<&[u8]>) -> Result<Vec<Vec<u8>>, ImportError> {
+        let mut out = Vec::new();
+        for buffer in self.doc.buffers() {
+            let i = buffer.index();
+            let err = |reason: String| ImportError::Buffer {
+                path: self.path.to_path_buf(),
+                buffer: i,
+                reason,
+            };
+            let mut data = match buffer.source() {
+                gltf::buffer::Source::Bin => match (i, bin) {
+                    (0, Some(b)) => b.to_vec(),
+                    _ => {
+                        return Err(err(
+                            "has no URI and there is no GLB binary chunk for it".into()
+                        ))
+                    }
+                },
+                gltf::buffer::Source::Uri(uri) => self.load_uri(uri, &format!("buffers[{i}]"))?,
+            };
+            if data.len() < buffer.length() {
+                return Err(err(format!(
+                    "holds {} bytes but byteLength is {}",
+                    data.len(),
+                    buffer.length()
+                )));
+            }
+            data.truncate(buffer.length());
+            out.push(data);
+        }
+        Ok(out)
+    }
+
+    /// Reads a `data:` URI or a file relative to the scene's folder. A URI that leaves the
+    /// folder (absolute, `..` above it, another scheme) is refused.
+    pub(super) fn load_uri(&self, uri: &str, what: &str) -> Result<Vec<u8>, ImportError> {
+        if let Some(rest) = uri.strip_prefix("data:") {
+            let bad = |reason: String| ImportError::BadUri {
+                path: self.path.to_path_buf(),
+                what: what.to_string(),
+                reason,
+            };
+            let (meta, payload) = rest
+                .split_once(',')
+                .ok_or_else(|| bad("data URI without a comma".into()))?;
+            return if meta.ends_with(";base64") {
+                decode_base64(payload).map_err(|r| bad(format!("bad base64 in data URI: {r}")))
+            } else {
+                Ok(percent_decode(payload))
+            };
+        }
+        let refuse = || ImportError::UriOutsideFolder {
+            path: self.path.to_path_buf(),
+            what: what.to_string(),
+            uri: uri.to_string(),
+        };
+        // A scheme ("http:", "file:", "C:") is never a relative reference.
+        if let Some(colon) = uri.find(':') {
+            if !uri[..colon].contains('/') {
+                return Err(refuse());
+            }
+        }
+        let decoded = String::from_utf8(percent_decode(uri)).map_err(|_| refuse())?;
+        // Resolved lexically ("a/../b" is "b" whether or not "a" exists), so the check
+        // and the file opened are the same path.
+        let mut rel = PathBuf::new();
+        for c in Path::new(&decoded).components() {
+            match c {
+                Component::Normal(part) => rel.push(part),
+                Component::CurDir => {}
+                Component::ParentDir => {
+                    if !rel.pop() {
+                        return Err(refuse());
+                    }
+                }
+                Component::RootDir | Component::Prefix(_) => return Err(refuse()),
+            }
+        }
+        let resolved: PathBuf = self.folder.join(rel);
+        std::fs::read(&resolved).map_err(|source| ImportError::MissingFile {
+            path: self.path.to_path_buf(),
+            what: what.to_string(),
+            uri: uri.to_string(),
+            resolved,
+            source,
+        })
+    }
+}
+
+/// `%XX` escapes decoded; malformed escapes kept as they are.
+pub(super) fn percent_decode(s: &str) -> Vec<u8> {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' && i + 2 < b.len() {
+            let hex = |c: u8| (c as char).to_digit(16);
+            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    out
+}
+
+/// Standard or URL-safe base64, padding optional.
+pub(crate) fn decode_base64(s: &str) -> Result<Vec<u8>, String> {
+    let mut out = Vec::with_capacity(s.len() / 4 * 3 + 3);
+    let mut acc: u32 = 0;
+    let mut bits = 0u32;
+    for (i, c) in s.bytes().enumerate() {
+        let v = match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' | b'-' => 62,
+            b'/' | b'_' => 63,
+            b'=' => break,
+            _ => return Err(format!("invalid character {:?} at {i}", c as char)),
+        };
+        acc = (acc << 6) | u32::from(v);
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+            acc &= (1 << bits) - 1;
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_matches_known_vectors() {
+        assert_eq!(decode_base64("").unwrap(), b"");
+        assert_eq!(decode_base64("Zg==").unwrap(), b"f");
+        assert_eq!(decode_base64("Zm8=").unwrap(), b"fo");
+        assert_eq!(decode_base64("Zm9v").unwrap(), b"foo");
+        assert_eq!(decode_base64("Zm9vYmFy").unwrap(), b"foobar");
+        assert_eq!(decode_base64("Zm9vYg").unwrap(), b"foob");
+        assert!(decode_base64("Zm9v!").is_err());
+    }
+
+    #[test]
+    fn percent_decoding() {
+        assert_eq!(percent_decode("a%20b.bin"), b"a b.bin");
+        assert_eq!(percent_decode("100%"), b"100%");
+        assert_eq!(percent_decode("%4"), b"%4");
+        assert_eq!(percent_decode("%zz"), b"%zz");
+    }
+}

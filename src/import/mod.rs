@@ -1,0 +1,63 @@
+//! The import layer: scene files in, the one [`Scene`] model out; and the glTF writer.
+//!
+//! * [`load`]: one entry for every format we read, chosen by extension (any case):
+//!   `.aff` / `.nff` go through the BART reader ([`aff`]), everything else through the
+//!   glTF 2.0 reader (`.gltf` with external or data-URI buffers, `.glb`).
+//! * [`from_gltf_slice`]: glTF or GLB bytes already in memory.
+//! * [`validate`]: the border check every importer runs before handing a scene out; past
+//!   it the rest of the crate relies on the invariants it checks (every index in range,
+//!   every float finite, the node hierarchy a forest).
+//! * [`GltfBuilder`] and the `*Desc` types: a glTF writer for scenes built in code (the
+//!   `convert` command, the generators in `crate::gen`, tests).
+//!
+//! Every failure is an [`ImportError`] naming the file and the accessor, node, URI or line.
+//!
+//! Layering: `import` uses `scene` (the model it fills); `scene` never uses `import`. The
+//! AFF reader builds its glTF document with the writer and imports it with the glTF reader
+//! (both here), so `bake`, `render` and a file written by `subfield convert` see the same
+//! scene by construction.
+
+pub mod aff;
+mod error;
+mod gltf_read;
+mod gltf_write;
+mod validate;
+
+use std::path::Path;
+
+pub use error::ImportError;
+pub use gltf_write::{
+    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, ImageDesc, MaterialDesc, MeshDesc,
+    NodeDesc, PrimitiveDesc, TextureDesc,
+};
+pub use validate::validate;
+
+use crate::scene::Scene;
+
+/// Imports a scene file, choosing the reader by extension (any case).
+///
+/// A `.gltf` (external or data-URI buffers and images) or `.glb` file: the default
+/// scene's hierarchy, triangle primitives (strips and fans unrolled; points and lines
+/// skipped with one warning), normals, `TEXCOORD_0`, skins, morph targets, materials (with
+/// emissive strength, transmission, ior), textures decoded to RGBA8, cameras,
+/// `KHR_lights_punctual` lights, animation clips and `extras.fps`.
+///
+/// A BART `.aff` or `.nff` file is parsed and converted to glTF in memory first
+/// ([`aff::load_scene`]), so it imports exactly as the file `subfield convert` writes
+/// would.
+pub fn load(path: &Path) -> Result<Scene, ImportError> {
+    let is_aff = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("aff") || e.eq_ignore_ascii_case("nff"));
+    if is_aff {
+        return aff::load_scene(path);
+    }
+    gltf_read::load(path)
+}
+
+/// Imports glTF or GLB bytes; external URIs resolve against `folder`.
+/// `path` is only used to name the input in errors.
+pub fn from_gltf_slice(bytes: &[u8], path: &Path, folder: &Path) -> Result<Scene, ImportError> {
+    gltf_read::from_slice(bytes, path, folder)
+}
