@@ -451,3 +451,33 @@ fn kept_grids_are_one_a_point_and_eight_at_most() {
         );
     }
 }
+
+/// The cache's capacity bounds the grids kept (the least recently used dropped, at
+/// once when it shrinks), `clear` drops them all, and neither changes a hit.
+#[test]
+fn kept_grids_follow_the_capacity_and_clear() {
+    let mut rng = Rng::new(37);
+    let (stat, psf) = room(&mut rng, 2000, 0.3);
+    let brute = BruteForce::new(&stat);
+    assert_eq!(psf.point_grid_capacity(), 8, "the default");
+    psf.set_point_grid_capacity(3);
+    for k in 0..6 {
+        let eye = Vec3::new(0.5 + 0.5 * k as f32, 3.0, 4.0);
+        let rs = view(&mut rng, 3000, eye, Vec3::Z, 0.4);
+        assert_agrees(&psf, &brute, &rs, &format!("capacity 3, batch {k}"));
+        assert!(psf.kept_point_grids() <= 3, "batch {k}");
+    }
+    assert_eq!(psf.kept_point_grids(), 3);
+    psf.set_point_grid_capacity(1);
+    assert_eq!(psf.kept_point_grids(), 1, "shrunk at once");
+    psf.clear_point_grids();
+    assert_eq!(psf.kept_point_grids(), 0, "cleared");
+    assert_eq!(psf.point_grid_capacity(), 1, "the capacity stays");
+    psf.set_point_grid_capacity(0);
+    let eye = Vec3::new(4.0, 3.0, 4.0);
+    for k in 0..2 {
+        let rs = view(&mut rng, 3000, eye, Vec3::Z, 0.4);
+        assert_agrees(&psf, &brute, &rs, &format!("capacity 0, batch {k}"));
+        assert_eq!(psf.kept_point_grids(), 0, "none kept, batch {k}");
+    }
+}

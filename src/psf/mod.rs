@@ -142,7 +142,7 @@ pub struct Psf {
     triangles: Buf<[Vec3; 3]>,
     subfields: Vec<Subfield>,
     table: DirectionTable,
-    /// Point grids over `triangles` kept from batch to batch (`point.rs`).
+    /// Point grids over `triangles` kept from batch to batch (`point/cache.rs`).
     points: PointCache,
 }
 
@@ -387,12 +387,31 @@ impl Psf {
     }
 
     /// How many grids over the static triangles around a camera, a light or a mirror
-    /// image (point grids) are kept from batch to batch now: at most eight, the least
-    /// recently used dropped first. A camera that moves every frame leaves up to eight
-    /// behind; each holds 12 bytes an entry and 4 a tile (33 MiB for a camera's view of
-    /// the million-triangle room at 640x480).
+    /// image (point grids) are kept from batch to batch now: at most eight (see
+    /// [`set_point_grid_capacity`](Psf::set_point_grid_capacity)), the least recently
+    /// used dropped first. A camera that moves every frame leaves up to eight behind;
+    /// each holds 12 bytes an entry and 4 a tile (33 MiB for a camera's view of the
+    /// million-triangle room at 640x480).
     pub fn kept_point_grids(&self) -> usize {
         self.points.len()
+    }
+
+    /// How many point grids are kept at most (eight unless set).
+    pub fn point_grid_capacity(&self) -> usize {
+        self.points.capacity()
+    }
+
+    /// Keeps at most `capacity` point grids from now on (0: none, each batch then
+    /// builds its grids again), dropping the least recently used beyond it now. Hits do
+    /// not depend on it, only the time a batch takes and the memory held.
+    pub fn set_point_grid_capacity(&self, capacity: usize) {
+        self.points.set_capacity(capacity);
+    }
+
+    /// Drops every kept point grid (and the static triangles' copy they share), to free
+    /// their memory; later batches build them again. The capacity stays.
+    pub fn clear_point_grids(&self) {
+        self.points.clear();
     }
 
     pub fn params(&self) -> &PsfParams {
