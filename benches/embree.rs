@@ -42,7 +42,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
-use subfield::psf::RayStats;
+use subfield::psf::{Prim, RayStats};
 use subfield::render::CameraModel;
 use subfield::scene::{ClipSelection, LightKind, Scene, TriangleSoup};
 use subfield::{DynamicLayer, Hit, Intersector, Psf, PsfParams, Ray};
@@ -347,7 +347,9 @@ fn main() {
             r.primary_ms = ms(t);
             r.primary_rays = primary.len();
             r.primary_hits = hits.iter().flatten().count();
-            r.dynamic_hits = hits.iter().flatten().filter(|h| h.tri >= nstat).count();
+            r.dynamic_hits = (hits.iter().flatten())
+                .filter(|h| matches!(both.prim(h), Prim::Moving(_)))
+                .count();
 
             // Secondary rays, as the harness builds them (untimed in the frame).
             let t = Instant::now();

@@ -1,17 +1,23 @@
 //! Parallel subfields (the paper's PSF): for each of a set of directions, the scene's
 //! triangles rasterised into a grid of beams (tiles) with a 1D BSP along the beam.
 //!
-//! * [`directions`]: subdivided tetrahedron, subfields shared by `d` and `-d`, lookup table.
-//! * [`grid`]: a subfield's frame and tiles; conservative raster with per-tile depths.
-//! * [`bsp`]: the per-tile 1D BSP, flattened to slabs.
+//! * `directions`: subdivided tetrahedron, subfields shared by `d` and `-d`, lookup table.
+//! * `grid`: a subfield's frame and tiles; conservative raster with per-tile depths.
+//! * `bsp`: the per-tile 1D BSP, flattened to slabs.
 //! * [`bake`](Psf::build): all of it for a static triangle set, in parallel and deterministic.
 //! * `traverse`: closest-hit and any-hit queries (2D DDA near to far, early exit).
+//! * `dynamic`: the moving triangles' layer ([`DynamicLayer`]) and the two layers queried
+//!   together ([`Layered`], whose hits [`Prim`] tells apart).
+//! * `point`: grids by central projection around a point that a batch's rays pass.
+//!
+//! The modules are the crate's own; what callers use is re-exported here, so the file
+//! layout is no part of the API.
 
 mod batch;
-pub mod bsp;
-pub mod directions;
-pub mod dynamic;
-pub mod grid;
+pub(crate) mod bsp;
+pub(crate) mod directions;
+pub(crate) mod dynamic;
+pub(crate) mod grid;
 mod point;
 mod stats;
 mod storage;
@@ -24,7 +30,7 @@ use rayon::prelude::*;
 
 pub use bsp::{Block, Entry, TileHeader};
 pub use directions::{subfield_directions, tetrahedron_directions, DirectionTable, MAX_LEVEL};
-pub use dynamic::{DynamicLayer, DynamicStats, Layered};
+pub use dynamic::{DynamicLayer, DynamicStats, Layered, Prim};
 pub use grid::GridFrame;
 pub use stats::{Histogram, PsfStats, RayStats};
 pub use storage::{Buf, SharedBytes};

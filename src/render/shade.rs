@@ -30,6 +30,7 @@ use rayon::prelude::*;
 use super::camera::CameraModel;
 use super::options::{Aovs, ShadingOptions};
 use crate::geometry::{Hit, Intersector, Ray};
+use crate::psf::Prim;
 use crate::scene::{AlphaMode, Light, LightKind, Material, Scene, TextureRef, TriangleSoup, Wrap};
 
 /// Linear radiance and AOVs of one frame, rows top to bottom.
@@ -213,10 +214,9 @@ impl<'a> ShadeContext<'a> {
 
     /// Geometry at a hit, `None` for a triangle index out of range.
     fn surface(&self, ray: &Ray, hit: &Hit) -> Option<Surface> {
-        let s = self.static_soup.len();
-        let (soup, i) = match (hit.tri as usize).checked_sub(s) {
-            None => (self.static_soup, hit.tri as usize),
-            Some(d) => (self.dynamic_soup, d),
+        let (soup, i) = match Prim::from_index(hit.tri, self.static_soup.len()) {
+            Prim::Static(i) => (self.static_soup, i as usize),
+            Prim::Moving(i) => (self.dynamic_soup, i as usize),
         };
         let p = soup.positions.get(i)?;
         let nrm = soup.normals.get(i);
