@@ -280,6 +280,9 @@ impl<'a> ShadeContext<'a> {
         (s.ns.to_array(), albedo.to_array())
     }
 
+    /// One ray's contribution: the background on a miss; else the pass-through ray of a
+    /// surface not wholly opaque, emission and ambient, shadow rays to the lights, and
+    /// the refracted and mirror rays.
     fn shade(&self, ray: &Ray, item: &Item, hit: Option<Hit>, max_depth: u32, out: &mut BlockOut) {
         let Some(hit) = hit else {
             out.add(item.sample, item.weight * self.options.background);
@@ -291,41 +294,43 @@ impl<'a> ShadeContext<'a> {
         let default = Material::default();
         let m = self.material(s.material).unwrap_or(&default);
         let base = self.base_color(m, s.uv);
-        let alpha = match m.alpha_mode {
-            AlphaMode::Opaque => 1.0,
-            AlphaMode::Mask { cutoff } => {
-                if base.w >= cutoff {
-                    1.0
-                } else {
-                    0.0
-                }
-            }
-            AlphaMode::Blend => base.w.clamp(0.0, 1.0),
-        };
+        let alpha = alpha_of(m, base);
         let eps = self.eps(s.point);
         if alpha < 1.0 && item.passes < MAX_PASSES {
-            // On through the surface, same direction, same depth.
-            let w = item.weight * (1.0 - alpha);
-            if w.max_element() > MIN_WEIGHT || item.coverage > 0.0 {
-                out.next(
-                    Ray::new(s.point - s.ng * eps, s.dir),
-                    Item {
-                        sample: item.sample,
-                        weight: w,
-                        coverage: item.coverage * (1.0 - alpha),
-                        depth: item.depth,
-                        passes: item.passes + 1,
-                    },
-                );
-            }
+            pass_through(&s, item, alpha, eps, out);
         }
         if alpha <= 0.0 {
             return;
         }
         out.cover(item.sample, item.coverage * alpha);
         let weight = item.weight * alpha;
-        let albedo = base.truncate();
+        let lobes = self.lobes(m, &s, base.truncate());
 
+        // Emission and ambient.
+        let mut emitted = m.emissive * m.emissive_strength;
+        if emitted != Vec3::ZERO {
+            if let Some(t) = self.texture(m.emissive_texture, s.uv, true) {
+                emitted *= t.truncate();
+            }
+        }
+        out.add(
+            item.sample,
+            weight * (emitted + lobes.kd * self.options.ambient),
+        );
+
+        // Direct light through shadow rays.
+        let origin = s.point + s.ng * eps;
+        self.direct_light(&s, &lobes, weight, origin, item.sample, out);
+
+        if item.depth >= max_depth {
+            return;
+        }
+        secondary(&s, &lobes, item, weight, eps, origin, out);
+    }
+
+    /// The material's lobes at `s`: metallic and roughness (textured), Fresnel, and the
+    /// mirror, transmitted and diffuse weights.
+    fn lobes(&self, m: &Material, s: &Surface, albedo: Vec3) -> Lobes {
         let (mut metallic, mut roughness) = (m.metallic, m.roughness);
         if let Some(t) = self.texture(m.metallic_roughness_texture, s.uv, false) {
             metallic *= t.z;
@@ -350,23 +355,43 @@ impl<'a> ShadeContext<'a> {
         } else {
             f0 + (Vec3::ONE - f0) * (1.0 - cos_o).powi(5)
         };
-        let mut kr = fresnel * gloss;
+        let kr = fresnel * gloss;
         let kt = (Vec3::ONE - fresnel) * transmission * albedo;
         let kd = albedo
             * ((1.0 - metallic) * (1.0 - transmission) * (1.0 - fresnel.max_element() * gloss)
                 + metallic * (1.0 - gloss));
-
-        // Emission and ambient.
-        let mut emitted = m.emissive * m.emissive_strength;
-        if emitted != Vec3::ZERO {
-            if let Some(t) = self.texture(m.emissive_texture, s.uv, true) {
-                emitted *= t.truncate();
-            }
+        Lobes {
+            roughness,
+            gloss,
+            v,
+            f0,
+            eta,
+            kr,
+            kt,
+            kd,
         }
-        out.add(item.sample, weight * (emitted + kd * self.options.ambient));
+    }
 
-        // Direct light through shadow rays.
-        let origin = s.point + s.ng * eps;
+    /// A shadow ray towards each light that lights `s` (from `origin`, just off the
+    /// surface), carrying what the light would add: diffuse and a capped Blinn-Phong
+    /// glint.
+    fn direct_light(
+        &self,
+        s: &Surface,
+        lobes: &Lobes,
+        weight: Vec3,
+        origin: Vec3,
+        sample: u32,
+        out: &mut BlockOut,
+    ) {
+        let Lobes {
+            roughness,
+            gloss,
+            v,
+            f0,
+            kd,
+            ..
+        } = *lobes;
         let shininess = if roughness < 0.9 {
             // Capped: a point light is a delta, and the glint of one on a polished
             // surface would otherwise be a tiny spot of enormous radiance (one that
@@ -376,32 +401,8 @@ impl<'a> ShadeContext<'a> {
             0.0
         };
         for (li, l) in self.lights.iter().enumerate() {
-            let (to_light, dist, irradiance) = match l.kind {
-                LightKind::Directional => (-l.direction, f32::INFINITY, l.power),
-                LightKind::Point | LightKind::Spot { .. } => {
-                    let d = l.position - origin;
-                    let d2 = d.length_squared();
-                    if d2 <= 0.0 || !d2.is_finite() {
-                        continue;
-                    }
-                    let dist = d2.sqrt();
-                    let mut att = 1.0 / d2;
-                    if let Some(r) = l.range {
-                        att *= (1.0 - (dist / r).powi(4)).clamp(0.0, 1.0).powi(2);
-                    }
-                    let to = d / dist;
-                    if let LightKind::Spot {
-                        inner_cone_angle,
-                        outer_cone_angle,
-                    } = l.kind
-                    {
-                        let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
-                        let scale = 1.0 / (ci - co).max(1e-3);
-                        let cd = l.direction.dot(-to);
-                        att *= ((cd - co) * scale).clamp(0.0, 1.0).powi(2);
-                    }
-                    (to, dist, l.power * att)
-                }
+            let Some((to_light, dist, irradiance)) = light_at(l, origin) else {
+                continue;
             };
             let cos_i = s.ns.dot(to_light);
             if cos_i <= 0.0 || s.ng.dot(to_light) <= 0.0 {
@@ -423,37 +424,128 @@ impl<'a> ShadeContext<'a> {
             } else {
                 Ray::new(origin, to_light)
             };
-            out.shadow(shadow, li, item.sample, c);
+            out.shadow(shadow, li, sample, c);
         }
+    }
+}
 
-        if item.depth >= max_depth {
-            return;
-        }
-        let next = |w: Vec3| Item {
-            sample: item.sample,
-            weight: w,
-            coverage: 0.0,
-            depth: item.depth + 1,
-            passes: item.passes,
-        };
-        // Refraction (or total internal reflection, which adds to the mirror ray).
-        let kt_w = weight * kt;
-        if kt_w.max_element() > MIN_WEIGHT {
-            match refract(s.dir, s.ns, eta).or_else(|| refract(s.dir, s.ng, eta)) {
-                Some(t) if t.dot(s.ng) < 0.0 => {
-                    out.next(Ray::new(s.point - s.ng * eps, t), next(kt_w));
-                }
-                _ => kr += kt,
+/// What a surface's material makes of light, as [`ShadeContext::lobes`] finds it.
+#[derive(Clone, Copy)]
+struct Lobes {
+    roughness: f32,
+    gloss: f32,
+    /// Towards the viewer.
+    v: Vec3,
+    f0: Vec3,
+    /// The ratio of the indices of refraction across the surface, as the ray crosses it.
+    eta: f32,
+    /// Mirror, transmitted and diffuse weights.
+    kr: Vec3,
+    kt: Vec3,
+    kd: Vec3,
+}
+
+/// The material's coverage at a point of base colour `base`.
+fn alpha_of(m: &Material, base: Vec4) -> f32 {
+    match m.alpha_mode {
+        AlphaMode::Opaque => 1.0,
+        AlphaMode::Mask { cutoff } => {
+            if base.w >= cutoff {
+                1.0
+            } else {
+                0.0
             }
         }
-        let kr_w = weight * kr;
-        if kr_w.max_element() > MIN_WEIGHT {
-            let mut r = reflect(s.dir, s.ns);
-            if r.dot(s.ng) <= 0.0 {
-                r = reflect(s.dir, s.ng);
+        AlphaMode::Blend => base.w.clamp(0.0, 1.0),
+    }
+}
+
+/// On through a surface of coverage `alpha`, same direction, same depth.
+fn pass_through(s: &Surface, item: &Item, alpha: f32, eps: f32, out: &mut BlockOut) {
+    let w = item.weight * (1.0 - alpha);
+    if w.max_element() > MIN_WEIGHT || item.coverage > 0.0 {
+        out.next(
+            Ray::new(s.point - s.ng * eps, s.dir),
+            Item {
+                sample: item.sample,
+                weight: w,
+                coverage: item.coverage * (1.0 - alpha),
+                depth: item.depth,
+                passes: item.passes + 1,
+            },
+        );
+    }
+}
+
+/// The direction towards light `l` from `origin`, its distance (infinite for a
+/// directional light) and the irradiance it brings there (range and cone applied);
+/// `None` at the light itself or where the numbers overflow.
+fn light_at(l: &PreLight, origin: Vec3) -> Option<(Vec3, f32, Vec3)> {
+    Some(match l.kind {
+        LightKind::Directional => (-l.direction, f32::INFINITY, l.power),
+        LightKind::Point | LightKind::Spot { .. } => {
+            let d = l.position - origin;
+            let d2 = d.length_squared();
+            if d2 <= 0.0 || !d2.is_finite() {
+                return None;
             }
-            out.next(Ray::new(origin, r), next(kr_w));
+            let dist = d2.sqrt();
+            let mut att = 1.0 / d2;
+            if let Some(r) = l.range {
+                att *= (1.0 - (dist / r).powi(4)).clamp(0.0, 1.0).powi(2);
+            }
+            let to = d / dist;
+            if let LightKind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } = l.kind
+            {
+                let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
+                let scale = 1.0 / (ci - co).max(1e-3);
+                let cd = l.direction.dot(-to);
+                att *= ((cd - co) * scale).clamp(0.0, 1.0).powi(2);
+            }
+            (to, dist, l.power * att)
         }
+    })
+}
+
+/// The refracted ray (or, on total internal reflection, more weight for the mirror)
+/// and the mirror ray, one level deeper.
+fn secondary(
+    s: &Surface,
+    lobes: &Lobes,
+    item: &Item,
+    weight: Vec3,
+    eps: f32,
+    origin: Vec3,
+    out: &mut BlockOut,
+) {
+    let (eta, kt, mut kr) = (lobes.eta, lobes.kt, lobes.kr);
+    let next = |w: Vec3| Item {
+        sample: item.sample,
+        weight: w,
+        coverage: 0.0,
+        depth: item.depth + 1,
+        passes: item.passes,
+    };
+    // Refraction (or total internal reflection, which adds to the mirror ray).
+    let kt_w = weight * kt;
+    if kt_w.max_element() > MIN_WEIGHT {
+        match refract(s.dir, s.ns, eta).or_else(|| refract(s.dir, s.ng, eta)) {
+            Some(t) if t.dot(s.ng) < 0.0 => {
+                out.next(Ray::new(s.point - s.ng * eps, t), next(kt_w));
+            }
+            _ => kr += kt,
+        }
+    }
+    let kr_w = weight * kr;
+    if kr_w.max_element() > MIN_WEIGHT {
+        let mut r = reflect(s.dir, s.ns);
+        if r.dot(s.ng) <= 0.0 {
+            r = reflect(s.dir, s.ng);
+        }
+        out.next(Ray::new(origin, r), next(kr_w));
     }
 }
 
