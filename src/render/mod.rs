@@ -21,7 +21,7 @@
 //!
 //! Files: `planning` (pattern, camera source, frames, the checks before writing, resume
 //! skips), `sequence` (the static part and the frame loop), `writer` (jobs, atomic
-//! writes, folders), `shade` (tracing and Whitted shading of one frame), `camera`,
+//! writes, folders), `wavefront` (one frame traced level by level), `shade` (Whitted shading of a hit), `camera`,
 //! `stats`, and `options` / `output` (the options and the EXR / PNG encoders).
 
 mod camera;
@@ -31,6 +31,7 @@ mod planning;
 mod sequence;
 mod shade;
 mod stats;
+mod wavefront;
 mod writer;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -43,8 +44,9 @@ pub use options::{
 pub use output::{channel_names, encode_exr, encode_preview, is_complete, linear_to_srgb8};
 pub use planning::{plan, CameraSource, OutputPattern, RenderPlan};
 pub use sequence::render_sequence;
-pub use shade::{render_frame, sample_offset, FrameBuffers, FrameWork, RayCounts, ShadeContext};
+pub use shade::{FrameBuffers, FrameWork, RayCounts, ShadeContext};
 pub use stats::{plot_png, plot_svg, stats_csv, FrameStats};
+pub use wavefront::{render_frame, sample_offset};
 
 use crate::format::FormatError;
 use crate::psf::PsfError;
