@@ -1,6 +1,6 @@
 //! Batches of rays through one point (a camera's primary rays, shadow rays towards a
 //! point light) are traced through a grid by central projection around that point
-//! (`src/psf/point.rs`). They must agree with brute force exactly, like every other
+//! (`src/psf/point/`). They must agree with brute force exactly, like every other
 //! query: same closest hit (triangle, t, barycentrics), same any-hit answer. The scenes
 //! put triangles where that grid is delicate: around the point itself (the near list),
 //! across the planes between the cube faces, crossing the plane a face clips at, far
