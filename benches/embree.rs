@@ -43,7 +43,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
 use subfield::import;
-use subfield::psf::RayStats;
+use subfield::psf::{Prim, RayStats};
 use subfield::render::CameraModel;
 use subfield::scene::{ClipSelection, LightKind, TriangleSoup};
 use subfield::{DynamicLayer, Hit, Intersector, Psf, PsfParams, Ray};
@@ -348,7 +348,9 @@ fn main() {
             r.primary_ms = ms(t);
             r.primary_rays = primary.len();
             r.primary_hits = hits.iter().flatten().count();
-            r.dynamic_hits = hits.iter().flatten().filter(|h| h.tri >= nstat).count();
+            r.dynamic_hits = (hits.iter().flatten())
+                .filter(|h| matches!(both.prim(h), Prim::Moving(_)))
+                .count();
 
             // Secondary rays, as the harness builds them (untimed in the frame).
             let t = Instant::now();

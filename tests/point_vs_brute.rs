@@ -1,6 +1,6 @@
 //! Batches of rays through one point (a camera's primary rays, shadow rays towards a
 //! point light) are traced through a grid by central projection around that point
-//! (`src/psf/point.rs`). They must agree with brute force exactly, like every other
+//! (`src/psf/point/`). They must agree with brute force exactly, like every other
 //! query: same closest hit (triangle, t, barycentrics), same any-hit answer. The scenes
 //! put triangles where that grid is delicate: around the point itself (the near list),
 //! across the planes between the cube faces, crossing the plane a face clips at, far
@@ -449,5 +449,35 @@ fn kept_grids_are_one_a_point_and_eight_at_most() {
             (k + 2).min(8),
             "moving camera, batch {k}"
         );
+    }
+}
+
+/// The cache's capacity bounds the grids kept (the least recently used dropped, at
+/// once when it shrinks), `clear` drops them all, and neither changes a hit.
+#[test]
+fn kept_grids_follow_the_capacity_and_clear() {
+    let mut rng = Rng::new(37);
+    let (stat, psf) = room(&mut rng, 2000, 0.3);
+    let brute = BruteForce::new(&stat);
+    assert_eq!(psf.point_grid_capacity(), 8, "the default");
+    psf.set_point_grid_capacity(3);
+    for k in 0..6 {
+        let eye = Vec3::new(0.5 + 0.5 * k as f32, 3.0, 4.0);
+        let rs = view(&mut rng, 3000, eye, Vec3::Z, 0.4);
+        assert_agrees(&psf, &brute, &rs, &format!("capacity 3, batch {k}"));
+        assert!(psf.kept_point_grids() <= 3, "batch {k}");
+    }
+    assert_eq!(psf.kept_point_grids(), 3);
+    psf.set_point_grid_capacity(1);
+    assert_eq!(psf.kept_point_grids(), 1, "shrunk at once");
+    psf.clear_point_grids();
+    assert_eq!(psf.kept_point_grids(), 0, "cleared");
+    assert_eq!(psf.point_grid_capacity(), 1, "the capacity stays");
+    psf.set_point_grid_capacity(0);
+    let eye = Vec3::new(4.0, 3.0, 4.0);
+    for k in 0..2 {
+        let rs = view(&mut rng, 3000, eye, Vec3::Z, 0.4);
+        assert_agrees(&psf, &brute, &rs, &format!("capacity 0, batch {k}"));
+        assert_eq!(psf.kept_point_grids(), 0, "none kept, batch {k}");
     }
 }

@@ -22,7 +22,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::Vec4;
 
 /// One tile: where its slabs start, how many, and the affine map from depth to slab; or,
-/// for a flat tile ([`FLAT`] set in `slab_count`), where its blocks start and how many.
+/// for a flat tile (`FLAT` set in `slab_count`), where its blocks start and how many.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct TileHeader {
@@ -30,7 +30,7 @@ pub struct TileHeader {
     /// `slab_count + 1` consecutive starts (the last one ends its last slab). For a flat
     /// tile, the index of its first block in the subfield's `blocks`.
     pub first_slab: u32,
-    /// 0 for an empty tile; [`FLAT`] plus the block count (1..=4) for a flat tile.
+    /// 0 for an empty tile; `FLAT` plus the block count (1..=4) for a flat tile.
     pub slab_count: u32,
     pub z0: f32,
     /// `slab_count / (z1 - z0)`, 0 when all entries share one depth (0 for a flat tile).
@@ -48,7 +48,7 @@ pub const LANES: usize = 8;
 
 /// Eight entries, the depths by columns: a query filters them by depth with two
 /// loads a column and reads the triangle numbers beside them. Unused lanes are
-/// [`PADDING`]'s: a depth range from +inf to -inf, which no interval meets.
+/// `PADDING`'s: a depth range from +inf to -inf, which no interval meets.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct Block {

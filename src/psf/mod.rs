@@ -1,17 +1,23 @@
 //! Parallel subfields (the paper's PSF): for each of a set of directions, the scene's
 //! triangles rasterised into a grid of beams (tiles) with a 1D BSP along the beam.
 //!
-//! * [`directions`]: subdivided tetrahedron, subfields shared by `d` and `-d`, lookup table.
-//! * [`grid`]: a subfield's frame and tiles; conservative raster with per-tile depths.
-//! * [`bsp`]: the per-tile 1D BSP, flattened to slabs.
+//! * `directions`: subdivided tetrahedron, subfields shared by `d` and `-d`, lookup table.
+//! * `grid`: a subfield's frame and tiles; conservative raster with per-tile depths.
+//! * `bsp`: the per-tile 1D BSP, flattened to slabs.
 //! * [`bake`](Psf::build): all of it for a static triangle set, in parallel and deterministic.
 //! * `traverse`: closest-hit and any-hit queries (2D DDA near to far, early exit).
+//! * `dynamic`: the moving triangles' layer ([`DynamicLayer`]) and the two layers queried
+//!   together ([`Layered`], whose hits [`Prim`] tells apart).
+//! * `point`: grids by central projection around a point that a batch's rays pass.
+//!
+//! The modules are the crate's own; what callers use is re-exported here, so the file
+//! layout is no part of the API.
 
 mod batch;
-pub mod bsp;
-pub mod directions;
-pub mod dynamic;
-pub mod grid;
+pub(crate) mod bsp;
+pub(crate) mod directions;
+pub(crate) mod dynamic;
+pub(crate) mod grid;
 mod point;
 mod stats;
 mod storage;
@@ -24,7 +30,7 @@ use rayon::prelude::*;
 
 pub use bsp::{Block, Entry, TileHeader};
 pub use directions::{subfield_directions, tetrahedron_directions, DirectionTable, MAX_LEVEL};
-pub use dynamic::{DynamicLayer, DynamicStats, Layered};
+pub use dynamic::{DynamicLayer, DynamicStats, Layered, Prim};
 pub use grid::GridFrame;
 pub use stats::{Histogram, PsfStats, RayStats};
 pub use storage::{Buf, SharedBytes};
@@ -142,7 +148,7 @@ pub struct Psf {
     triangles: Buf<[Vec3; 3]>,
     subfields: Vec<Subfield>,
     table: DirectionTable,
-    /// Point grids over `triangles` kept from batch to batch (`point.rs`).
+    /// Point grids over `triangles` kept from batch to batch (`point/cache.rs`).
     points: PointCache,
 }
 
@@ -387,12 +393,31 @@ impl Psf {
     }
 
     /// How many grids over the static triangles around a camera, a light or a mirror
-    /// image (point grids) are kept from batch to batch now: at most eight, the least
-    /// recently used dropped first. A camera that moves every frame leaves up to eight
-    /// behind; each holds 12 bytes an entry and 4 a tile (33 MiB for a camera's view of
-    /// the million-triangle room at 640x480).
+    /// image (point grids) are kept from batch to batch now: at most eight (see
+    /// [`set_point_grid_capacity`](Psf::set_point_grid_capacity)), the least recently
+    /// used dropped first. A camera that moves every frame leaves up to eight behind;
+    /// each holds 12 bytes an entry and 4 a tile (33 MiB for a camera's view of the
+    /// million-triangle room at 640x480).
     pub fn kept_point_grids(&self) -> usize {
         self.points.len()
+    }
+
+    /// How many point grids are kept at most (eight unless set).
+    pub fn point_grid_capacity(&self) -> usize {
+        self.points.capacity()
+    }
+
+    /// Keeps at most `capacity` point grids from now on (0: none, each batch then
+    /// builds its grids again), dropping the least recently used beyond it now. Hits do
+    /// not depend on it, only the time a batch takes and the memory held.
+    pub fn set_point_grid_capacity(&self, capacity: usize) {
+        self.points.set_capacity(capacity);
+    }
+
+    /// Drops every kept point grid (and the static triangles' copy they share), to free
+    /// their memory; later batches build them again. The capacity stays.
+    pub fn clear_point_grids(&self) {
+        self.points.clear();
     }
 
     pub fn params(&self) -> &PsfParams {

@@ -22,14 +22,14 @@
 //! (lux), point and spot `E = intensity/d²` (candela) with the spec's range window and
 //! spot cone falloff.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use glam::{Vec2, Vec3, Vec4};
-use rayon::prelude::*;
 
 use super::camera::CameraModel;
-use super::options::{Aovs, ShadingOptions};
-use crate::geometry::{Hit, Intersector, Ray};
+use super::options::ShadingOptions;
+use crate::geometry::{Hit, Ray};
+use crate::psf::Prim;
 use crate::scene::{AlphaMode, Light, LightKind, Material, Scene, TextureRef, TriangleSoup, Wrap};
 
 /// Linear radiance and AOVs of one frame, rows top to bottom.
@@ -101,10 +101,6 @@ const MAX_PASSES: u16 = 16;
 const MIN_WEIGHT: f32 = 1e-4;
 /// Largest Blinn–Phong exponent (roughness below about 0.3 gets this).
 const MAX_SHININESS: f32 = 256.0;
-/// Rays shaded by one task.
-const BLOCK: usize = 1024;
-/// Samples traced together (bounds the wavefront's memory).
-const CHUNK_SAMPLES: usize = 1 << 18;
 
 fn srgb_to_linear(c: f32) -> f32 {
     if c <= 0.04045 {
@@ -213,10 +209,9 @@ impl<'a> ShadeContext<'a> {
 
     /// Geometry at a hit, `None` for a triangle index out of range.
     fn surface(&self, ray: &Ray, hit: &Hit) -> Option<Surface> {
-        let s = self.static_soup.len();
-        let (soup, i) = match (hit.tri as usize).checked_sub(s) {
-            None => (self.static_soup, hit.tri as usize),
-            Some(d) => (self.dynamic_soup, d),
+        let (soup, i) = match Prim::from_index(hit.tri, self.static_soup.len()) {
+            Prim::Static(i) => (self.static_soup, i as usize),
+            Prim::Moving(i) => (self.dynamic_soup, i as usize),
         };
         let p = soup.positions.get(i)?;
         let nrm = soup.normals.get(i);
@@ -270,7 +265,7 @@ impl<'a> ShadeContext<'a> {
     }
 
     /// The AOV values at a primary hit: (normal, albedo).
-    fn aov(&self, ray: &Ray, hit: &Hit) -> ([f32; 3], [f32; 3]) {
+    pub(super) fn aov(&self, ray: &Ray, hit: &Hit) -> ([f32; 3], [f32; 3]) {
         let Some(s) = self.surface(ray, hit) else {
             return ([0.0; 3], [0.0; 3]);
         };
@@ -280,7 +275,17 @@ impl<'a> ShadeContext<'a> {
         (s.ns.to_array(), albedo.to_array())
     }
 
-    fn shade(&self, ray: &Ray, item: &Item, hit: Option<Hit>, max_depth: u32, out: &mut BlockOut) {
+    /// One ray's contribution: the background on a miss; else the pass-through ray of a
+    /// surface not wholly opaque, emission and ambient, shadow rays to the lights, and
+    /// the refracted and mirror rays.
+    pub(super) fn shade(
+        &self,
+        ray: &Ray,
+        item: &Item,
+        hit: Option<Hit>,
+        max_depth: u32,
+        out: &mut BlockOut,
+    ) {
         let Some(hit) = hit else {
             out.add(item.sample, item.weight * self.options.background);
             return;
@@ -291,41 +296,43 @@ impl<'a> ShadeContext<'a> {
         let default = Material::default();
         let m = self.material(s.material).unwrap_or(&default);
         let base = self.base_color(m, s.uv);
-        let alpha = match m.alpha_mode {
-            AlphaMode::Opaque => 1.0,
-            AlphaMode::Mask { cutoff } => {
-                if base.w >= cutoff {
-                    1.0
-                } else {
-                    0.0
-                }
-            }
-            AlphaMode::Blend => base.w.clamp(0.0, 1.0),
-        };
+        let alpha = alpha_of(m, base);
         let eps = self.eps(s.point);
         if alpha < 1.0 && item.passes < MAX_PASSES {
-            // On through the surface, same direction, same depth.
-            let w = item.weight * (1.0 - alpha);
-            if w.max_element() > MIN_WEIGHT || item.coverage > 0.0 {
-                out.next(
-                    Ray::new(s.point - s.ng * eps, s.dir),
-                    Item {
-                        sample: item.sample,
-                        weight: w,
-                        coverage: item.coverage * (1.0 - alpha),
-                        depth: item.depth,
-                        passes: item.passes + 1,
-                    },
-                );
-            }
+            pass_through(&s, item, alpha, eps, out);
         }
         if alpha <= 0.0 {
             return;
         }
         out.cover(item.sample, item.coverage * alpha);
         let weight = item.weight * alpha;
-        let albedo = base.truncate();
+        let lobes = self.lobes(m, &s, base.truncate());
 
+        // Emission and ambient.
+        let mut emitted = m.emissive * m.emissive_strength;
+        if emitted != Vec3::ZERO {
+            if let Some(t) = self.texture(m.emissive_texture, s.uv, true) {
+                emitted *= t.truncate();
+            }
+        }
+        out.add(
+            item.sample,
+            weight * (emitted + lobes.kd * self.options.ambient),
+        );
+
+        // Direct light through shadow rays.
+        let origin = s.point + s.ng * eps;
+        self.direct_light(&s, &lobes, weight, origin, item.sample, out);
+
+        if item.depth >= max_depth {
+            return;
+        }
+        secondary(&s, &lobes, item, weight, eps, origin, out);
+    }
+
+    /// The material's lobes at `s`: metallic and roughness (textured), Fresnel, and the
+    /// mirror, transmitted and diffuse weights.
+    fn lobes(&self, m: &Material, s: &Surface, albedo: Vec3) -> Lobes {
         let (mut metallic, mut roughness) = (m.metallic, m.roughness);
         if let Some(t) = self.texture(m.metallic_roughness_texture, s.uv, false) {
             metallic *= t.z;
@@ -350,23 +357,43 @@ impl<'a> ShadeContext<'a> {
         } else {
             f0 + (Vec3::ONE - f0) * (1.0 - cos_o).powi(5)
         };
-        let mut kr = fresnel * gloss;
+        let kr = fresnel * gloss;
         let kt = (Vec3::ONE - fresnel) * transmission * albedo;
         let kd = albedo
             * ((1.0 - metallic) * (1.0 - transmission) * (1.0 - fresnel.max_element() * gloss)
                 + metallic * (1.0 - gloss));
-
-        // Emission and ambient.
-        let mut emitted = m.emissive * m.emissive_strength;
-        if emitted != Vec3::ZERO {
-            if let Some(t) = self.texture(m.emissive_texture, s.uv, true) {
-                emitted *= t.truncate();
-            }
+        Lobes {
+            roughness,
+            gloss,
+            v,
+            f0,
+            eta,
+            kr,
+            kt,
+            kd,
         }
-        out.add(item.sample, weight * (emitted + kd * self.options.ambient));
+    }
 
-        // Direct light through shadow rays.
-        let origin = s.point + s.ng * eps;
+    /// A shadow ray towards each light that lights `s` (from `origin`, just off the
+    /// surface), carrying what the light would add: diffuse and a capped Blinn-Phong
+    /// glint.
+    fn direct_light(
+        &self,
+        s: &Surface,
+        lobes: &Lobes,
+        weight: Vec3,
+        origin: Vec3,
+        sample: u32,
+        out: &mut BlockOut,
+    ) {
+        let Lobes {
+            roughness,
+            gloss,
+            v,
+            f0,
+            kd,
+            ..
+        } = *lobes;
         let shininess = if roughness < 0.9 {
             // Capped: a point light is a delta, and the glint of one on a polished
             // surface would otherwise be a tiny spot of enormous radiance (one that
@@ -376,32 +403,8 @@ impl<'a> ShadeContext<'a> {
             0.0
         };
         for (li, l) in self.lights.iter().enumerate() {
-            let (to_light, dist, irradiance) = match l.kind {
-                LightKind::Directional => (-l.direction, f32::INFINITY, l.power),
-                LightKind::Point | LightKind::Spot { .. } => {
-                    let d = l.position - origin;
-                    let d2 = d.length_squared();
-                    if d2 <= 0.0 || !d2.is_finite() {
-                        continue;
-                    }
-                    let dist = d2.sqrt();
-                    let mut att = 1.0 / d2;
-                    if let Some(r) = l.range {
-                        att *= (1.0 - (dist / r).powi(4)).clamp(0.0, 1.0).powi(2);
-                    }
-                    let to = d / dist;
-                    if let LightKind::Spot {
-                        inner_cone_angle,
-                        outer_cone_angle,
-                    } = l.kind
-                    {
-                        let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
-                        let scale = 1.0 / (ci - co).max(1e-3);
-                        let cd = l.direction.dot(-to);
-                        att *= ((cd - co) * scale).clamp(0.0, 1.0).powi(2);
-                    }
-                    (to, dist, l.power * att)
-                }
+            let Some((to_light, dist, irradiance)) = light_at(l, origin) else {
+                continue;
             };
             let cos_i = s.ns.dot(to_light);
             if cos_i <= 0.0 || s.ng.dot(to_light) <= 0.0 {
@@ -423,37 +426,128 @@ impl<'a> ShadeContext<'a> {
             } else {
                 Ray::new(origin, to_light)
             };
-            out.shadow(shadow, li, item.sample, c);
+            out.shadow(shadow, li, sample, c);
         }
+    }
+}
 
-        if item.depth >= max_depth {
-            return;
-        }
-        let next = |w: Vec3| Item {
-            sample: item.sample,
-            weight: w,
-            coverage: 0.0,
-            depth: item.depth + 1,
-            passes: item.passes,
-        };
-        // Refraction (or total internal reflection, which adds to the mirror ray).
-        let kt_w = weight * kt;
-        if kt_w.max_element() > MIN_WEIGHT {
-            match refract(s.dir, s.ns, eta).or_else(|| refract(s.dir, s.ng, eta)) {
-                Some(t) if t.dot(s.ng) < 0.0 => {
-                    out.next(Ray::new(s.point - s.ng * eps, t), next(kt_w));
-                }
-                _ => kr += kt,
+/// What a surface's material makes of light, as [`ShadeContext::lobes`] finds it.
+#[derive(Clone, Copy)]
+struct Lobes {
+    roughness: f32,
+    gloss: f32,
+    /// Towards the viewer.
+    v: Vec3,
+    f0: Vec3,
+    /// The ratio of the indices of refraction across the surface, as the ray crosses it.
+    eta: f32,
+    /// Mirror, transmitted and diffuse weights.
+    kr: Vec3,
+    kt: Vec3,
+    kd: Vec3,
+}
+
+/// The material's coverage at a point of base colour `base`.
+fn alpha_of(m: &Material, base: Vec4) -> f32 {
+    match m.alpha_mode {
+        AlphaMode::Opaque => 1.0,
+        AlphaMode::Mask { cutoff } => {
+            if base.w >= cutoff {
+                1.0
+            } else {
+                0.0
             }
         }
-        let kr_w = weight * kr;
-        if kr_w.max_element() > MIN_WEIGHT {
-            let mut r = reflect(s.dir, s.ns);
-            if r.dot(s.ng) <= 0.0 {
-                r = reflect(s.dir, s.ng);
+        AlphaMode::Blend => base.w.clamp(0.0, 1.0),
+    }
+}
+
+/// On through a surface of coverage `alpha`, same direction, same depth.
+fn pass_through(s: &Surface, item: &Item, alpha: f32, eps: f32, out: &mut BlockOut) {
+    let w = item.weight * (1.0 - alpha);
+    if w.max_element() > MIN_WEIGHT || item.coverage > 0.0 {
+        out.next(
+            Ray::new(s.point - s.ng * eps, s.dir),
+            Item {
+                sample: item.sample,
+                weight: w,
+                coverage: item.coverage * (1.0 - alpha),
+                depth: item.depth,
+                passes: item.passes + 1,
+            },
+        );
+    }
+}
+
+/// The direction towards light `l` from `origin`, its distance (infinite for a
+/// directional light) and the irradiance it brings there (range and cone applied);
+/// `None` at the light itself or where the numbers overflow.
+fn light_at(l: &PreLight, origin: Vec3) -> Option<(Vec3, f32, Vec3)> {
+    Some(match l.kind {
+        LightKind::Directional => (-l.direction, f32::INFINITY, l.power),
+        LightKind::Point | LightKind::Spot { .. } => {
+            let d = l.position - origin;
+            let d2 = d.length_squared();
+            if d2 <= 0.0 || !d2.is_finite() {
+                return None;
             }
-            out.next(Ray::new(origin, r), next(kr_w));
+            let dist = d2.sqrt();
+            let mut att = 1.0 / d2;
+            if let Some(r) = l.range {
+                att *= (1.0 - (dist / r).powi(4)).clamp(0.0, 1.0).powi(2);
+            }
+            let to = d / dist;
+            if let LightKind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } = l.kind
+            {
+                let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
+                let scale = 1.0 / (ci - co).max(1e-3);
+                let cd = l.direction.dot(-to);
+                att *= ((cd - co) * scale).clamp(0.0, 1.0).powi(2);
+            }
+            (to, dist, l.power * att)
         }
+    })
+}
+
+/// The refracted ray (or, on total internal reflection, more weight for the mirror)
+/// and the mirror ray, one level deeper.
+fn secondary(
+    s: &Surface,
+    lobes: &Lobes,
+    item: &Item,
+    weight: Vec3,
+    eps: f32,
+    origin: Vec3,
+    out: &mut BlockOut,
+) {
+    let (eta, kt, mut kr) = (lobes.eta, lobes.kt, lobes.kr);
+    let next = |w: Vec3| Item {
+        sample: item.sample,
+        weight: w,
+        coverage: 0.0,
+        depth: item.depth + 1,
+        passes: item.passes,
+    };
+    // Refraction (or total internal reflection, which adds to the mirror ray).
+    let kt_w = weight * kt;
+    if kt_w.max_element() > MIN_WEIGHT {
+        match refract(s.dir, s.ns, eta).or_else(|| refract(s.dir, s.ng, eta)) {
+            Some(t) if t.dot(s.ng) < 0.0 => {
+                out.next(Ray::new(s.point - s.ng * eps, t), next(kt_w));
+            }
+            _ => kr += kt,
+        }
+    }
+    let kr_w = weight * kr;
+    if kr_w.max_element() > MIN_WEIGHT {
+        let mut r = reflect(s.dir, s.ns);
+        if r.dot(s.ng) <= 0.0 {
+            r = reflect(s.dir, s.ng);
+        }
+        out.next(Ray::new(origin, r), next(kr_w));
     }
 }
 
@@ -515,26 +609,26 @@ struct Surface {
 
 /// A ray's bookkeeping: which sample it adds to, with what weight.
 #[derive(Clone, Copy, Debug)]
-struct Item {
-    sample: u32,
-    weight: Vec3,
+pub(super) struct Item {
+    pub(super) sample: u32,
+    pub(super) weight: Vec3,
     /// Share of the sample's coverage (alpha) this ray decides (primary rays and their
     /// pass-through continuations; 0 for secondary rays).
-    coverage: f32,
-    depth: u32,
-    passes: u16,
+    pub(super) coverage: f32,
+    pub(super) depth: u32,
+    pub(super) passes: u16,
 }
 
 #[derive(Default)]
-struct BlockOut {
-    add: Vec<(u32, Vec3)>,
-    cover: Vec<(u32, f32)>,
-    shadow_rays: Vec<Ray>,
-    shadow_add: Vec<(u32, Vec3)>,
+pub(super) struct BlockOut {
+    pub(super) add: Vec<(u32, Vec3)>,
+    pub(super) cover: Vec<(u32, f32)>,
+    pub(super) shadow_rays: Vec<Ray>,
+    pub(super) shadow_add: Vec<(u32, Vec3)>,
     /// The light each shadow ray goes to.
-    shadow_light: Vec<u16>,
-    next_rays: Vec<Ray>,
-    next_items: Vec<Item>,
+    pub(super) shadow_light: Vec<u16>,
+    pub(super) next_rays: Vec<Ray>,
+    pub(super) next_items: Vec<Item>,
 }
 
 impl BlockOut {
@@ -556,276 +650,6 @@ impl BlockOut {
     fn next(&mut self, ray: Ray, item: Item) {
         self.next_rays.push(ray);
         self.next_items.push(item);
-    }
-}
-
-/// `occluded_batch` of `rays`, one batch per light (`light[i]` is ray `i`'s): the
-/// shadow rays towards one point light all pass through it, and such a batch is traced
-/// through a point grid around it (`subfield::psf`'s point grids), which a batch mixing
-/// several lights would not get. The answers are the same either way.
-fn occluded_by_light<T: Intersector>(tracer: &T, rays: &[Ray], light: &[u16]) -> Vec<bool> {
-    let mut blocked = vec![false; rays.len()];
-    let lights = light.iter().max().map_or(0, |&l| l as usize + 1);
-    if lights <= 1 {
-        tracer.occluded_batch(rays, &mut blocked);
-        return blocked;
-    }
-    // The rays in order of their light (a stable counting sort), a batch a light.
-    let mut start = vec![0usize; lights + 1];
-    for &l in light {
-        start[l as usize + 1] += 1;
-    }
-    for l in 0..lights {
-        start[l + 1] += start[l];
-    }
-    let mut index = vec![0usize; rays.len()];
-    let mut at = start.clone();
-    for (i, &l) in light.iter().enumerate() {
-        index[at[l as usize]] = i;
-        at[l as usize] += 1;
-    }
-    let sorted: Vec<Ray> = index.iter().map(|&i| rays[i]).collect();
-    let mut out = vec![false; rays.len()];
-    for l in 0..lights {
-        let (a, b) = (start[l], start[l + 1]);
-        tracer.occluded_batch(&sorted[a..b], &mut out[a..b]);
-    }
-    for (&i, b) in index.iter().zip(out) {
-        blocked[i] = b;
-    }
-    blocked
-}
-
-/// A 64-bit mix of the inputs (SplitMix64 finaliser over a running combination).
-fn hash(values: [u32; 4]) -> u64 {
-    let mut h = 0x9E37_79B9_7F4A_7C15u64;
-    for v in values {
-        h ^= u64::from(v);
-        h = h.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        h = (h ^ (h >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        h = (h ^ (h >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        h ^= h >> 31;
-    }
-    h
-}
-
-/// Position of sample `k` of `spp` inside pixel `(x, y)` of `frame`, in `[0, 1)²`:
-/// the centre for one sample, else a jittered point in cell `k` of a
-/// `ceil(√spp) × ceil(spp / ceil(√spp))` grid.
-pub fn sample_offset(frame: u32, x: u32, y: u32, k: u32, spp: u32) -> (f32, f32) {
-    if spp <= 1 {
-        return (0.5, 0.5);
-    }
-    let sx = (spp as f64).sqrt().ceil() as u32;
-    let sy = spp.div_ceil(sx);
-    let h = hash([frame, x, y, k]);
-    let rx = (h >> 40) as f32 / (1u64 << 24) as f32;
-    let ry = ((h >> 16) & 0xFF_FFFF) as f32 / (1u64 << 24) as f32;
-    (
-        (((k % sx) as f32 + rx) / sx as f32).min(0.999_999_9),
-        (((k / sx) as f32 + ry) / sy as f32).min(0.999_999_9),
-    )
-}
-
-/// Traces and shades one frame.
-pub fn render_frame<T: Intersector>(
-    ctx: &ShadeContext<'_>,
-    tracer: &T,
-    camera: &CameraModel,
-    frame: u32,
-    spp: u32,
-    max_depth: u32,
-    aovs: Aovs,
-) -> (FrameBuffers, FrameWork) {
-    let (w, h) = (camera.width as usize, camera.height as usize);
-    let spp = spp.max(1) as usize;
-    let mut work = FrameWork::default();
-    let mut fb = FrameBuffers {
-        width: camera.width,
-        height: camera.height,
-        rgba: vec![[0.0; 4]; w * h],
-        depth: aovs.depth.then(|| vec![f32::INFINITY; w * h]),
-        normal: aovs.normal.then(|| vec![[0.0; 3]; w * h]),
-        albedo: aovs.albedo.then(|| vec![[0.0; 3]; w * h]),
-    };
-    let any_aov = aovs.depth || aovs.normal || aovs.albedo;
-    let rows_per_chunk = (CHUNK_SAMPLES / (w * spp)).max(1);
-    let mut y0 = 0;
-    while y0 < h {
-        let y1 = (y0 + rows_per_chunk).min(h);
-        let px0 = y0 * w;
-        let npix = (y1 - y0) * w;
-        let nsamples = npix * spp;
-
-        // Primary rays.
-        let clock = Instant::now();
-        let mut rays: Vec<Ray> = (0..nsamples)
-            .into_par_iter()
-            .with_min_len(BLOCK)
-            .map(|s| {
-                let p = px0 + s / spp;
-                let (x, y) = ((p % w) as u32, (p / w) as u32);
-                let (ox, oy) = sample_offset(frame, x, y, (s % spp) as u32, spp as u32);
-                camera.ray(x as f32 + ox, y as f32 + oy)
-            })
-            .collect();
-        let mut items: Vec<Item> = (0..nsamples)
-            .map(|s| Item {
-                sample: s as u32,
-                weight: Vec3::ONE,
-                coverage: 1.0,
-                depth: 0,
-                passes: 0,
-            })
-            .collect();
-        work.rays.primary += nsamples as u64;
-        let mut radiance = vec![Vec3::ZERO; nsamples];
-        let mut coverage = vec![0.0f32; nsamples];
-        work.shade += clock.elapsed();
-
-        let mut first = true;
-        let mut hits: Vec<Option<Hit>> = Vec::new();
-        while !rays.is_empty() {
-            let clock = Instant::now();
-            hits.clear();
-            hits.resize(rays.len(), None);
-            tracer.intersect_batch(&rays, &mut hits);
-            work.trace += clock.elapsed();
-
-            let clock = Instant::now();
-            if first && any_aov {
-                // The centre rays: the primary rays themselves with one sample, else
-                // their own batch (traced below).
-                if spp == 1 {
-                    write_aovs(ctx, &mut fb, px0, &rays, &hits);
-                }
-            }
-            first = false;
-            let outs: Vec<BlockOut> = rays
-                .par_chunks(BLOCK)
-                .zip(items.par_chunks(BLOCK))
-                .zip(hits.par_chunks(BLOCK))
-                .map(|((r, it), hs)| {
-                    let mut out = BlockOut::default();
-                    for ((ray, item), hit) in r.iter().zip(it).zip(hs) {
-                        ctx.shade(ray, item, *hit, max_depth, &mut out);
-                    }
-                    out
-                })
-                .collect();
-            let mut shadow_rays = Vec::new();
-            let mut shadow_add = Vec::new();
-            let mut shadow_light = Vec::new();
-            rays.clear();
-            items.clear();
-            for o in outs {
-                for (s, c) in o.add {
-                    radiance[s as usize] += c;
-                }
-                for (s, c) in o.cover {
-                    coverage[s as usize] += c;
-                }
-                shadow_rays.extend(o.shadow_rays);
-                shadow_add.extend(o.shadow_add);
-                shadow_light.extend(o.shadow_light);
-                rays.extend(o.next_rays);
-                items.extend(o.next_items);
-            }
-            work.rays.secondary += rays.len() as u64;
-            work.rays.shadow += shadow_rays.len() as u64;
-            work.shade += clock.elapsed();
-
-            let clock = Instant::now();
-            let blocked = occluded_by_light(tracer, &shadow_rays, &shadow_light);
-            work.trace += clock.elapsed();
-
-            let clock = Instant::now();
-            for ((s, c), b) in shadow_add.into_iter().zip(blocked) {
-                if !b {
-                    radiance[s as usize] += c;
-                }
-            }
-            work.shade += clock.elapsed();
-        }
-
-        if any_aov && spp > 1 {
-            let clock = Instant::now();
-            let centre: Vec<Ray> = (0..npix)
-                .into_par_iter()
-                .with_min_len(BLOCK)
-                .map(|i| {
-                    let p = px0 + i;
-                    camera.ray((p % w) as f32 + 0.5, (p / w) as f32 + 0.5)
-                })
-                .collect();
-            work.rays.primary += npix as u64;
-            work.shade += clock.elapsed();
-            let clock = Instant::now();
-            let mut chits = vec![None; npix];
-            tracer.intersect_batch(&centre, &mut chits);
-            work.trace += clock.elapsed();
-            let clock = Instant::now();
-            write_aovs(ctx, &mut fb, px0, &centre, &chits);
-            work.shade += clock.elapsed();
-        }
-
-        let clock = Instant::now();
-        let inv = 1.0 / spp as f32;
-        fb.rgba[px0..px0 + npix]
-            .par_iter_mut()
-            .enumerate()
-            .with_min_len(BLOCK)
-            .for_each(|(i, px)| {
-                let mut c = Vec3::ZERO;
-                let mut a = 0.0;
-                for s in i * spp..(i + 1) * spp {
-                    c += radiance[s];
-                    a += coverage[s];
-                }
-                let c = c * inv;
-                *px = [c.x, c.y, c.z, (a * inv).min(1.0)];
-            });
-        work.shade += clock.elapsed();
-        y0 = y1;
-    }
-    (fb, work)
-}
-
-/// AOVs of the pixels `px0..px0 + rays.len()` from their centre rays.
-fn write_aovs(
-    ctx: &ShadeContext<'_>,
-    fb: &mut FrameBuffers,
-    px0: usize,
-    rays: &[Ray],
-    hits: &[Option<Hit>],
-) {
-    let n = rays.len();
-    if let Some(depth) = &mut fb.depth {
-        depth[px0..px0 + n]
-            .par_iter_mut()
-            .zip(rays.par_iter().zip(hits))
-            .for_each(|(z, (r, h))| {
-                *z = h.map_or(f32::INFINITY, |h| h.t * r.dir.length());
-            });
-    }
-    if fb.normal.is_none() && fb.albedo.is_none() {
-        return;
-    }
-    let vals: Vec<([f32; 3], [f32; 3])> = rays
-        .par_iter()
-        .zip(hits)
-        .with_min_len(BLOCK)
-        .map(|(r, h)| h.map_or(([0.0; 3], [0.0; 3]), |h| ctx.aov(r, &h)))
-        .collect();
-    if let Some(normal) = &mut fb.normal {
-        for (d, v) in normal[px0..px0 + n].iter_mut().zip(&vals) {
-            *d = v.0;
-        }
-    }
-    if let Some(albedo) = &mut fb.albedo {
-        for (d, v) in albedo[px0..px0 + n].iter_mut().zip(&vals) {
-            *d = v.1;
-        }
     }
 }
 
@@ -858,21 +682,5 @@ mod tests {
         assert_eq!(wrap(4, 4, Wrap::MirroredRepeat), 3);
         assert_eq!(wrap(-1, 4, Wrap::MirroredRepeat), 0);
         assert_eq!(wrap(8, 4, Wrap::MirroredRepeat), 0);
-    }
-
-    #[test]
-    fn samples_are_stratified_and_centred_for_one() {
-        assert_eq!(sample_offset(3, 1, 2, 0, 1), (0.5, 0.5));
-        let mut cells = [false; 4];
-        for k in 0..4 {
-            let (x, y) = sample_offset(7, 10, 20, k, 4);
-            assert!((0.0..1.0).contains(&x) && (0.0..1.0).contains(&y));
-            cells[(x * 2.0) as usize + 2 * (y * 2.0) as usize] = true;
-        }
-        assert!(cells.iter().all(|&c| c), "one sample in each quarter");
-        assert_ne!(
-            sample_offset(7, 10, 20, 0, 4),
-            sample_offset(8, 10, 20, 0, 4)
-        );
     }
 }

@@ -1,0 +1,198 @@
+//! The static PSF and a dynamic layer queried together ([`Layered`]).
+
+use super::DynamicLayer;
+use crate::geometry::{Hit, Intersector, Ray, RayPre};
+use crate::psf::batch::binned;
+use crate::psf::point::{trace_batch, Plan, Sources};
+use crate::psf::stats::{Counter, NoCount, RayStats};
+use crate::psf::Psf;
+
+/// The static PSF and a dynamic layer queried together.
+#[derive(Clone, Debug)]
+pub struct Layered<'a> {
+    psf: &'a Psf,
+    dynamic: &'a DynamicLayer,
+    /// Per static subfield, the dynamic subfield of the closest direction: a batch,
+    /// which knows each ray's static subfield, walks that dynamic grid without a second
+    /// direction lookup (a doubled lookup had cost 4.7% of the trace, `benches/PERF.md`
+    /// step 51).
+    dyn_of: Vec<u8>,
+}
+
+/// Which triangle a [`Layered`] hit names: its [`Hit::tri`] numbers the static PSF's
+/// triangles first, then the dynamic layer's (`static count + i`); this tells the two
+/// apart ([`Layered::prim`], [`Prim::from_index`]).
+#[non_exhaustive]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Prim {
+    /// Static triangle `i`: `psf.triangles()[i]`.
+    Static(u32),
+    /// Moving triangle `i`: the `i`-th of the last [`DynamicLayer::update`]'s input.
+    Moving(u32),
+}
+
+impl Prim {
+    /// What hit number `tri` names over `statics` static triangles.
+    #[inline]
+    pub fn from_index(tri: u32, statics: usize) -> Prim {
+        if (tri as usize) < statics {
+            Prim::Static(tri)
+        } else {
+            Prim::Moving(tri - statics as u32)
+        }
+    }
+}
+
+impl Psf {
+    /// Queries over this PSF and `dynamic` together; dynamic triangle `i` is reported
+    /// as `self.triangles().len() + i` ([`Layered::prim`] tells which is which).
+    pub fn with_dynamic<'a>(&'a self, dynamic: &'a DynamicLayer) -> Layered<'a> {
+        // At most 7 dynamic subfields at level 1, 469 at level 4: a u16 would do for any
+        // level, a u8 holds the levels up to 3 (109); level 4 falls back to the lookup.
+        let dyn_of = if dynamic.subfields.len() <= u8::MAX as usize + 1 {
+            let dirs = self.subfields.iter().map(|s| s.frame.d);
+            dirs.map(|d| dynamic.table.lookup(d) as u8).collect()
+        } else {
+            Vec::new()
+        };
+        Layered {
+            psf: self,
+            dynamic,
+            dyn_of,
+        }
+    }
+}
+
+impl Layered<'_> {
+    /// Whether `hit` (one of this query's) names a static or a moving triangle, and
+    /// which.
+    #[inline]
+    pub fn prim(&self, hit: &Hit) -> Prim {
+        Prim::from_index(hit.tri, self.psf.triangles().len())
+    }
+
+    /// `sub`: the static subfield, when a batch knows it already.
+    fn trace<const ANY: bool, C: Counter>(
+        &self,
+        ray: &Ray,
+        sub: Option<usize>,
+        count: &mut C,
+    ) -> Option<Hit> {
+        if !ray.is_valid() {
+            return None;
+        }
+        // One shear for both layers: the dynamic walk's ray differs in `t_max` alone.
+        let pre = RayPre::new(ray.origin, ray.dir);
+        let s = self.psf.trace_pre::<ANY, C>(ray, &pre, sub, count);
+        let dyn_sub = sub.and_then(|k| self.dyn_of.get(k)).map(|&k| k as usize);
+        if ANY && s.is_some() {
+            return s;
+        }
+        // The dynamic walk stops at the static hit: a dynamic triangle at the same t
+        // loses the tie anyway (its number is larger).
+        let mut r = *ray;
+        if let Some(h) = &s {
+            r.t_max = h.t;
+        }
+        let offset = self.psf.triangles().len() as u32;
+        let d = self
+            .dynamic
+            .trace_pre::<ANY, C>(&r, &pre, dyn_sub, count)
+            .map(|mut h| {
+                h.tri += offset;
+                h
+            });
+        match (s, d) {
+            (Some(a), Some(b)) => Some(if b.is_closer_than(&a) { b } else { a }),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// Whether [`intersect_batch`](Intersector::intersect_batch) and
+    /// [`occluded_batch`](Intersector::occluded_batch) trace some of `rays` through point
+    /// grids (grids by central projection around a point rays pass through): when a share
+    /// of a sample passes one point (a camera's rays, a light's shadow rays, reflections
+    /// off one plane) and those rays are enough to pay for what must be built (for camera
+    /// and shadow rays at least a twelfth as many as triangles times the cube faces they
+    /// use, for rays that merely pass the point six times that; only the moving triangles
+    /// count once the static PSF keeps a grid around the point, which it does for a
+    /// point seen in an earlier batch). Either way the hits are the same. It builds the
+    /// grids to find out, and keeps and remembers what a batch would.
+    pub fn point_grid_for(&self, rays: &[Ray]) -> bool {
+        !Plan::for_batch(rays, &self.sources()).is_empty()
+    }
+
+    /// Both layers' triangles, for a point grid.
+    fn sources(&self) -> Sources<'_> {
+        let d = self.dynamic;
+        Sources {
+            statics: self.psf.triangles(),
+            moving_pre: &d.local,
+            moving_number: &d.order,
+            margin: self
+                .psf
+                .margin()
+                .max(if d.is_empty() { 0.0 } else { d.margin }),
+            bounds: if d.is_empty() {
+                *self.psf.bounds()
+            } else {
+                self.psf.bounds().union(&d.clip)
+            },
+            cache: self.psf.point_cache(),
+        }
+    }
+
+    /// The closest hit, also counting the work done (both layers) into `stats`.
+    pub fn intersect_counted(&self, ray: &Ray, stats: &mut RayStats) -> Option<Hit> {
+        stats.rays += 1;
+        self.trace::<false, _>(ray, None, stats)
+    }
+
+    /// Any hit, also counting the work done into `stats`.
+    pub fn occluded_counted(&self, ray: &Ray, stats: &mut RayStats) -> bool {
+        stats.rays += 1;
+        self.trace::<true, _>(ray, None, stats).is_some()
+    }
+}
+
+impl Intersector for Layered<'_> {
+    fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.trace::<false, _>(ray, None, &mut NoCount)
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        self.trace::<true, _>(ray, None, &mut NoCount).is_some()
+    }
+
+    /// Through point grids for the rays that pass a point grids pay for (a camera's
+    /// primary rays, shadow rays towards a point light, reflections off a plane;
+    /// [`Layered::point_grid_for`]); the others binned by the static PSF's subfield
+    /// (`psf::batch`).
+    fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        let bins = self.psf.subfields().len().max(1);
+        let walk = |rays: &[Ray], out: &mut [Option<Hit>]| {
+            binned(
+                rays,
+                out,
+                bins,
+                |r| self.psf.bin_of(r),
+                |r, k| self.trace::<false, _>(r, Some(k), &mut NoCount),
+            )
+        };
+        trace_batch::<false, _>(rays, out, &self.sources(), |h| h, walk);
+    }
+
+    fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
+        let bins = self.psf.subfields().len().max(1);
+        let walk = |rays: &[Ray], out: &mut [bool]| {
+            binned(
+                rays,
+                out,
+                bins,
+                |r| self.psf.bin_of(r),
+                |r, k| self.trace::<true, _>(r, Some(k), &mut NoCount).is_some(),
+            )
+        };
+        trace_batch::<true, _>(rays, out, &self.sources(), |h| h.is_some(), walk);
+    }
+}

@@ -1,0 +1,107 @@
+//! The geometry of the six cube faces around a point: which rays qualify for a grid
+//! around it ([`passes`]), the face and projected point of a ray's reference direction
+//! ([`project`]), and rounding to `f32` outwards. Used by every other part; uses none.
+
+use glam::{DVec3, Vec3};
+
+use crate::geometry::Ray;
+
+/// `x` rounded to an `f32` no greater than it.
+#[inline]
+pub(super) fn down(x: f64) -> f32 {
+    let y = x as f32;
+    if y as f64 <= x || x.is_nan() {
+        y
+    } else if y.is_infinite() {
+        f32::MAX
+    } else {
+        // At least one unit in the last place below `y`, which rounding to nearest put
+        // at most that far above `x`.
+        y - (y.abs() * f32::EPSILON).max(f32::MIN_POSITIVE)
+    }
+}
+
+/// `x` rounded to an `f32` no less than it.
+#[inline]
+pub(super) fn up(x: f64) -> f32 {
+    let y = x as f32;
+    if y as f64 >= x || x.is_nan() {
+        y
+    } else if y.is_infinite() {
+        f32::MIN
+    } else {
+        y + (y.abs() * f32::EPSILON).max(f32::MIN_POSITIVE)
+    }
+}
+
+/// Face `f` (axis `f / 2`, negative when `f` is odd) coordinates `(u, v, z)` of `x`.
+#[inline]
+pub(super) fn face_coords(f: usize, x: DVec3) -> (f64, f64, f64) {
+    let k = f / 2;
+    let a = x.to_array();
+    let z = if f % 2 == 0 { a[k] } else { -a[k] };
+    (a[(k + 1) % 3], a[(k + 2) % 3], z)
+}
+
+/// The face whose frustum holds direction `a`.
+#[inline]
+pub(super) fn face_of(a: DVec3) -> usize {
+    let m = a.abs();
+    let k = if m.x >= m.y && m.x >= m.z {
+        0
+    } else if m.y >= m.z {
+        1
+    } else {
+        2
+    };
+    2 * k + (a[k] < 0.0) as usize
+}
+
+/// Whether a ray qualifies for a grid around `c` (see the module's notes), and if so
+/// its reference direction: `Some(true)` for `d`, `Some(false)` for `-d`. No division.
+#[inline(always)]
+pub(super) fn passes(c: DVec3, r: f64, rho_max: f64, ray: &Ray) -> Option<bool> {
+    if !ray.is_valid() || ray.t_min > ray.t_max {
+        return None;
+    }
+    let o = ray.origin.as_dvec3() - c;
+    let d = ray.dir.as_dvec3();
+    let dd = d.length_squared();
+    // The line misses `c` by |o x d| / |d|; NaN (numbers that overflow here) fails.
+    if o.cross(d)
+        .length_squared()
+        .partial_cmp(&(rho_max * rho_max * dd))
+        != Some(std::cmp::Ordering::Less)
+    {
+        return None;
+    }
+    // `c`'s foot on the line is at `tc = -o.d / dd`; `half` is `r / 2` in `t`, times dd.
+    let (tc, half) = (-o.dot(d), 0.5 * r * dd.sqrt());
+    if ray.t_min as f64 * dd >= tc - half {
+        Some(true)
+    } else if ray.t_max as f64 * dd <= tc + half {
+        Some(false)
+    } else {
+        None
+    }
+}
+
+/// The face and projected point of reference direction `a` (`dir`, negated unless
+/// `forward`), the point rounded to `f32` (which [`EPS_P`] allows for).
+#[inline(always)]
+pub(super) fn project(dir: Vec3, forward: bool) -> (u8, [f32; 2]) {
+    let a = if forward { dir } else { -dir }.as_dvec3();
+    let f = face_of(a);
+    let (u, v, z) = face_coords(f, a);
+    let inv = 1.0 / z;
+    (f as u8, [(u * inv) as f32, (v * inv) as f32])
+}
+
+/// The rounding of a ray's projected point (`|p| <= 1`) to `f32`, with room to spare.
+pub(super) const EPS_P: f64 = 2e-7;
+
+/// `passes` and `project` together, for tests and sampling.
+#[inline]
+pub(super) fn aim(c: DVec3, r: f64, rho_max: f64, ray: &Ray) -> Option<(u8, [f32; 2])> {
+    passes(c, r, rho_max, ray).map(|fw| project(ray.dir, fw))
+}

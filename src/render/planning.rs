@@ -1,0 +1,288 @@
+//! Planning a render: the output pattern, the camera source, the frames (range, shard)
+//! and the checks made before anything is written (option values against the scene,
+//! output folders), and which frames a resumed run skips.
+
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+
+use super::camera::{animation_bounds, CameraModel};
+use super::options::{FrameRange, RenderOptions, MAX_SIDE};
+use super::output::is_complete;
+use super::stats;
+use super::writer::check_writable;
+use super::RenderError;
+use crate::scene::{ClipSelection, Scene, Split, SplitSummary};
+
+/// An output pattern: one run of `#` replaced by the zero-padded frame number.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OutputPattern {
+    /// Text before and after the run of `#`, and the run's length; `None` without `#`.
+    parts: Option<(String, usize, String)>,
+    fixed: PathBuf,
+}
+
+impl OutputPattern {
+    pub fn parse(pattern: &Path) -> Result<OutputPattern, RenderError> {
+        if pattern.as_os_str().is_empty() {
+            return Err(RenderError::Option(
+                "-o: the output pattern is empty".into(),
+            ));
+        }
+        let Some(s) = pattern.to_str() else {
+            // Not UTF-8: no '#' can be found reliably; take it as a fixed name.
+            return Ok(OutputPattern {
+                parts: None,
+                fixed: pattern.to_path_buf(),
+            });
+        };
+        let runs = s
+            .as_bytes()
+            .windows(2)
+            .filter(|w| w[0] != b'#' && w[1] == b'#')
+            .count()
+            + usize::from(s.starts_with('#'));
+        if runs > 1 {
+            return Err(RenderError::Option(format!(
+                "-o {s:?}: the pattern has {runs} runs of '#'; it needs exactly one (or none for a single frame)"
+            )));
+        }
+        let parts = s.find('#').map(|a| {
+            let b = s[a..].find(|c| c != '#').map_or(s.len(), |k| a + k);
+            (s[..a].to_string(), b - a, s[b..].to_string())
+        });
+        if s.ends_with('/') || pattern.file_name().is_none() {
+            return Err(RenderError::Option(format!(
+                "-o {s:?}: names a folder, not a file"
+            )));
+        }
+        Ok(OutputPattern {
+            parts,
+            fixed: pattern.to_path_buf(),
+        })
+    }
+
+    /// Whether the pattern numbers its frames.
+    pub fn is_numbered(&self) -> bool {
+        self.parts.is_some()
+    }
+
+    /// The file of `frame`.
+    pub fn path(&self, frame: u32) -> PathBuf {
+        match &self.parts {
+            Some((a, n, b)) => PathBuf::from(format!("{a}{frame:0n$}{b}")),
+            None => self.fixed.clone(),
+        }
+    }
+}
+
+/// Where each frame's camera comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum CameraSource {
+    /// A scene camera (by name, or the first), posed every frame.
+    Scene(Option<String>),
+    /// A fixed camera: given outright, or framing the scene.
+    Fixed(CameraModel),
+}
+
+/// A checked render: which frames, at what times, from which camera.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderPlan {
+    pub selection: ClipSelection,
+    pub fps: f32,
+    /// The range before sharding.
+    pub range: FrameRange,
+    /// The frames this run renders (after `--shard`), ascending.
+    pub frames: Vec<u32>,
+    pub pattern: OutputPattern,
+    pub camera: CameraSource,
+    pub split: SplitSummary,
+}
+
+impl RenderPlan {
+    /// Animation time of `frame`, seconds.
+    pub fn time(&self, frame: u32) -> f64 {
+        frame as f64 / self.fps as f64
+    }
+}
+
+/// Checks `opts` against `scene` without touching the file system.
+pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderError> {
+    let selection = match &opts.animation {
+        Some(a) => scene.resolve_clip(a)?,
+        None => ClipSelection::All,
+    };
+    let fps = match opts.fps {
+        Some(f) if f.is_finite() && f > 0.0 => f,
+        Some(f) => {
+            return Err(RenderError::Option(format!(
+                "--fps {f}: must be a positive number"
+            )))
+        }
+        None => scene
+            .fps
+            .filter(|f| f.is_finite() && *f > 0.0)
+            .unwrap_or(24.0),
+    };
+    for (v, what) in [(opts.width, "width"), (opts.height, "height")] {
+        if !(1..=MAX_SIDE).contains(&v) {
+            return Err(RenderError::Option(format!(
+                "--size: the {what} {v} is not in 1..={MAX_SIDE}"
+            )));
+        }
+    }
+    if !(1..=65536).contains(&opts.spp) {
+        return Err(RenderError::Option(format!(
+            "--spp {}: must be in 1..=65536",
+            opts.spp
+        )));
+    }
+    if opts.max_depth > 64 {
+        return Err(RenderError::Option(format!(
+            "--max-depth {}: at most 64",
+            opts.max_depth
+        )));
+    }
+    let range = match opts.frames {
+        Some(r) if r.end > r.start => r,
+        Some(r) => {
+            return Err(RenderError::Option(format!(
+                "--frames {}..{}: the range is empty (the end is exclusive and must be above the start)",
+                r.start, r.end
+            )))
+        }
+        None => {
+            let d = scene.duration(selection) as f64;
+            // The last frame at or before the end of the animation. The end is an f32 key
+            // time, a few ulps (2^-24 each, relative) off the frame time it stands for:
+            // 299/30 s is stored as 9.966666 s, 298.99999 frames at 30 fps. Allow 2^-20
+            // of it, so the last key's frame is not dropped.
+            let last = if d > 0.0 {
+                let x = d * fps as f64;
+                (x + x * (1.0 / 1_048_576.0) + 1e-6)
+                    .floor()
+                    .min(u32::MAX as f64 - 1.0) as u32
+            } else {
+                0
+            };
+            FrameRange {
+                start: 0,
+                end: last + 1,
+            }
+        }
+    };
+    let pattern = OutputPattern::parse(&opts.output)?;
+    if !pattern.is_numbered() && range.end - range.start != 1 {
+        return Err(RenderError::Option(format!(
+            "-o {}: {} frames ({}..{}) need a '#' in the pattern for the frame number",
+            opts.output.display(),
+            range.end - range.start,
+            range.start,
+            range.end
+        )));
+    }
+    let frames: Vec<u32> = match opts.shard {
+        Some(s) if s.count == 0 || s.index >= s.count => {
+            return Err(RenderError::Option(format!(
+                "--shard {}/{}: needs N >= 1 and 0 <= I < N",
+                s.index, s.count
+            )))
+        }
+        Some(s) => (range.start..range.end)
+            .filter(|k| k % s.count == s.index)
+            .collect(),
+        None => (range.start..range.end).collect(),
+    };
+    let camera = if let Some(l) = &opts.look_at {
+        CameraSource::Fixed(CameraModel::look_at(l, opts.width, opts.height)?)
+    } else if let Some(name) = &opts.camera {
+        if scene.camera_at(selection, 0.0, Some(name)).is_none() {
+            return Err(RenderError::UnknownCamera {
+                requested: name.clone(),
+                available: scene.camera_names(),
+            });
+        }
+        CameraSource::Scene(Some(name.clone()))
+    } else if scene.camera_at(selection, 0.0, None).is_some() {
+        CameraSource::Scene(None)
+    } else {
+        let (lo, hi) = animation_bounds(scene, selection).unwrap_or((-Vec3::ONE, Vec3::ONE));
+        CameraSource::Fixed(CameraModel::framing(lo, hi, opts.width, opts.height))
+    };
+    if let Some(p) = &opts.plot {
+        stats::plot_kind(p)?;
+    }
+    Ok(RenderPlan {
+        selection,
+        fps,
+        range,
+        frames,
+        pattern,
+        camera,
+        split: static_dynamic_split(scene, selection).summary(),
+    })
+}
+
+/// The split a render uses: the static instances of *all* clips (exactly what `subfield
+/// bake` writes, so one baked file serves every `--animation`), the other instances
+/// dynamic and posed with the selected clips.
+pub(super) fn static_dynamic_split(scene: &Scene, sel: ClipSelection) -> Split {
+    let all = scene.split(ClipSelection::All);
+    Split {
+        selection: sel,
+        ..all
+    }
+}
+
+/// Checks every file the run writes can be made (frames, stats, plot, preview), the last
+/// of the checks before a frame is rendered, and removes the temporaries a killed run left
+/// beside this run's frames.
+pub(super) fn check_outputs(plan: &RenderPlan, opts: &RenderOptions) -> Result<(), RenderError> {
+    if let Some(&first) = plan.frames.first() {
+        let first = plan.pattern.path(first);
+        check_writable(&first)?;
+        // Temporaries a killed run left beside this run's frames go; those of a live
+        // process (a concurrent shard) stay. Best effort: a folder that cannot be
+        // listed has failed the check above already.
+        let names: std::collections::HashSet<String> = plan
+            .frames
+            .iter()
+            .filter_map(|&f| Some(plan.pattern.path(f).file_name()?.to_str()?.to_owned()))
+            .collect();
+        let dir = crate::atomic::folder_of(&first);
+        let _ = crate::atomic::remove_stale_temporaries(&dir, |t| names.contains(t));
+    }
+    for p in [&opts.stats, &opts.plot].into_iter().flatten() {
+        check_writable(p)?;
+    }
+    if let Some(p) = &opts.preview {
+        check_writable(&p.path)?;
+    }
+    Ok(())
+}
+
+/// Whether a resumed run skips `path`: its file is complete for these options.
+pub(super) fn skips(opts: &RenderOptions, path: &Path) -> bool {
+    opts.resume && is_complete(path, opts.width, opts.height, opts.aovs, opts.pixel_type)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn patterns() {
+        let p = OutputPattern::parse(Path::new("out/frame.####.exr")).unwrap();
+        assert!(p.is_numbered());
+        assert_eq!(p.path(7), PathBuf::from("out/frame.0007.exr"));
+        assert_eq!(p.path(123456), PathBuf::from("out/frame.123456.exr"));
+        let p = OutputPattern::parse(Path::new("#.exr")).unwrap();
+        assert_eq!(p.path(3), PathBuf::from("3.exr"));
+        let p = OutputPattern::parse(Path::new("still.exr")).unwrap();
+        assert!(!p.is_numbered());
+        assert_eq!(p.path(9), PathBuf::from("still.exr"));
+        for bad in ["a#b#.exr", "#x#", "", "out/"] {
+            assert!(OutputPattern::parse(Path::new(bad)).is_err(), "{bad}");
+        }
+    }
+}

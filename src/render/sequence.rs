@@ -1,0 +1,342 @@
+//! The sequence loop: the static part opened or baked, then frame by frame the scene
+//! posed, the dynamic layer updated, the frame traced and shaded and handed to the
+//! writer thread (a channel of capacity 1, so one frame is written while the next is
+//! traced), and the tables written at the end.
+
+use std::path::PathBuf;
+use std::sync::mpsc;
+use std::time::Instant;
+
+use glam::Vec3;
+
+use super::camera::CameraModel;
+use super::options::RenderOptions;
+use super::output;
+use super::planning::{check_outputs, plan, skips, static_dynamic_split, CameraSource, RenderPlan};
+use super::shade::{FrameBuffers, ShadeContext};
+use super::stats::{self, stats_csv, FrameStats};
+use super::wavefront::render_frame;
+use super::writer::{write_job, Job};
+use super::{FrameReport, RenderError, RenderEvent, RenderSummary};
+use crate::format::{self, OpenOptions};
+use crate::psf::{DynamicLayer, Psf, PsfParams};
+use crate::scene::{ClipSelection, Scene, Split, TriangleSoup};
+
+/// Renders the planned frames of `scene` to EXR files (see the module docs). Every
+/// option is checked before the first file is written; `on_event` sees the plan, the
+/// static part, and each frame as it is written or skipped. Its parallel loops start
+/// soonest when it is called from a rayon pool thread (`subfield render` calls it inside
+/// `rayon::scope`; [`Intersector`](crate::Intersector) says why).
+pub fn render_sequence(
+    scene: &Scene,
+    opts: &RenderOptions,
+    on_event: &mut dyn FnMut(RenderEvent<'_>),
+) -> Result<RenderSummary, RenderError> {
+    let wall = Instant::now();
+    let plan = plan(scene, opts)?;
+    on_event(RenderEvent::Planned(&plan));
+
+    // The static part: opened (refused when stale) or baked in memory.
+    let split_all = scene.split(ClipSelection::All);
+    let split = static_dynamic_split(scene, plan.selection);
+    let static_soup = scene.static_triangles(&split_all);
+    let clock = Instant::now();
+    let psf = static_part(&static_soup, opts)?;
+    let static_seconds = clock.elapsed().as_secs_f64();
+
+    // Folders, last of the checks.
+    check_outputs(&plan, opts)?;
+    on_event(RenderEvent::StaticReady {
+        triangles: static_soup.len(),
+        baked_file: opts.baked.is_some(),
+        seconds: static_seconds,
+    });
+
+    let frames = Frames {
+        scene,
+        opts,
+        plan: &plan,
+        split: &split,
+        psf: &psf,
+        static_soup: &static_soup,
+    };
+    let Done {
+        mut stats_out,
+        skipped,
+        preview_written,
+    } = frames.run(on_event)?;
+    stats_out.sort_by_key(|s| s.frame);
+    if let Some(p) = &opts.stats {
+        output::write_atomically(p, stats_csv(&stats_out).as_bytes())?;
+    }
+    if let Some(p) = &opts.plot {
+        output::write_atomically(p, &stats::plot_bytes(p, &stats_out)?)?;
+    }
+    Ok(RenderSummary {
+        rendered: stats_out.len(),
+        skipped,
+        frames: stats_out,
+        preview: preview_written,
+        static_seconds,
+        wall: wall.elapsed(),
+        plan,
+    })
+}
+
+/// The static part of a render: opened from `--baked` (refused when stale) or baked in
+/// memory.
+fn static_part(static_soup: &TriangleSoup, opts: &RenderOptions) -> Result<Psf, RenderError> {
+    Ok(match &opts.baked {
+        Some(path) => {
+            let hash = format::scene_hash(&static_soup.positions);
+            format::open_psf(
+                path,
+                &OpenOptions {
+                    expect_scene_hash: Some(hash),
+                },
+            )?
+            .psf
+        }
+        None => Psf::build(
+            &static_soup.positions,
+            &PsfParams::for_triangles(static_soup.len()),
+        )?,
+    })
+}
+
+/// What the frame loop renders from.
+struct Frames<'a> {
+    scene: &'a Scene,
+    opts: &'a RenderOptions,
+    plan: &'a RenderPlan,
+    split: &'a Split,
+    psf: &'a Psf,
+    static_soup: &'a TriangleSoup,
+}
+
+/// What the frame loop leaves: the written frames' stats (in the order written), the
+/// frames skipped, the preview written.
+struct Done {
+    stats_out: Vec<FrameStats>,
+    skipped: usize,
+    preview_written: Option<PathBuf>,
+}
+
+/// The frame loop's account of the frames written, and the first error.
+struct Written {
+    total: usize,
+    stats_out: Vec<FrameStats>,
+    preview_written: Option<PathBuf>,
+    first_error: Option<RenderError>,
+}
+
+impl Written {
+    /// Takes the writer's answer for one frame: its stats and event, or the error.
+    fn finish(
+        &mut self,
+        r: Result<(Job, f64), RenderError>,
+        on_event: &mut dyn FnMut(RenderEvent<'_>),
+    ) {
+        match r {
+            Ok((job, ms)) => {
+                let mut st = job.stats;
+                st.write_ms = ms;
+                self.stats_out.push(st);
+                if job.preview.is_some() {
+                    self.preview_written = job.preview.clone();
+                }
+                on_event(RenderEvent::Frame(&FrameReport {
+                    frame: st.frame,
+                    index: job.index,
+                    total: self.total,
+                    path: job.path,
+                    skipped: false,
+                    stats: Some(st),
+                }));
+            }
+            Err(e) => {
+                self.first_error.get_or_insert(e);
+            }
+        }
+    }
+}
+
+/// The preview still to write: (its frame, its file, whether the first rendered frame
+/// takes it).
+type PreviewPending = Option<(u32, PathBuf, bool)>;
+
+/// The preview's file when `frame` is the one it shows (the first rendered, or the one
+/// asked for); it is then no longer pending.
+fn take_preview(pending: &mut PreviewPending, frame: u32) -> Option<PathBuf> {
+    match pending {
+        Some((f, p, first)) if *first || *f == frame => {
+            let p = p.clone();
+            *pending = None;
+            Some(p)
+        }
+        _ => None,
+    }
+}
+
+impl Frames<'_> {
+    /// Every planned frame rendered (or skipped when resumed) and handed to a writer
+    /// thread; stops at the first error, once the writer has answered for the frames
+    /// sent.
+    fn run(&self, on_event: &mut dyn FnMut(RenderEvent<'_>)) -> Result<Done, RenderError> {
+        let (opts, plan) = (self.opts, self.plan);
+        let preview_frame = opts.preview.as_ref().map(|p| {
+            (
+                p.frame.unwrap_or(u32::MAX),
+                p.path.clone(),
+                p.frame.is_none(),
+            )
+        });
+        let static_bounds = self.static_soup.bounds();
+        let total = plan.frames.len();
+        let mut written = Written {
+            total,
+            stats_out: Vec::with_capacity(total),
+            preview_written: None,
+            first_error: None,
+        };
+        let mut skipped = 0usize;
+
+        std::thread::scope(|sc| {
+            let (tx, rx) = mpsc::sync_channel::<Job>(1);
+            let (done_tx, done_rx) = mpsc::channel::<Result<(Job, f64), RenderError>>();
+            sc.spawn(move || {
+                for job in rx {
+                    let r = write_job(&job, opts).map(|ms| (job, ms));
+                    let failed = r.is_err();
+                    if done_tx.send(r).is_err() || failed {
+                        break;
+                    }
+                }
+            });
+
+            // The moving triangles get their own grids, sized for their count like a bake.
+            let mut dl = DynamicLayer::for_triangles(plan.split.dynamic_triangles);
+            let mut dyn_soup = TriangleSoup::new();
+            let mut preview_pending = preview_frame;
+            for (index, &frame) in plan.frames.iter().enumerate() {
+                while let Ok(r) = done_rx.try_recv() {
+                    written.finish(r, on_event);
+                }
+                if written.first_error.is_some() {
+                    break;
+                }
+                let path = plan.pattern.path(frame);
+                if skips(opts, &path) {
+                    skipped += 1;
+                    on_event(RenderEvent::Frame(&FrameReport {
+                        frame,
+                        index,
+                        total,
+                        path,
+                        skipped: true,
+                        stats: None,
+                    }));
+                    continue;
+                }
+                match self.render_one(static_bounds, &mut dl, &mut dyn_soup, frame) {
+                    Ok((fb, st)) => {
+                        let job = Job {
+                            index,
+                            path,
+                            frame: fb,
+                            stats: st,
+                            preview: take_preview(&mut preview_pending, frame),
+                        };
+                        if tx.send(job).is_err() {
+                            written.first_error.get_or_insert(RenderError::WriterGone);
+                            break;
+                        }
+                    }
+                    Err(e) => {
+                        written.first_error.get_or_insert(e);
+                        break;
+                    }
+                }
+            }
+            drop(tx);
+            for r in done_rx {
+                written.finish(r, on_event);
+            }
+        });
+        if let Some(e) = written.first_error {
+            return Err(e);
+        }
+        Ok(Done {
+            stats_out: written.stats_out,
+            skipped,
+            preview_written: written.preview_written,
+        })
+    }
+
+    /// Poses, updates and renders one frame.
+    fn render_one(
+        &self,
+        static_bounds: Option<(Vec3, Vec3)>,
+        dl: &mut DynamicLayer,
+        dyn_soup: &mut TriangleSoup,
+        frame: u32,
+    ) -> Result<(FrameBuffers, FrameStats), RenderError> {
+        let (scene, opts, plan) = (self.scene, self.opts, self.plan);
+        let (split, psf, static_soup) = (self.split, self.psf, self.static_soup);
+        let time = plan.time(frame);
+        let t = time as f32;
+        let clock = Instant::now();
+        scene.dynamic_triangles_at(split, t, dyn_soup);
+        dl.update(&dyn_soup.positions)?;
+        let camera = match &plan.camera {
+            CameraSource::Fixed(c) => *c,
+            CameraSource::Scene(name) => {
+                let cam = scene
+                    .camera_at(plan.selection, t, name.as_deref())
+                    .ok_or_else(|| RenderError::UnknownCamera {
+                        requested: name.clone().unwrap_or_default(),
+                        available: scene.camera_names(),
+                    })?;
+                CameraModel::from_scene(&cam, opts.width, opts.height)
+            }
+        };
+        let lights = scene.lights_at(plan.selection, t);
+        let bounds = match (static_bounds, dyn_soup.bounds()) {
+            (Some((a, b)), Some((c, d))) => Some((a.min(c), b.max(d))),
+            (a, b) => a.or(b),
+        };
+        let extent = bounds.map_or(1.0, |(lo, hi)| (hi - lo).length());
+        let ctx = ShadeContext::new(
+            scene,
+            static_soup,
+            dyn_soup,
+            &lights,
+            &camera,
+            opts.shading,
+            extent,
+        );
+        let update_ms = clock.elapsed().as_secs_f64() * 1e3;
+        let tracer = psf.with_dynamic(dl);
+        let (fb, work) = render_frame(
+            &ctx,
+            &tracer,
+            &camera,
+            frame,
+            opts.spp,
+            opts.max_depth,
+            opts.aovs,
+        );
+        Ok((
+            fb,
+            FrameStats {
+                frame,
+                time,
+                update_ms,
+                trace_ms: work.trace.as_secs_f64() * 1e3,
+                shade_ms: work.shade.as_secs_f64() * 1e3,
+                write_ms: 0.0,
+                rays: work.rays,
+            },
+        ))
+    }
+}

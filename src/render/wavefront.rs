@@ -1,0 +1,310 @@
+//! One frame traced as a wavefront (see `shade`): camera rays made per sample, each
+//! depth level traced as one batch and shaded in parallel blocks, the shadow rays traced
+//! one batch per light, the AOVs from the pixel-centre rays; and the frame's buffers,
+//! ray counts and times.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::camera::CameraModel;
+use super::options::Aovs;
+use super::shade::{BlockOut, FrameBuffers, FrameWork, Item, ShadeContext};
+use crate::geometry::{Hit, Intersector, Ray};
+
+/// Rays shaded by one task.
+const BLOCK: usize = 1024;
+/// Samples traced together (bounds the wavefront's memory).
+const CHUNK_SAMPLES: usize = 1 << 18;
+
+/// `occluded_batch` of `rays`, one batch per light (`light[i]` is ray `i`'s): the
+/// shadow rays towards one point light all pass through it, and such a batch is traced
+/// through a point grid around it (`subfield::psf`'s point grids), which a batch mixing
+/// several lights would not get. The answers are the same either way.
+fn occluded_by_light<T: Intersector>(tracer: &T, rays: &[Ray], light: &[u16]) -> Vec<bool> {
+    let mut blocked = vec![false; rays.len()];
+    let lights = light.iter().max().map_or(0, |&l| l as usize + 1);
+    if lights <= 1 {
+        tracer.occluded_batch(rays, &mut blocked);
+        return blocked;
+    }
+    // The rays in order of their light (a stable counting sort), a batch a light.
+    let mut start = vec![0usize; lights + 1];
+    for &l in light {
+        start[l as usize + 1] += 1;
+    }
+    for l in 0..lights {
+        start[l + 1] += start[l];
+    }
+    let mut index = vec![0usize; rays.len()];
+    let mut at = start.clone();
+    for (i, &l) in light.iter().enumerate() {
+        index[at[l as usize]] = i;
+        at[l as usize] += 1;
+    }
+    let sorted: Vec<Ray> = index.iter().map(|&i| rays[i]).collect();
+    let mut out = vec![false; rays.len()];
+    for l in 0..lights {
+        let (a, b) = (start[l], start[l + 1]);
+        tracer.occluded_batch(&sorted[a..b], &mut out[a..b]);
+    }
+    for (&i, b) in index.iter().zip(out) {
+        blocked[i] = b;
+    }
+    blocked
+}
+
+/// A 64-bit mix of the inputs (SplitMix64 finaliser over a running combination).
+fn hash(values: [u32; 4]) -> u64 {
+    let mut h = 0x9E37_79B9_7F4A_7C15u64;
+    for v in values {
+        h ^= u64::from(v);
+        h = h.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        h = (h ^ (h >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        h = (h ^ (h >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        h ^= h >> 31;
+    }
+    h
+}
+
+/// Position of sample `k` of `spp` inside pixel `(x, y)` of `frame`, in `[0, 1)²`:
+/// the centre for one sample, else a jittered point in cell `k` of a
+/// `ceil(√spp) × ceil(spp / ceil(√spp))` grid.
+pub fn sample_offset(frame: u32, x: u32, y: u32, k: u32, spp: u32) -> (f32, f32) {
+    if spp <= 1 {
+        return (0.5, 0.5);
+    }
+    let sx = (spp as f64).sqrt().ceil() as u32;
+    let sy = spp.div_ceil(sx);
+    let h = hash([frame, x, y, k]);
+    let rx = (h >> 40) as f32 / (1u64 << 24) as f32;
+    let ry = ((h >> 16) & 0xFF_FFFF) as f32 / (1u64 << 24) as f32;
+    (
+        (((k % sx) as f32 + rx) / sx as f32).min(0.999_999_9),
+        (((k / sx) as f32 + ry) / sy as f32).min(0.999_999_9),
+    )
+}
+
+/// Traces and shades one frame.
+pub fn render_frame<T: Intersector>(
+    ctx: &ShadeContext<'_>,
+    tracer: &T,
+    camera: &CameraModel,
+    frame: u32,
+    spp: u32,
+    max_depth: u32,
+    aovs: Aovs,
+) -> (FrameBuffers, FrameWork) {
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let spp = spp.max(1) as usize;
+    let mut work = FrameWork::default();
+    let mut fb = FrameBuffers {
+        width: camera.width,
+        height: camera.height,
+        rgba: vec![[0.0; 4]; w * h],
+        depth: aovs.depth.then(|| vec![f32::INFINITY; w * h]),
+        normal: aovs.normal.then(|| vec![[0.0; 3]; w * h]),
+        albedo: aovs.albedo.then(|| vec![[0.0; 3]; w * h]),
+    };
+    let any_aov = aovs.depth || aovs.normal || aovs.albedo;
+    let rows_per_chunk = (CHUNK_SAMPLES / (w * spp)).max(1);
+    let mut y0 = 0;
+    while y0 < h {
+        let y1 = (y0 + rows_per_chunk).min(h);
+        let px0 = y0 * w;
+        let npix = (y1 - y0) * w;
+        let nsamples = npix * spp;
+
+        // Primary rays.
+        let clock = Instant::now();
+        let mut rays: Vec<Ray> = (0..nsamples)
+            .into_par_iter()
+            .with_min_len(BLOCK)
+            .map(|s| {
+                let p = px0 + s / spp;
+                let (x, y) = ((p % w) as u32, (p / w) as u32);
+                let (ox, oy) = sample_offset(frame, x, y, (s % spp) as u32, spp as u32);
+                camera.ray(x as f32 + ox, y as f32 + oy)
+            })
+            .collect();
+        let mut items: Vec<Item> = (0..nsamples)
+            .map(|s| Item {
+                sample: s as u32,
+                weight: Vec3::ONE,
+                coverage: 1.0,
+                depth: 0,
+                passes: 0,
+            })
+            .collect();
+        work.rays.primary += nsamples as u64;
+        let mut radiance = vec![Vec3::ZERO; nsamples];
+        let mut coverage = vec![0.0f32; nsamples];
+        work.shade += clock.elapsed();
+
+        let mut first = true;
+        let mut hits: Vec<Option<Hit>> = Vec::new();
+        while !rays.is_empty() {
+            let clock = Instant::now();
+            hits.clear();
+            hits.resize(rays.len(), None);
+            tracer.intersect_batch(&rays, &mut hits);
+            work.trace += clock.elapsed();
+
+            let clock = Instant::now();
+            if first && any_aov {
+                // The centre rays: the primary rays themselves with one sample, else
+                // their own batch (traced below).
+                if spp == 1 {
+                    write_aovs(ctx, &mut fb, px0, &rays, &hits);
+                }
+            }
+            first = false;
+            let outs: Vec<BlockOut> = rays
+                .par_chunks(BLOCK)
+                .zip(items.par_chunks(BLOCK))
+                .zip(hits.par_chunks(BLOCK))
+                .map(|((r, it), hs)| {
+                    let mut out = BlockOut::default();
+                    for ((ray, item), hit) in r.iter().zip(it).zip(hs) {
+                        ctx.shade(ray, item, *hit, max_depth, &mut out);
+                    }
+                    out
+                })
+                .collect();
+            let mut shadow_rays = Vec::new();
+            let mut shadow_add = Vec::new();
+            let mut shadow_light = Vec::new();
+            rays.clear();
+            items.clear();
+            for o in outs {
+                for (s, c) in o.add {
+                    radiance[s as usize] += c;
+                }
+                for (s, c) in o.cover {
+                    coverage[s as usize] += c;
+                }
+                shadow_rays.extend(o.shadow_rays);
+                shadow_add.extend(o.shadow_add);
+                shadow_light.extend(o.shadow_light);
+                rays.extend(o.next_rays);
+                items.extend(o.next_items);
+            }
+            work.rays.secondary += rays.len() as u64;
+            work.rays.shadow += shadow_rays.len() as u64;
+            work.shade += clock.elapsed();
+
+            let clock = Instant::now();
+            let blocked = occluded_by_light(tracer, &shadow_rays, &shadow_light);
+            work.trace += clock.elapsed();
+
+            let clock = Instant::now();
+            for ((s, c), b) in shadow_add.into_iter().zip(blocked) {
+                if !b {
+                    radiance[s as usize] += c;
+                }
+            }
+            work.shade += clock.elapsed();
+        }
+
+        if any_aov && spp > 1 {
+            let clock = Instant::now();
+            let centre: Vec<Ray> = (0..npix)
+                .into_par_iter()
+                .with_min_len(BLOCK)
+                .map(|i| {
+                    let p = px0 + i;
+                    camera.ray((p % w) as f32 + 0.5, (p / w) as f32 + 0.5)
+                })
+                .collect();
+            work.rays.primary += npix as u64;
+            work.shade += clock.elapsed();
+            let clock = Instant::now();
+            let mut chits = vec![None; npix];
+            tracer.intersect_batch(&centre, &mut chits);
+            work.trace += clock.elapsed();
+            let clock = Instant::now();
+            write_aovs(ctx, &mut fb, px0, &centre, &chits);
+            work.shade += clock.elapsed();
+        }
+
+        let clock = Instant::now();
+        let inv = 1.0 / spp as f32;
+        fb.rgba[px0..px0 + npix]
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(BLOCK)
+            .for_each(|(i, px)| {
+                let mut c = Vec3::ZERO;
+                let mut a = 0.0;
+                for s in i * spp..(i + 1) * spp {
+                    c += radiance[s];
+                    a += coverage[s];
+                }
+                let c = c * inv;
+                *px = [c.x, c.y, c.z, (a * inv).min(1.0)];
+            });
+        work.shade += clock.elapsed();
+        y0 = y1;
+    }
+    (fb, work)
+}
+
+/// AOVs of the pixels `px0..px0 + rays.len()` from their centre rays.
+fn write_aovs(
+    ctx: &ShadeContext<'_>,
+    fb: &mut FrameBuffers,
+    px0: usize,
+    rays: &[Ray],
+    hits: &[Option<Hit>],
+) {
+    let n = rays.len();
+    if let Some(depth) = &mut fb.depth {
+        depth[px0..px0 + n]
+            .par_iter_mut()
+            .zip(rays.par_iter().zip(hits))
+            .for_each(|(z, (r, h))| {
+                *z = h.map_or(f32::INFINITY, |h| h.t * r.dir.length());
+            });
+    }
+    if fb.normal.is_none() && fb.albedo.is_none() {
+        return;
+    }
+    let vals: Vec<([f32; 3], [f32; 3])> = rays
+        .par_iter()
+        .zip(hits)
+        .with_min_len(BLOCK)
+        .map(|(r, h)| h.map_or(([0.0; 3], [0.0; 3]), |h| ctx.aov(r, &h)))
+        .collect();
+    if let Some(normal) = &mut fb.normal {
+        for (d, v) in normal[px0..px0 + n].iter_mut().zip(&vals) {
+            *d = v.0;
+        }
+    }
+    if let Some(albedo) = &mut fb.albedo {
+        for (d, v) in albedo[px0..px0 + n].iter_mut().zip(&vals) {
+            *d = v.1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn samples_are_stratified_and_centred_for_one() {
+        assert_eq!(sample_offset(3, 1, 2, 0, 1), (0.5, 0.5));
+        let mut cells = [false; 4];
+        for k in 0..4 {
+            let (x, y) = sample_offset(7, 10, 20, k, 4);
+            assert!((0.0..1.0).contains(&x) && (0.0..1.0).contains(&y));
+            cells[(x * 2.0) as usize + 2 * (y * 2.0) as usize] = true;
+        }
+        assert!(cells.iter().all(|&c| c), "one sample in each quarter");
+        assert_ne!(
+            sample_offset(7, 10, 20, 0, 4),
+            sample_offset(8, 10, 20, 0, 4)
+        );
+    }
+}

@@ -1,0 +1,73 @@
+//! The writer's side of a render: frames on their way to disk ([`Job`]), written
+//! atomically with their previews, and the folders made and checked for them.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use super::options::RenderOptions;
+use super::output::{self, encode_exr, encode_preview};
+use super::shade::FrameBuffers;
+use super::stats::FrameStats;
+use super::RenderError;
+
+/// A frame on its way to the writer.
+pub(super) struct Job {
+    pub(super) index: usize,
+    pub(super) path: PathBuf,
+    pub(super) frame: FrameBuffers,
+    pub(super) stats: FrameStats,
+    pub(super) preview: Option<PathBuf>,
+}
+
+fn create_parent(path: &Path) -> Result<(), RenderError> {
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(|source| {
+            // "File exists" says little when a file sits where a folder should be.
+            match parent.ancestors().find(|a| a.exists()) {
+                Some(a) if !a.is_dir() => RenderError::Io {
+                    path: parent.to_path_buf(),
+                    source: std::io::Error::other(format!(
+                        "cannot create the folder: {} is a file",
+                        a.display()
+                    )),
+                },
+                _ => RenderError::Io {
+                    path: parent.to_path_buf(),
+                    source,
+                },
+            }
+        })?;
+    }
+    Ok(())
+}
+
+/// Creates `path`'s folder and checks a file can be made there (the probe is removed).
+pub(super) fn check_writable(path: &Path) -> Result<(), RenderError> {
+    create_parent(path)?;
+    let folder = crate::atomic::folder_of(path);
+    let probe = folder.join(format!(".subfield-probe-{}", std::process::id()));
+    std::fs::File::create(&probe).map_err(|source| RenderError::Io {
+        path: folder.clone(),
+        source,
+    })?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+pub(super) fn write_job(job: &Job, opts: &RenderOptions) -> Result<f64, RenderError> {
+    let clock = Instant::now();
+    create_parent(&job.path)?;
+    let bytes = encode_exr(&job.frame, opts.pixel_type).map_err(|source| RenderError::Exr {
+        path: job.path.clone(),
+        source,
+    })?;
+    output::write_atomically(&job.path, &bytes)?;
+    if let Some(p) = &job.preview {
+        let png = encode_preview(&job.frame).map_err(|source| RenderError::Png {
+            path: p.clone(),
+            source,
+        })?;
+        output::write_atomically(p, &png)?;
+    }
+    Ok(clock.elapsed().as_secs_f64() * 1e3)
+}
