@@ -8,7 +8,8 @@
 //! * `import` → `scene`: the glTF and AFF / NFF readers ([`import::load`]) and the glTF
 //!   writer;
 //! * `gen` → `import`, `scene`: scenes made in code (museum, animart, synthetic sets);
-//! * `render` → `psf`, `format`, `scene`: camera, shading, EXR sequences.
+//! * `render` → `psf`, `format`, `scene`: camera, shading, EXR sequences;
+//! * `farm` → `format`: staging bakes by content hash, Slurm and Open Job Description jobs.
 //!
 //! A module does not reach back up: `scene` knows no file format, `import` knows no
 //! renderer, and nothing below `gen` uses it.
@@ -22,11 +23,6 @@ pub mod import;
 pub mod psf;
 pub mod render;
 pub mod scene;
-
-// The psf unit tests scatter triangles with `crate::synth` (src/psf/ is edited by others;
-// their two `use` lines can move to `crate::gen::synth` later). Private and test-only.
-#[cfg(test)]
-use gen::synth;
 
 pub use geometry::{Aabb, BruteForce, Hit, Intersector, Ray};
 pub use psf::{DynamicLayer, Psf, PsfError, PsfParams};

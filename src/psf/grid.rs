@@ -313,7 +313,7 @@ mod tests {
             1e9,
             -1e9,
         ];
-        let mut rng = crate::synth::Rng::new(5);
+        let mut rng = crate::gen::synth::Rng::new(5);
         for (nu, nv) in [(1, 1), (8, 3), (64, 64), (4096, 17), (1, 4096)] {
             for k in 0..4000 {
                 let r: [f32; 4] = std::array::from_fn(|c| {
@@ -343,7 +343,7 @@ mod tests {
     #[test]
     fn projection_is_project() {
         // The raster's three-lane projection against `project`, bit for bit.
-        let mut rng = crate::synth::Rng::new(99);
+        let mut rng = crate::gen::synth::Rng::new(99);
         for level in 0..3 {
             for dir in crate::psf::subfield_directions(level) {
                 let b = Aabb {

@@ -1,7 +1,7 @@
 use super::tiles::DynSubfield;
 use super::*;
 use crate::psf::bsp::LANES;
-use crate::synth::{soup, Rng};
+use crate::gen::synth::{soup, Rng};
 
 /// The ranks of triangles already in the order their entries name them.
 fn identity(n: usize) -> Vec<u32> {

@@ -6,7 +6,7 @@ use super::plan::SAMPLE;
 use super::project::{aim, down, passes, up, EPS_P};
 use super::types::{Around, Item, PointGrid, NO_RECT};
 use crate::geometry::Ray;
-use crate::synth::Rng;
+use crate::gen::synth::Rng;
 
 #[test]
 fn rounding_goes_outwards() {
