@@ -403,26 +403,27 @@ fn an_openjd_template_run_by_openjd_gives_the_frames_of_a_local_render() {
     ]);
     let job = dir.join("job/render.yaml");
     let stage = dir.join("stage");
-    ok(&[
-        "submit",
-        "openjd",
-        s(&scene),
-        "--baked",
-        s(&psf),
-        "-o",
-        s(&dir.join("farm/f.##.exr")),
-        "--frames",
-        "0..10",
-        "--size",
-        SIZE,
-        "--template",
-        s(&job),
-        "--chunk",
-        "4",
-        "--stage-dir",
-        s(&stage),
-        "--quiet",
-    ]);
+    let farm_out = dir.join("farm/f.##.exr");
+    let submit = |extra: &[&str]| {
+        let mut args = vec![
+            "submit",
+            "openjd",
+            s(&scene),
+            "--baked",
+            s(&psf),
+            "-o",
+            s(&farm_out),
+            "--frames",
+            "0..10",
+            "--size",
+            SIZE,
+            "--template",
+            s(&job),
+        ];
+        args.extend_from_slice(extra);
+        ok(&args)
+    };
+    submit(&["--chunk", "4", "--stage-dir", s(&stage), "--quiet"]);
     let text = std::fs::read_to_string(&job).unwrap();
     assert!(
         text.contains("\"0..4\"") && text.contains("\"8..10\""),
@@ -443,21 +444,7 @@ fn an_openjd_template_run_by_openjd_gives_the_frames_of_a_local_render() {
     assert_eq!(frames_of("farm").len(), 10);
     assert!(temporaries(&dir.join("farm")).is_empty());
     // Everything is there: writing the template again has nothing to do.
-    let again = ok(&[
-        "submit",
-        "openjd",
-        s(&scene),
-        "--baked",
-        s(&psf),
-        "-o",
-        s(&dir.join("farm/f.##.exr")),
-        "--frames",
-        "0..10",
-        "--size",
-        SIZE,
-        "--template",
-        s(&job),
-    ]);
+    let again = submit(&[]);
     assert!(
         stderr(&again).contains("nothing to submit"),
         "{}",

@@ -1,7 +1,7 @@
 use super::tiles::DynSubfield;
 use super::*;
-use crate::psf::bsp::LANES;
 use crate::gen::synth::{soup, Rng};
+use crate::psf::bsp::LANES;
 
 /// The ranks of triangles already in the order their entries name them.
 fn identity(n: usize) -> Vec<u32> {

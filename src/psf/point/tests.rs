@@ -5,8 +5,8 @@ use super::center::center;
 use super::plan::SAMPLE;
 use super::project::{aim, down, passes, up, EPS_P};
 use super::types::{Around, Item, PointGrid, NO_RECT};
-use crate::geometry::Ray;
 use crate::gen::synth::Rng;
+use crate::geometry::Ray;
 
 #[test]
 fn rounding_goes_outwards() {
