@@ -3,6 +3,10 @@
 //! The data flows one way (see README): `scene` → `psf` (bake, dynamic, traverse) →
 //! `format` (write, open) → `render` (camera, shading, EXR sequences). A module does not
 //! reach back up.
+//!
+//! `unsafe` is confined to two places, each block with its `// SAFETY:` argument: the
+//! memory map in `format::read` and the SSE2 intrinsics in `psf::grid`.
+#![deny(clippy::undocumented_unsafe_blocks)]
 
 pub mod aff;
 pub mod atomic;

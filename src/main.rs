@@ -1,6 +1,9 @@
 //! The `subfield` command. Each subcommand lives in `src/cli/`; this file parses the
 //! command line, runs one, and turns an error into one line on stderr and a non-zero
 //! exit (the only place that prints errors or exits).
+//!
+//! The command line is safe code only; the library's few `unsafe` blocks are its own.
+#![forbid(unsafe_code)]
 
 mod cli;
 
