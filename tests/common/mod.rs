@@ -4,6 +4,9 @@
 //! out expected values without calling the code under test.
 #![allow(dead_code)]
 
+pub mod render_scene;
+pub mod reseal;
+
 use std::path::{Path, PathBuf};
 
 use glam::{Mat4, Quat, Vec3};
