@@ -13,6 +13,10 @@
 //!
 //! A module does not reach back up: `scene` knows no file format, `import` knows no
 //! renderer, and nothing below `gen` uses it.
+//!
+//! `unsafe` is confined to two places, each block with its `// SAFETY:` argument: the
+//! memory map in `format::read` and the SSE2 intrinsics in `psf::grid`.
+#![deny(clippy::undocumented_unsafe_blocks)]
 
 pub mod atomic;
 pub mod farm;

@@ -4,10 +4,13 @@
 //! loaded directly and as the AFF model evaluated on its own (splines, `tpa` keys).
 //! Also `subfield generate animart` end to end.
 //!
-//! Scenes are read from `../shared/scenes/bart` (skipped with a message when absent). The
+//! Scenes are read from `../shared/scenes/bart` (see `common::shared_scene`: skipped with
+//! `SKIPPED:` when absent, a failure under CI). The
 //! validator is `.ci/node_modules/gltf-validator` (installed by `.ci/run`); when it is
 //! missing these tests FAIL with the command to install it: a conversion that is never
 //! validated must not pass silently.
+
+mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -16,16 +19,6 @@ use glam::Vec3;
 use subfield::import;
 use subfield::import::aff::AffScene;
 use subfield::scene::{ClipSelection, Scene, TriangleSoup};
-
-fn bart() -> Option<PathBuf> {
-    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/bart");
-    if d.is_dir() {
-        Some(d)
-    } else {
-        eprintln!("skipped: ../shared/scenes/bart absent");
-        None
-    }
-}
 
 fn out_dir(name: &str) -> PathBuf {
     let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("aff-bart-{name}"));
@@ -94,7 +87,7 @@ fn soup(scene: &Scene, t: f32) -> Vec<[Vec3; 3]> {
 /// Converts `rel` (under the BART folder), validates it, and compares the .glb with the
 /// AFF at several frames. Returns the triangle count.
 fn check_scene(rel: &str, expect_triangles: usize, expect_animated: usize) -> Option<()> {
-    let src = bart()?.join(rel);
+    let src = common::shared_scene(Path::new("bart").join(rel))?;
     let dir = out_dir(rel.replace('/', "-").as_str());
     let glb = dir.join("scene.glb");
     eprintln!("{}", convert_ok(&src, &glb).trim());
@@ -176,7 +169,9 @@ fn robots_converts_validates_and_matches() {
 fn museum_with_generated_animart_pairs_with_the_static_part() {
     // A museum7-like file: museum5's static part and camera with 16,384 generated
     // animated triangles (the public copy lacks animart7.aff).
-    let Some(b) = bart() else { return };
+    let Some(museum) = common::shared_scene("bart/museum") else {
+        return;
+    };
     let dir = out_dir("museum-animart");
     let art = dir.join("animart.aff");
     let out = subfield(&[
@@ -194,7 +189,6 @@ fn museum_with_generated_animart_pairs_with_the_static_part() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let museum = b.join("museum");
     let top = std::fs::read_to_string(museum.join("museum5.aff"))
         .unwrap()
         .replace("i 0 animart5.aff", &format!("i 0 {}", art.display()))
@@ -297,9 +291,10 @@ fn read_z(path: &Path) -> Vec<f32> {
 /// (museum5: moving `tpa` triangles and the animated camera path both matter).
 #[test]
 fn aff_and_converted_glb_render_the_same_depth() {
-    let Some(b) = bart() else { return };
+    let Some(aff) = common::shared_scene("bart/museum/museum5.aff") else {
+        return;
+    };
     let dir = out_dir("render-z");
-    let aff = b.join("museum/museum5.aff");
     let glb = dir.join("museum5.glb");
     convert_ok(&aff, &glb);
     for (name, scene) in [("aff", &aff), ("glb", &glb)] {

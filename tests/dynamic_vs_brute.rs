@@ -330,7 +330,7 @@ fn memory_is_flat_over_frames() {
 /// frames): the edge functions are rounding noise and could give any `t`, so neither
 /// brute force nor the layers report it (this case once made them disagree).
 #[test]
-fn collinear_triangle_is_never_hit() {
+fn collinear_triangle_gives_no_rounding_noise_hit() {
     let (a, b) = (
         Vec3::new(0.675_544_7, 1.502_061_8, 3.599_168_8),
         Vec3::new(7.292_999, 7.956_143, 3.074_461),

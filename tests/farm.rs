@@ -2,14 +2,13 @@
 //! node-local stage, a raw bake cut short under a render, two hosts sharing an output
 //! folder, `submit`'s refusals, and an Open Job Description template run by `openjd`.
 
-mod farm_common;
-mod render_scene;
+mod common;
 
 use std::path::Path;
 use std::process::Command;
 
-use farm_common::{frames, need, ok, on_path, s, stderr, subfield, temporaries};
-use render_scene::{temp_dir, write_scene};
+use common::farm::{frames, need, ok, on_path, s, stderr, subfield, temporaries};
+use common::render_scene::{temp_dir, write_scene};
 
 const SIZE: &str = "40x30";
 

@@ -5,8 +5,7 @@
 //! task's log and `--wait` names it. Without a cluster these fail under CI and are
 //! skipped (with a printed line) elsewhere.
 
-mod farm_common;
-mod render_scene;
+mod common;
 
 use std::collections::BTreeMap;
 use std::io::BufRead;
@@ -16,8 +15,8 @@ use std::process::{Command, Output, Stdio};
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use farm_common::{frames, need, ok, s, slurm_up, stderr, subfield, temporaries};
-use render_scene::{temp_dir, write_scene};
+use common::farm::{frames, need, ok, s, slurm_up, stderr, subfield, temporaries};
+use common::render_scene::{temp_dir, write_scene};
 
 /// The cluster runs one job at a time for these tests (it has two CPUs).
 static CLUSTER: Mutex<()> = Mutex::new(());

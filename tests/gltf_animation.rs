@@ -82,10 +82,9 @@ fn dynamic_soup(scene: &Scene, t: f32) -> TriangleSoup {
 
 #[test]
 fn simple_skin_by_hand() {
-    let Some(dir) = common::shared_gltf() else {
+    let Some(path) = common::shared_scene("gltf/SimpleSkin/SimpleSkin.gltf") else {
         return;
     };
-    let path = dir.join("SimpleSkin/SimpleSkin.gltf");
     let scene = import::load(&path).unwrap();
     let raw = RawGltf::open(&path);
     let prim = &raw.json["meshes"][0]["primitives"][0];
@@ -161,10 +160,9 @@ fn rigged_figure_and_other_skins_match_independent_skinning() {
 
 #[test]
 fn animated_morph_cube_matches_weights_by_hand() {
-    let Some(dir) = common::shared_gltf() else {
+    let Some(path) = common::shared_scene("gltf/AnimatedMorphCube/AnimatedMorphCube.gltf") else {
         return;
     };
-    let path = dir.join("AnimatedMorphCube/AnimatedMorphCube.gltf");
     let scene = import::load(&path).unwrap();
     let raw = RawGltf::open(&path);
     let prim = &raw.json["meshes"][0]["primitives"][0];
@@ -200,10 +198,9 @@ fn animated_morph_cube_matches_weights_by_hand() {
 
 #[test]
 fn box_animated_hierarchy() {
-    let Some(dir) = common::shared_gltf() else {
+    let Some(path) = common::shared_scene("gltf/BoxAnimated/BoxAnimated.gltf") else {
         return;
     };
-    let path = dir.join("BoxAnimated/BoxAnimated.gltf");
     let scene = import::load(&path).unwrap();
     let raw = RawGltf::open(&path);
     // Node 2 (mesh 0) rotates under node 0, which translates: dynamic. Node 3 (mesh 1)
@@ -237,10 +234,11 @@ fn box_animated_hierarchy() {
 /// the Hermite formula evaluated in the test from the raw keyframes.
 #[test]
 fn cubic_spline_camera_and_light() {
-    let Some(dir) = common::shared_gltf() else {
+    let Some(path) =
+        common::shared_scene("gltf/AnimatedCameraAndLight/animated_camera_and_light.glb")
+    else {
         return;
     };
-    let path = dir.join("AnimatedCameraAndLight/animated_camera_and_light.glb");
     let scene = import::load(&path).unwrap();
     let raw = RawGltf::open(&path);
     let anim = &raw.json["animations"][1];

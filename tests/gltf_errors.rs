@@ -415,21 +415,23 @@ fn mutate_json(rng: &mut Rng, input: &[u8]) -> Option<Vec<u8>> {
         (input, &[][..])
     };
     let mut v: Value = serde_json::from_slice(json_bytes).ok()?;
-    fn numbers(v: &mut Value, out: &mut Vec<*mut Value>) {
+    /// Every number in `v`, in document order.
+    fn numbers(v: &mut Value) -> Vec<&mut Value> {
+        if v.is_number() {
+            return vec![v];
+        }
         match v {
-            Value::Number(_) => out.push(v as *mut Value),
-            Value::Array(a) => a.iter_mut().for_each(|x| numbers(x, out)),
-            Value::Object(o) => o.values_mut().for_each(|x| numbers(x, out)),
-            _ => {}
+            Value::Array(a) => a.iter_mut().flat_map(numbers).collect(),
+            Value::Object(o) => o.values_mut().flat_map(numbers).collect(),
+            _ => Vec::new(),
         }
     }
     for _ in 0..1 + rng.below(3) {
-        let mut slots = Vec::new();
-        numbers(&mut v, &mut slots);
+        let mut slots = numbers(&mut v);
         if slots.is_empty() {
             return None;
         }
-        let pick = slots[rng.below(slots.len())];
+        let pick = slots.swap_remove(rng.below(slots.len()));
         let awkward = [
             json!(0),
             json!(1),
@@ -443,8 +445,7 @@ fn mutate_json(rng: &mut Rng, input: &[u8]) -> Option<Vec<u8>> {
             json!(1.5),
             json!(1e39),
         ];
-        // SAFETY: `pick` points into `v`, which is alive and not otherwise borrowed here.
-        unsafe { *pick = awkward[rng.below(awkward.len())].clone() };
+        *pick = awkward[rng.below(awkward.len())].clone();
     }
     let mut out_json = serde_json::to_vec(&v).ok()?;
     if !glb {

@@ -5,6 +5,7 @@
 //! the command line.
 
 use std::path::Path;
+#[cfg(feature = "cli")]
 use std::process::Command;
 
 use glam::Vec3;
@@ -308,6 +309,7 @@ fn bad_parameters_are_refused_with_the_parameter_named() {
     }
 }
 
+#[cfg(feature = "cli")]
 fn temp_dir(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir()
         .join(format!("subfield-museum-{}", std::process::id()))
@@ -316,6 +318,8 @@ fn temp_dir(name: &str) -> std::path::PathBuf {
     d
 }
 
+// The command line (the `cli` feature) writing and refusing museums.
+#[cfg(feature = "cli")]
 #[test]
 fn cli_writes_a_museum_that_loads() {
     let dir = temp_dir("cli");
@@ -353,6 +357,7 @@ fn cli_writes_a_museum_that_loads() {
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
 }
 
+#[cfg(feature = "cli")]
 #[test]
 fn cli_refuses_bad_numbers_with_one_line_and_writes_nothing() {
     let dir = temp_dir("bad");

@@ -4,7 +4,9 @@
 //!
 //! The fuzz loops below are seeded and bounded; proptest prints the failing case.
 
-mod reseal;
+mod common;
+
+use common::reseal;
 
 use std::path::PathBuf;
 use std::sync::Arc;

@@ -3,7 +3,8 @@
 //! in code, and every shared glTF sample rendering.
 
 mod common;
-mod render_scene;
+
+use common::render_scene;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -2,7 +2,9 @@
 //! resume after an interrupted run, shards, stats and plot, and one clear error line
 //! with nothing written for every bad input.
 
-mod render_scene;
+mod common;
+
+use common::render_scene;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

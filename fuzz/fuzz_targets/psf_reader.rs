@@ -14,7 +14,7 @@ use subfield::format::{from_bytes, to_bytes, Codec, Inspection, OpenOptions, Wri
 use subfield::geometry::{Intersector, Ray};
 use subfield::{Psf, PsfParams};
 
-#[path = "../../tests/reseal/mod.rs"]
+#[path = "../../tests/common/reseal.rs"]
 mod reseal;
 
 /// Reads bytes off the front of the input.

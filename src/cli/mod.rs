@@ -5,6 +5,8 @@ mod bake;
 mod convert;
 mod demo;
 mod generate;
+// The one module of the CLI with unsafe code (a signal handler; see its docs).
+#[allow(unsafe_code)]
 mod guard;
 mod inspect;
 mod parse;

@@ -1,22 +1,71 @@
-//! Test helpers: where the shared scenes are, and an independent reader of raw glTF
+//! Test helpers shared by the integration tests: where the third-party scenes are (and
+//! what a test does when they are not), and an independent reader of raw glTF
 //! numbers (JSON + bytes, written separately from the library's importer) used to work
 //! out expected values without calling the code under test.
 #![allow(dead_code)]
+
+pub mod farm;
+pub mod render_scene;
+pub mod reseal;
 
 use std::path::{Path, PathBuf};
 
 use glam::{Mat4, Quat, Vec3};
 use serde_json::Value;
 
-/// `../shared/scenes/gltf` beside the crate, or `None` (after printing why) when absent.
-pub fn shared_gltf() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/gltf");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("skipped: ../shared/scenes absent");
-        None
+/// The root of the third-party files: `$SUBFIELD_SHARED` when set, else `../shared`
+/// beside the crate (where `.ci/run` expects it). Setting `SUBFIELD_SHARED=/nonexistent`
+/// shows what the tests do without it.
+pub fn shared_root() -> PathBuf {
+    match std::env::var_os("SUBFIELD_SHARED") {
+        Some(root) => PathBuf::from(root),
+        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared"),
     }
+}
+
+/// `scenes/REL` under [`shared_root`] (a file or a folder) when it is there.
+///
+/// When it is not, a test cannot check what it is for, so it must not pass quietly:
+/// under CI (the variable `CI` set, as `.ci/run` and CI services do) this panics; on a
+/// developer's machine it writes `SKIPPED: <test>: <reason>` to the real stderr (which
+/// `cargo test` shows, unlike a test's own captured output) and returns `None`, and the
+/// test returns early.
+#[track_caller]
+pub fn shared_scene(rel: impl AsRef<Path>) -> Option<PathBuf> {
+    let rel = Path::new("scenes").join(rel);
+    let path = shared_root().join(&rel);
+    if path.exists() {
+        return Some(path);
+    }
+    let shown = match std::env::var_os("SUBFIELD_SHARED") {
+        Some(_) => path.display().to_string(),
+        None => Path::new("../shared").join(&rel).display().to_string(),
+    };
+    if std::env::var_os("CI").is_some() {
+        panic!(
+            "{shown} missing: CI must have ../shared beside the clone \
+             (the third-party scenes; or SUBFIELD_SHARED naming it)"
+        );
+    }
+    let caller = std::panic::Location::caller();
+    let thread = std::thread::current();
+    let test = match thread.name() {
+        Some(name) if name != "main" => name.to_string(),
+        _ => format!("{}:{}", caller.file(), caller.line()),
+    };
+    // Straight to stderr: `eprintln!` inside a passing test is captured and dropped.
+    use std::io::Write;
+    let _ = writeln!(
+        std::io::stderr(),
+        "SKIPPED: {test}: {shown} missing (third-party scenes; see docs/TESTING.md)"
+    );
+    None
+}
+
+/// `../shared/scenes/gltf`, the Khronos sample models (see [`shared_scene`]).
+#[track_caller]
+pub fn shared_gltf() -> Option<PathBuf> {
+    shared_scene("gltf")
 }
 
 /// Every `.gltf`/`.glb` under `dir`, sorted.

@@ -2,8 +2,6 @@
 //! the rule for tools a test needs (a Slurm cluster, `openjd`): present, the test runs;
 //! absent, it fails when `CI` is set (CI installs and starts them, `.ci/run`) and
 //! otherwise prints `SKIPPED` with the reason.
-#![allow(dead_code)]
-
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
