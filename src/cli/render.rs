@@ -26,11 +26,12 @@ pub struct Args {
     /// static part is baked in memory.
     #[arg(long)]
     pub baked: Option<PathBuf>,
-    /// Frames A..B (inclusive A, exclusive B); default: the whole animation.
-    #[arg(long, value_name = "A..B")]
+    /// Frames: A..B (inclusive A, exclusive B), a single frame N, every S-th frame A..B:S,
+    /// or a comma list of these (0..10,47,50..60); default: the whole animation.
+    #[arg(long, value_name = "A..B|N|A..B:S,...")]
     pub frames: Option<String>,
     /// Frames per second; frame i shows time i/F (default: the scene's extras.fps, else 24).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub fps: Option<f32>,
     /// Play one animation clip (name or index); default: all together.
     #[arg(long, value_name = "NAME|INDEX")]
@@ -44,20 +45,21 @@ pub struct Args {
     /// Reflection/refraction depth.
     #[arg(long, default_value_t = 4)]
     pub max_depth: u32,
-    /// A scene camera by name (default: the first; else one framing the scene).
-    #[arg(long)]
+    /// A scene camera by name or by its index in the file's cameras (default: the first;
+    /// else one framing the scene). Not with --look-from.
+    #[arg(long, value_name = "NAME|INDEX")]
     pub camera: Option<String>,
     /// Camera position (world), overriding the scene's camera; needs --look-at.
-    #[arg(long, value_name = "X,Y,Z")]
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub look_from: Option<String>,
     /// Point the camera looks at (world).
-    #[arg(long, value_name = "X,Y,Z")]
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub look_at: Option<String>,
     /// Camera up vector (default 0,1,0).
-    #[arg(long, value_name = "X,Y,Z")]
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub up: Option<String>,
     /// Vertical field of view in degrees for --look-from (default 45).
-    #[arg(long, value_name = "DEG")]
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
     pub yfov: Option<f32>,
     /// Extra EXR channels: depth (Z), normal (N.X/Y/Z), albedo (albedo.R/G/B).
     #[arg(long, value_name = "depth,normal,albedo")]
@@ -240,12 +242,12 @@ pub fn drive(
     let summary = rayon::scope(|_| {
         render::render_sequence(scene, opts, &mut |e| match e {
             RenderEvent::Planned(p) => {
+                pending.extend(p.warnings.iter().map(|w| format!("warning: {w}")));
                 pending.push(format!(
-                    "{}: {}; frames {}..{} at {} fps, {} to render, {}x{} at {} spp",
+                    "{}: {}; frames {} at {} fps, {} to render, {}x{} at {} spp",
                     label.display(),
                     p.split,
-                    p.range.start,
-                    p.range.end,
+                    p.set,
                     p.fps,
                     p.frames.len(),
                     opts.width,

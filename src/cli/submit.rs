@@ -13,6 +13,8 @@ use subfield::farm::{self, openjd::OpenJdJob, slurm::SlurmJob};
 use subfield::format::{self, ContentHash, WriteOptions};
 use subfield::render::{self, RenderOptions, RenderPlan};
 
+use subfield::plural;
+
 use super::progress::Progress;
 use super::render as render_cmd;
 
@@ -299,17 +301,14 @@ fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
     if nothing_missing(&w, r.quiet) {
         return Ok(ExitCode::SUCCESS);
     }
-    let range = w.plan.range;
-    let shards = a
-        .tasks
-        .unwrap_or_else(|| (range.end - range.start).min(8))
-        .min(range.end - range.start)
-        .max(1);
+    let count = u32::try_from(w.plan.frames.len()).unwrap_or(u32::MAX);
+    let shards = a.tasks.unwrap_or_else(|| count.min(8)).min(count).max(1);
     let mut array: Vec<u32> = w.missing.iter().map(|f| f % shards).collect();
     array.sort_unstable();
     array.dedup();
     let mut command = w.command.clone();
-    command.push(format!("--frames={}..{}", range.start, range.end));
+    // Every task plans the same frames as this plan, and takes its shard of them.
+    command.push(format!("--frames={}", w.plan.set));
     let job = SlurmJob {
         name: format!("subfield-{}", w.base),
         shards,
@@ -334,13 +333,12 @@ fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
     let id = farm::slurm::sbatch(&path, &a.sbatch_args)?;
     if !r.quiet {
         eprintln!(
-            "submitted job {id}: {} of {} tasks for {} missing frames of {} ({}..{}), script {}, logs {}",
+            "submitted job {id}: {} of {} for {} of {} ({}), script {}, logs {}",
             job.array.len(),
-            shards,
-            w.missing.len(),
+            plural(shards, "task"),
+            plural(w.missing.len() as u64, "missing frame"),
             w.plan.frames.len(),
-            range.start,
-            range.end,
+            w.plan.set,
             path.display(),
             job.log_dir.display()
         );

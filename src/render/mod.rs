@@ -37,8 +37,8 @@ use std::time::Duration;
 
 pub use camera::{animation_bounds, CameraModel};
 pub use options::{
-    Aovs, FrameRange, LookAt, PixelType, PreviewOptions, RenderOptions, ShadingOptions, Shard,
-    MAX_SIDE,
+    Aovs, FrameRange, FrameSet, FrameSpan, LookAt, PixelType, PreviewOptions, RenderOptions,
+    ShadingOptions, Shard, MAX_FRAMES, MAX_SIDE,
 };
 pub use output::{channel_names, encode_exr, encode_preview, is_complete, linear_to_srgb8};
 pub use planning::{plan, CameraSource, OutputPattern, RenderPlan};
@@ -57,7 +57,7 @@ pub enum RenderError {
     /// A bad option value (the message names the flag).
     #[error("{0}")]
     Option(String),
-    #[error("no camera {requested:?} in the scene; available: {}", list(.available))]
+    #[error("no camera {requested:?} in the scene (give a camera's name or its index in the file's cameras); available: {}", list(.available))]
     UnknownCamera {
         requested: String,
         available: Vec<String>,
