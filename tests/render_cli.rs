@@ -406,7 +406,7 @@ fn bad_input_gives_one_line_and_writes_nothing() {
         (vec![&sc, "-o", &p, "--plot", "x.pdf"], "--plot"),
         (
             vec![&sc, "-o", &p, "--baked", s(&a_file)],
-            "baked subfield file",
+            "a_file: not a baked subfield file",
         ),
     ];
     for (args, needle) in cases {
@@ -626,4 +626,31 @@ fn cameras_by_index_and_not_with_look_from() {
         "--camera",
     );
     assert!(!dir.join("x").exists());
+}
+
+#[test]
+fn threads_zero_is_all_cores_in_every_command() {
+    for cmd in ["render", "bake", "demo"] {
+        let o = ok(&[cmd, "--help"]);
+        let help = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            help.contains("0 or absent: all cores"),
+            "{cmd} --help: {help}"
+        );
+    }
+    let dir = temp_dir("threads0");
+    let scene = write_scene(&dir);
+    ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&dir.join("f.exr")),
+        "--frames",
+        "0",
+        "--size",
+        "8x8",
+        "--threads",
+        "0",
+        "--quiet",
+    ]);
 }

@@ -31,7 +31,7 @@ pub struct Args {
     /// Skip frames already in DIR that read back complete.
     #[arg(long)]
     pub resume: bool,
-    /// Worker threads (default: all cores).
+    /// Worker threads; 0 or absent: all cores.
     #[arg(long)]
     pub threads: Option<usize>,
     /// No progress or report.
@@ -55,7 +55,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let statics = scene.static_triangles(&scene.split(ClipSelection::All));
     let psf = Psf::build(&statics.positions, &PsfParams::for_triangles(statics.len()))?;
     let psf_path = dir.join("museum.psf");
-    write_psf(&psf_path, &psf, &WriteOptions::default())?;
+    write_psf(&psf_path, &psf, &WriteOptions::default())
+        .with_context(|| format!("cannot write {}", psf_path.display()))?;
     if !a.quiet {
         eprintln!(
             "wrote {} and {} ({} static triangles baked) in {:.2} s",

@@ -76,7 +76,7 @@ pub struct Args {
     /// Render only the frames k with k % N == I.
     #[arg(long, value_name = "I/N")]
     pub shard: Option<String>,
-    /// Worker threads (default: all cores).
+    /// Worker threads; 0 or absent: all cores.
     #[arg(long)]
     pub threads: Option<usize>,
     /// No progress or report.
@@ -261,7 +261,8 @@ pub fn drive(
                 seconds,
             } => {
                 pending.push(format!(
-                    "static part: {triangles} triangles, {} in {:.2} s",
+                    "static part: {}, {} in {:.2} s",
+                    subfield::plural(triangles as u64, "triangle"),
                     if baked_file {
                         "opened from the baked file"
                     } else {
@@ -298,8 +299,8 @@ pub fn drive(
         let n = summary.rendered.max(1) as f64;
         let per = |f: fn(&render::FrameStats) -> f64| summary.frames.iter().map(f).sum::<f64>() / n;
         let line = format!(
-            "rendered {} frames ({} skipped as complete) to {} in {:.2} s; per frame: update {:.1} ms, trace {:.1} ms, shade {:.1} ms, write {:.1} ms",
-            summary.rendered,
+            "rendered {} ({} skipped as complete) to {} in {:.2} s; per frame: update {:.1} ms, trace {:.1} ms, shade {:.1} ms, write {:.1} ms",
+            subfield::plural(summary.rendered as u64, "frame"),
             summary.skipped,
             opts.output.display(),
             summary.wall.as_secs_f64(),

@@ -271,8 +271,11 @@ fn nothing_missing(w: &Work, quiet: bool) -> bool {
     if w.missing.is_empty() {
         if !quiet {
             eprintln!(
-                "all {} frames are complete in {}; nothing to submit",
-                w.plan.frames.len(),
+                "{} complete in {}; nothing to submit",
+                match w.plan.frames.len() {
+                    1 => "the frame is".to_string(),
+                    n => format!("all {n} frames are"),
+                },
                 w.dir.display()
             );
         }
@@ -389,7 +392,12 @@ fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::R
     if missing.is_empty() {
         if !r.quiet {
             eprintln!(
-                "job {id} done: all {total} frames complete in {:.1} s",
+                "job {id} done: {} complete in {:.1} s",
+                if total == 1 {
+                    "the frame".to_string()
+                } else {
+                    format!("all {total} frames")
+                },
                 start.elapsed().as_secs_f64()
             );
         }
@@ -409,8 +417,9 @@ fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::R
         })
         .collect();
     bail!(
-        "job {id} ended with {} of {total} frames missing: {}; submit the same command again to render them",
+        "job {id} ended with {} of {} missing: {}; submit the same command again to render them",
         missing.len(),
+        plural(total, "frame"),
         runs.join(",")
     )
 }
@@ -470,10 +479,10 @@ fn openjd(a: OpenJdArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("cannot write {}", a.template.display()))?;
     if !r.quiet {
         eprintln!(
-            "wrote {}: {} tasks for {} missing frames of {}; run it with `openjd run {}`",
+            "wrote {}: {} for {} of {}; run it with `openjd run {}`",
             a.template.display(),
-            job.chunks.len(),
-            w.missing.len(),
+            plural(job.chunks.len() as u64, "task"),
+            plural(w.missing.len() as u64, "missing frame"),
             w.plan.frames.len(),
             a.template.display()
         );

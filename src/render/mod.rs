@@ -68,6 +68,13 @@ pub enum RenderError {
     Format(#[from] FormatError),
     #[error(transparent)]
     Psf(#[from] PsfError),
+    /// The baked file (`--baked`) cannot be used; the message names it.
+    #[error("{}: {source}", path.display())]
+    BakedFile {
+        path: PathBuf,
+        #[source]
+        source: FormatError,
+    },
     #[error("{}: {source}", path.display())]
     Io {
         path: PathBuf,
@@ -88,6 +95,19 @@ pub enum RenderError {
     },
     #[error("the frame writer stopped unexpectedly")]
     WriterGone,
+}
+
+impl RenderError {
+    /// An error opening the baked file `path`, naming it (an I/O error names it already).
+    pub(crate) fn baked(path: &std::path::Path, e: FormatError) -> RenderError {
+        match e {
+            FormatError::Io { .. } => RenderError::Format(e),
+            source => RenderError::BakedFile {
+                path: path.to_path_buf(),
+                source,
+            },
+        }
+    }
 }
 
 fn list(v: &[String]) -> String {
