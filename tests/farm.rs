@@ -394,8 +394,8 @@ fn a_dry_run_prints_a_script_naming_both_hashes_and_the_missing_shards() {
         script.contains("--shard \"${SLURM_ARRAY_TASK_ID}/4\""),
         "{script}"
     );
-    // Frames 3, 20, 30, 40 by k % 4: shards 0 and 3.
-    assert!(script.contains("#SBATCH --array=0,3\n"), "{script}");
+    // Frames 3, 20, 30, 40 by k % 4: shards 3, 0, 2, 0.
+    assert!(script.contains("#SBATCH --array=0,2-3\n"), "{script}");
 }
 
 #[test]

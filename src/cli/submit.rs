@@ -207,6 +207,11 @@ fn prepare(r: &render_cmd::Args, dry_run: bool) -> anyhow::Result<Work> {
     let scene = subfield::import::load(&scene_path)?;
     let plan = render::plan(&scene, &opts)
         .with_context(|| format!("cannot render {}", r.scene.display()))?;
+    if !r.quiet {
+        for w in &plan.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
     let missing: Vec<u32> = plan
         .frames
         .iter()
