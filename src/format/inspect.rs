@@ -298,12 +298,12 @@ impl fmt::Display for InspectionSummary<'_> {
                 if lo == hi {
                     lo.to_string()
                 } else {
-                    format!("{lo}..={hi}")
+                    format!("{lo}-{hi}")
                 }
             };
             writeln!(
                 f,
-                "directions: {} subfields, grids {}x{}, {} tiles each; the densest is #{busiest}",
+                "directions: {} subfields, grids of {} by {} tiles ({} each); the densest is #{busiest}",
                 d.len(),
                 span(nu_lo, nu_hi),
                 span(nv_lo, nv_hi),
