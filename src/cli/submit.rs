@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context};
 use subfield::farm::{self, openjd::OpenJdJob, slurm::SlurmJob};
 use subfield::format::{self, ContentHash, WriteOptions};
-use subfield::render::{self, RenderOptions, RenderPlan};
+use subfield::render::{self, FrameSet, FrameSpan, RenderOptions, RenderPlan};
 
 use subfield::plural;
 
@@ -472,7 +472,7 @@ fn openjd(a: OpenJdArgs) -> anyhow::Result<ExitCode> {
     }
     let job = OpenJdJob {
         name: format!("subfield render {}", w.base),
-        chunks: farm::frame_chunks(&w.missing, a.chunk),
+        chunks: chunks(&w.missing, a.chunk),
         command: w.command.clone(),
         stage_dir: r.stage_dir.clone(),
     };
@@ -495,9 +495,46 @@ fn openjd(a: OpenJdArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The missing frames (ascending) as OpenJD tasks of at most `k` frames each, spelled as
+/// `--frames` reads them: consecutive frames in chunks of `A..B` that a gap ends (as
+/// before), and frames with steps between them (`--frames 0..800:100`) `k` to a task.
+fn chunks(missing: &[u32], k: u32) -> Vec<String> {
+    let consecutive = missing.windows(2).all(|w| w[1] == w[0] + 1);
+    let stepped = missing.len() > 1 && !missing.windows(2).any(|w| w[1] == w[0] + 1);
+    if consecutive || !stepped {
+        return farm::frame_chunks(missing, k)
+            .into_iter()
+            .map(|(a, b)| {
+                FrameSet::new(vec![FrameSpan {
+                    start: a,
+                    end: b,
+                    step: 1,
+                }])
+                .to_string()
+            })
+            .collect();
+    }
+    missing
+        .chunks(k.max(1) as usize)
+        .map(|c| FrameSet::from_sorted(c).to_string())
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn openjd_chunks_spell_frames_as_render_reads_them() {
+        assert_eq!(
+            chunks(&[0, 1, 2, 3, 4, 9, 10], 2),
+            ["0..2", "2..4", "4", "9..11"]
+        );
+        assert_eq!(
+            chunks(&[0, 100, 200, 300, 400, 500, 600, 700], 3),
+            ["0..201:100", "300..501:100", "600,700"]
+        );
+    }
 
     #[test]
     fn job_files_are_named_after_the_pattern() {
