@@ -654,3 +654,24 @@ fn threads_zero_is_all_cores_in_every_command() {
         "--quiet",
     ]);
 }
+
+#[test]
+fn one_of_a_thing_is_singular() {
+    let dir = temp_dir("plural");
+    let scene = write_scene(&dir);
+    let o = ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&dir.join("f.exr")),
+        "--frames",
+        "2",
+        "--size",
+        "8x8",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("rendered 1 frame ("), "{err}");
+    for wrong in ["1 frames", "1 instances", "1 triangles"] {
+        assert!(!err.contains(&format!(" {wrong}")), "{wrong}: {err}");
+    }
+}
