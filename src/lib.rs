@@ -30,3 +30,14 @@ pub mod scene;
 
 pub use geometry::{Aabb, BruteForce, Hit, Intersector, Ray};
 pub use psf::{DynamicLayer, Psf, PsfError, PsfParams};
+
+/// `n` and `noun`, the noun in the plural unless `n` is 1 ("1 frame", "3 frames"); for
+/// nouns whose plural adds an `s`.
+pub fn plural(n: impl Into<u64>, noun: &str) -> String {
+    let n = n.into();
+    if n == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{n} {noun}s")
+    }
+}

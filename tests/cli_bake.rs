@@ -110,7 +110,23 @@ fn bake_then_inspect_then_trace() {
     }
 
     // inspect: text and JSON.
+    // The default is one screen: hashes, sizes, directions and occupancy summed up.
     let r = subfield(&["inspect", out.to_str().unwrap()]);
+    assert!(r.status.success());
+    let text = String::from_utf8_lossy(&r.stdout);
+    assert!(text.lines().count() <= 24, "{text}");
+    for needle in [
+        "content hash",
+        "scene hash",
+        &format!("{} triangles", soup.len()),
+        "subfields",
+        "occupancy:",
+        "entries ×",
+    ] {
+        assert!(text.contains(needle), "{needle}: {text}");
+    }
+    assert!(!text.contains("entries[6]"), "{text}");
+    let r = subfield(&["inspect", out.to_str().unwrap(), "--verbose"]);
     assert!(r.status.success());
     let text = String::from_utf8_lossy(&r.stdout);
     assert!(
@@ -212,4 +228,88 @@ fn bad_input_gives_one_line_and_no_file() {
     let r = subfield(&["inspect", out.to_str().unwrap()]);
     assert!(!r.status.success());
     assert!(String::from_utf8_lossy(&r.stderr).contains("out.psf"));
+}
+
+#[test]
+fn writers_create_folders_and_check_outputs_first() {
+    let dir = temp_dir("folders");
+    let scene_path = dir.join("scene.glb");
+    write_scene(&scene_path);
+    let s = |p: &Path| p.display().to_string();
+    let ok = |args: &[String]| {
+        let a: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+        let r = subfield(&a);
+        assert!(
+            r.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+    };
+    let psf = dir.join("new/deeper/scene.psf");
+    ok(&[
+        "bake".into(),
+        s(&scene_path),
+        "-o".into(),
+        s(&psf),
+        "-q".into(),
+    ]);
+    assert!(psf.is_file());
+    let aff = dir.join("gen/a/art.aff");
+    ok(&[
+        "generate".into(),
+        "animart".into(),
+        "--triangles".into(),
+        "10".into(),
+        "-o".into(),
+        s(&aff),
+        "-q".into(),
+    ]);
+    assert!(aff.is_file());
+    let glb = dir.join("conv/b/art.glb");
+    ok(&["convert".into(), s(&aff), "-o".into(), s(&glb), "-q".into()]);
+    assert!(glb.is_file());
+    let museum = dir.join("gen/m/museum.glb");
+    ok(&[
+        "generate".into(),
+        "museum".into(),
+        "--static-tris".into(),
+        "2000".into(),
+        "--dynamic-tris".into(),
+        "64".into(),
+        "-o".into(),
+        s(&museum),
+        "-q".into(),
+    ]);
+    assert!(museum.is_file());
+
+    // Under a file, nothing can be written: refused at once (before baking: no report
+    // line, only the error), naming the output.
+    let a_file = dir.join("a_file");
+    std::fs::write(&a_file, b"x").unwrap();
+    let bad = a_file.join("scene.psf");
+    for args in [
+        vec!["bake".to_string(), s(&scene_path), "-o".into(), s(&bad)],
+        vec![
+            "convert".into(),
+            s(&aff),
+            "-o".into(),
+            s(&a_file.join("x.glb")),
+        ],
+        vec![
+            "generate".into(),
+            "animart".into(),
+            "-o".into(),
+            s(&a_file.join("x.aff")),
+        ],
+    ] {
+        let a: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+        let r = subfield(&a);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert!(!r.status.success(), "{args:?}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(
+            err.starts_with("error: ") && err.contains("a_file"),
+            "{args:?}: {err}"
+        );
+    }
 }

@@ -371,6 +371,30 @@ fn a_dry_run_prints_a_script_naming_both_hashes_and_the_missing_shards() {
     );
     // Nothing written by a dry run.
     assert!(!dir.join("out/f.slurm.sh").exists());
+
+    // A frame list goes to every task as planned; tasks default to its frame count.
+    let o = ok(&[
+        "submit",
+        "slurm",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&dir.join("list/f.##.exr")),
+        "--frames",
+        "20..50:10, 3",
+        "--size",
+        SIZE,
+        "--dry-run",
+    ]);
+    let script = String::from_utf8(o.stdout).unwrap();
+    assert!(script.contains("--frames=20..50:10,3"), "{script}");
+    assert!(
+        script.contains("--shard \"${SLURM_ARRAY_TASK_ID}/4\""),
+        "{script}"
+    );
+    // Frames 3, 20, 30, 40 by k % 4: shards 3, 0, 2, 0.
+    assert!(script.contains("#SBATCH --array=0,2-3\n"), "{script}");
 }
 
 #[test]

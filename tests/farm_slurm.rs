@@ -214,7 +214,10 @@ fn a_cancelled_and_a_killed_task_are_rendered_again_and_only_their_frames() {
     let second = ok(&[args.as_slice(), &["--wait"]].concat());
     let e = stderr(&second);
     assert!(
-        e.contains(&format!("for {missing} missing frames of 24")),
+        e.contains(&format!(
+            "for {} of 24",
+            subfield::plural(missing as u64, "missing frame")
+        )),
         "{e}"
     );
     // The frames of the first job were kept, not written again.

@@ -107,7 +107,7 @@ fn depth_matches_brute_force_at_every_pixel() {
     let (w, h) = (80usize, 60usize);
     let opts = RenderOptions {
         output: dir.join("out/f.###.exr"),
-        frames: Some(FrameRange { start: 0, end: 25 }),
+        frames: Some(FrameRange { start: 0, end: 25 }.into()),
         shard: Some(render::Shard {
             index: 0,
             count: 12,
@@ -168,7 +168,7 @@ fn depth_matches_brute_force_at_every_pixel() {
     };
     let opts2 = RenderOptions {
         output: dir.join("look.exr"),
-        frames: Some(FrameRange { start: 7, end: 8 }),
+        frames: Some(FrameRange { start: 7, end: 8 }.into()),
         look_at: Some(look),
         shard: None,
         // One sample: the AOVs come from the shaded primary rays themselves.
@@ -268,7 +268,7 @@ fn openexr_reads_our_files_and_agrees() {
         let out = dir.join(format!("{rgba_type}.exr"));
         let opts = RenderOptions {
             output: out.clone(),
-            frames: Some(FrameRange { start: 5, end: 6 }),
+            frames: Some(FrameRange { start: 5, end: 6 }.into()),
             width: 48,
             height: 32,
             aovs,
@@ -350,7 +350,7 @@ fn render_pixels(
     let out = dir.join(format!("{name}.exr"));
     let mut opts = RenderOptions {
         output: out.clone(),
-        frames: Some(FrameRange { start: 0, end: 1 }),
+        frames: Some(FrameRange { start: 0, end: 1 }.into()),
         width: size.0,
         height: size.1,
         look_at: Some(look),
@@ -617,7 +617,7 @@ fn every_shared_gltf_renders_two_frames() {
         };
         let opts = RenderOptions {
             output: out.join(format!("r{rendered}.#.exr")),
-            frames: Some(FrameRange { start: 0, end: 2 }),
+            frames: Some(FrameRange { start: 0, end: 2 }.into()),
             width: 32,
             height: 24,
             aovs: Aovs {

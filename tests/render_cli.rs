@@ -372,11 +372,20 @@ fn bad_input_gives_one_line_and_writes_nothing() {
     let under_file = s(&a_file.join("f.#.exr")).to_string();
     let no_hash = s(&dir.join("out/still.exr")).to_string();
     let two_runs = s(&dir.join("out/f.#.#.exr")).to_string();
+    let png = s(&dir.join("out/f.####.png")).to_string();
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (vec![&missing, "-o", &p], "missing.glb"),
         (vec![&sc, "-o", &under_file], "a_file"),
         (vec![&sc, "-o", &p, "--frames", "5..2"], "--frames"),
         (vec![&sc, "-o", &p, "--frames", "x..2"], "--frames"),
+        (vec![&sc, "-o", &p, "--frames", "0..10,x"], "\"x\""),
+        (vec![&sc, "-o", &p, "--frames", "0..10:0"], "step"),
+        (
+            vec![&sc, "-o", &p, "--frames", "0..4000000000"],
+            "more than the 10000000",
+        ),
+        (vec![&sc, "-o", &png, "--frames", "0..3"], ".exr"),
+        (vec![&sc, "-o", &no_hash, "--frames", "1,4"], "'#'"),
         (vec![&sc, "-o", &no_hash, "--frames", "0..3"], "'#'"),
         (vec![&sc, "-o", &no_hash], "'#'"),
         (
@@ -399,7 +408,7 @@ fn bad_input_gives_one_line_and_writes_nothing() {
         (vec![&sc, "-o", &p, "--plot", "x.pdf"], "--plot"),
         (
             vec![&sc, "-o", &p, "--baked", s(&a_file)],
-            "baked subfield file",
+            "a_file: not a baked subfield file",
         ),
     ];
     for (args, needle) in cases {
@@ -423,5 +432,248 @@ fn bad_input_gives_one_line_and_writes_nothing() {
             "{args:?} left files: {:?}",
             files_under(&dir)
         );
+    }
+}
+
+#[test]
+fn negative_numbers_are_values_not_flags() {
+    let dir = temp_dir("negative");
+    let scene = write_scene(&dir);
+    let out = dir.join("neg/f.#.exr");
+    ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&out),
+        "--frames",
+        "0..1",
+        "--size",
+        "8x8",
+        "--look-from",
+        "-2,1.5,-3",
+        "--look-at",
+        "-0.5,0,0",
+        "--up",
+        "-0,1,0",
+        "--quiet",
+    ]);
+    assert_eq!(files_under(&dir.join("neg")).len(), 1);
+    // A negative value reaches our own check (one line naming the flag), not clap's.
+    for (flag, value) in [("--yfov", "-5"), ("--fps", "-24")] {
+        let mut args = vec!["render", s(&scene), "-o", s(&out), "--size", "8x8"];
+        args.extend(["--look-from", "0,0,3", "--look-at", "0,0,0", flag, value]);
+        let o = subfield(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success());
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(err.starts_with("error: ") && err.contains(flag), "{err}");
+    }
+}
+
+#[test]
+fn frame_lists_steps_and_single_frames() {
+    let dir = temp_dir("frame_lists");
+    let scene = write_scene(&dir);
+    let render = |sub: &str, frames: &str| {
+        let out = dir.join(format!("{sub}/f.#.exr"));
+        ok(&[
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--frames",
+            frames,
+            "--size",
+            "8x8",
+            "--quiet",
+        ]);
+        files_under(&dir.join(sub))
+    };
+    assert_eq!(render("one", "5"), [PathBuf::from("f.5.exr")]);
+    assert_eq!(
+        render("list", "0..7:3,10, 2..4"),
+        ["f.0.exr", "f.10.exr", "f.2.exr", "f.3.exr", "f.6.exr"].map(PathBuf::from)
+    );
+    // A single frame needs no '#'.
+    let still = dir.join("still.exr");
+    ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&still),
+        "--frames",
+        "3",
+        "--size",
+        "8x8",
+        "--quiet",
+    ]);
+    assert!(still.is_file());
+    // Shards split the listed frames by frame number.
+    let out = dir.join("shard/f.#.exr");
+    ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&out),
+        "--frames",
+        "0..7:3",
+        "--shard",
+        "1/2",
+        "--size",
+        "8x8",
+        "--quiet",
+    ]);
+    // 0, 3, 6: shard 1/2 has the odd one.
+    assert_eq!(files_under(&dir.join("shard")), [PathBuf::from("f.3.exr")]);
+}
+
+#[test]
+fn frames_past_the_end_warn_once() {
+    let dir = temp_dir("past_end");
+    let scene = write_scene(&dir);
+    // One second of animation at 24 fps: frames 0..=24.
+    let run = |frames: &str| {
+        let o = ok(&[
+            "render",
+            s(&scene),
+            "-o",
+            s(&dir.join("out/f.#.exr")),
+            "--frames",
+            frames,
+            "--size",
+            "8x8",
+        ]);
+        String::from_utf8_lossy(&o.stderr)
+            .lines()
+            .filter(|l| l.starts_with("warning:") && l.contains("--frames"))
+            .map(str::to_owned)
+            .collect::<Vec<_>>()
+    };
+    let w = run("23..27");
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].contains("past the end") && w[0].contains("frame 24"),
+        "{w:?}"
+    );
+    assert!(run("22..25").is_empty());
+}
+
+#[test]
+fn cameras_by_index_and_not_with_look_from() {
+    let dir = temp_dir("camera_index");
+    // The test scene with its cameras and their nodes unnamed.
+    let mut b = render_scene::builder();
+    for c in &mut b.cameras {
+        c.name = None;
+    }
+    for n in b.nodes.iter_mut().filter(|n| n.camera.is_some()) {
+        n.name = None;
+    }
+    let scene = dir.join("unnamed.glb");
+    b.write(&scene).unwrap();
+    let render = |camera: &str| {
+        let out = dir.join(format!("c{camera}.exr"));
+        ok(&[
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--frames",
+            "0",
+            "--size",
+            "8x8",
+            "--camera",
+            camera,
+            "--quiet",
+        ]);
+        std::fs::read(out).unwrap()
+    };
+    assert_ne!(render("0"), render("1"), "two cameras, one picture");
+    let fail = |args: &[&str], needle: &str| {
+        let o = subfield(args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(err.starts_with("error: ") && err.contains(needle), "{err}");
+    };
+    let out = dir.join("x/f.#.exr");
+    fail(
+        &[
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--camera",
+            "2",
+            "--size",
+            "8x8",
+        ],
+        "index",
+    );
+    fail(
+        &[
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--camera",
+            "0",
+            "--look-from",
+            "0,0,3",
+            "--look-at",
+            "0,0,0",
+            "--size",
+            "8x8",
+        ],
+        "--camera",
+    );
+    assert!(!dir.join("x").exists());
+}
+
+#[test]
+fn threads_zero_is_all_cores_in_every_command() {
+    for cmd in ["render", "bake", "demo"] {
+        let o = ok(&[cmd, "--help"]);
+        let help = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            help.contains("0 or absent: all cores"),
+            "{cmd} --help: {help}"
+        );
+    }
+    let dir = temp_dir("threads0");
+    let scene = write_scene(&dir);
+    ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&dir.join("f.exr")),
+        "--frames",
+        "0",
+        "--size",
+        "8x8",
+        "--threads",
+        "0",
+        "--quiet",
+    ]);
+}
+
+#[test]
+fn one_of_a_thing_is_singular() {
+    let dir = temp_dir("plural");
+    let scene = write_scene(&dir);
+    let o = ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&dir.join("f.exr")),
+        "--frames",
+        "2",
+        "--size",
+        "8x8",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("rendered 1 frame ("), "{err}");
+    for wrong in ["1 frames", "1 instances", "1 triangles"] {
+        assert!(!err.contains(&format!(" {wrong}")), "{wrong}: {err}");
     }
 }

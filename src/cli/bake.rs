@@ -17,7 +17,7 @@ use super::progress::Progress;
 pub struct Args {
     /// The scene: .gltf, .glb, or a BART .aff / .nff file.
     pub scene: PathBuf,
-    /// The baked file to write (atomically).
+    /// The baked file to write (atomically; its folder is created).
     #[arg(short, long)]
     pub output: PathBuf,
     /// Direction level 0..=4 (4, 10, 34, 130, 514 directions; antipodes share a subfield;
@@ -32,7 +32,7 @@ pub struct Args {
     /// Section codec: zstd (smaller) or none (raw, opened in place).
     #[arg(long, default_value_t = Codec::Zstd)]
     pub codec: Codec,
-    /// Worker threads (default: all cores).
+    /// Worker threads; 0 or absent: all cores.
     #[arg(long)]
     pub threads: Option<usize>,
     /// No progress or report.
@@ -48,6 +48,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         tiles: a.tiles.unwrap_or(1),
     }
     .validate()?;
+    super::prepare_output(&a.output)?;
     let scene = import::load(&a.scene)?;
     let say = |s: String| {
         if !a.quiet {
@@ -66,11 +67,12 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             codec: a.codec,
             ..WriteOptions::default()
         },
-    )?;
+    )
+    .with_context(|| format!("cannot write {}", a.output.display()))?;
     say(format!(
-        "wrote {}: {} triangles, {} subfields, {} bytes ({} raw), baked in {:.2} s, scene hash {}, content hash {}",
+        "wrote {}: {}, {} subfields, {} bytes ({} raw), baked in {:.2} s, scene hash {}, content hash {}",
         a.output.display(),
-        psf.triangles().len(),
+        subfield::plural(psf.triangles().len() as u64, "triangle"),
         psf.subfields().len(),
         report.file_length,
         report.raw_length,

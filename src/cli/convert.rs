@@ -11,7 +11,8 @@ use subfield::import::aff::AffScene;
 pub struct Args {
     /// The scene: a BART .aff or .nff file (includes and textures beside it).
     pub input: PathBuf,
-    /// The glTF file to write: .glb (binary) or .gltf (JSON with an embedded buffer).
+    /// The glTF file to write: .glb (binary) or .gltf (JSON with an embedded buffer); its
+    /// folder is created.
     #[arg(short, long)]
     pub output: PathBuf,
     /// No report.
@@ -42,6 +43,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             a.output.display()
         );
     }
+    super::prepare_output(&a.output)?;
     let scene = AffScene::load(&a.input)?;
     if !a.quiet {
         for w in &scene.warnings {
@@ -51,21 +53,22 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let gltf = scene
         .to_gltf()
         .with_context(|| format!("cannot convert {}", a.input.display()))?;
-    gltf.write(&a.output)?;
+    gltf.write(&a.output)
+        .with_context(|| format!("cannot write {}", a.output.display()))?;
     if !a.quiet {
         let frames = scene.frame_times().len();
         let fps = gltf
             .fps
             .map_or("no animation".to_string(), |f| format!("{f} fps"));
         eprintln!(
-            "wrote {}: {} triangles ({} animated), {} materials, {} textures, {} lights, {} frames ({fps})",
+            "wrote {}: {} triangles ({} animated), {} materials, {} textures, {} lights, {} ({fps})",
             a.output.display(),
             scene.triangle_count(),
             scene.animated_triangle_count(),
             gltf.materials.len(),
             gltf.textures.len(),
             scene.lights.len(),
-            frames,
+            subfield::plural(frames as u64, "frame"),
         );
     }
     Ok(ExitCode::SUCCESS)

@@ -11,7 +11,7 @@ use anyhow::Context;
 use subfield::format::{write_psf, WriteOptions};
 use subfield::gen::museum::{write_museum, MuseumParams};
 use subfield::import;
-use subfield::render::{FrameRange, PreviewOptions, RenderOptions};
+use subfield::render::{PreviewOptions, RenderOptions};
 use subfield::scene::ClipSelection;
 use subfield::{Psf, PsfParams};
 
@@ -22,8 +22,8 @@ pub struct Args {
     /// The folder to write into (created).
     #[arg(short, long, default_value = "demo")]
     pub output: PathBuf,
-    /// Frames A..B of the 300 (10 s at 30 fps); default all.
-    #[arg(long, value_name = "A..B")]
+    /// Frames of the 300 (10 s at 30 fps): A..B, N, A..B:S or a comma list; default all.
+    #[arg(long, value_name = "A..B|N|A..B:S,...")]
     pub frames: Option<String>,
     /// Image size.
     #[arg(long, value_name = "WxH", default_value = "640x480")]
@@ -31,7 +31,7 @@ pub struct Args {
     /// Skip frames already in DIR that read back complete.
     #[arg(long)]
     pub resume: bool,
-    /// Worker threads (default: all cores).
+    /// Worker threads; 0 or absent: all cores.
     #[arg(long)]
     pub threads: Option<usize>,
     /// No progress or report.
@@ -55,7 +55,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let statics = scene.static_triangles(&scene.split(ClipSelection::All));
     let psf = Psf::build(&statics.positions, &PsfParams::for_triangles(statics.len()))?;
     let psf_path = dir.join("museum.psf");
-    write_psf(&psf_path, &psf, &WriteOptions::default())?;
+    write_psf(&psf_path, &psf, &WriteOptions::default())
+        .with_context(|| format!("cannot write {}", psf_path.display()))?;
     if !a.quiet {
         eprintln!(
             "wrote {} and {} ({} static triangles baked) in {:.2} s",
@@ -66,11 +67,13 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         );
     }
 
-    let range = frames.unwrap_or(FrameRange {
-        start: 0,
-        end: params.frames,
-    });
-    let mid = range.start + range.end.saturating_sub(range.start) / 2;
+    let mid = match &frames {
+        Some(set) => {
+            let list = set.frames()?;
+            list[list.len() / 2]
+        }
+        None => params.frames / 2,
+    };
     let opts = RenderOptions {
         output: dir.join("frame.####.exr"),
         baked: Some(psf_path),

@@ -67,16 +67,17 @@ fn museum(a: MuseumArgs) -> anyhow::Result<ExitCode> {
         seed: a.seed,
     };
     p.validate()?;
+    super::prepare_output(&a.output)?;
     write_museum(&p, &a.output)
         .with_context(|| format!("cannot write the museum to {}", a.output.display()))?;
     if !a.quiet {
         let bytes = std::fs::metadata(&a.output).map(|m| m.len()).unwrap_or(0);
         super::print_stdout(&format!(
-            "wrote {}: {} static + {} dynamic triangles, {} frames at {} fps ({:.3} s, {} keys), {} bytes\n",
+            "wrote {}: {} static + {} dynamic triangles, {} at {} fps ({:.3} s, {} keys), {} bytes\n",
             a.output.display(),
             p.static_tris,
             p.dynamic_tris,
-            p.frames,
+            subfield::plural(p.frames, "frame"),
             p.fps,
             p.duration(),
             MUSEUM_KEYS,
@@ -91,7 +92,7 @@ pub struct AnimartArgs {
     /// Number of animated triangles.
     #[arg(long, default_value_t = AnimartParams::default().triangles)]
     pub triangles: usize,
-    /// The AFF file to write (atomically).
+    /// The AFF file to write (atomically; its folder is created).
     #[arg(short, long)]
     pub output: PathBuf,
     /// Seed of the random motion (same seed, same file).
@@ -117,13 +118,14 @@ fn animart(a: AnimartArgs) -> anyhow::Result<ExitCode> {
         seed: a.seed,
         frames: a.frames,
     });
+    super::prepare_output(&a.output)?;
     subfield::atomic::write_atomically(&a.output, text.as_bytes())
         .with_context(|| format!("cannot write {}", a.output.display()))?;
     if !a.quiet {
         eprintln!(
-            "wrote {}: {} animated triangles (seed {}, {} frames)",
+            "wrote {}: {} (seed {}, {} frames)",
             a.output.display(),
-            a.triangles,
+            subfield::plural(a.triangles as u64, "animated triangle"),
             a.seed,
             a.frames
         );

@@ -1,4 +1,5 @@
-//! `subfield inspect FILE.psf [--json]`.
+//! `subfield inspect FILE.psf [--verbose] [--json]`: a one-screen summary, every section
+//! and direction with `--verbose`, or everything as JSON.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -9,9 +10,12 @@ use anyhow::Context;
 pub struct Args {
     /// The baked file.
     pub file: PathBuf,
-    /// Print JSON instead of tables.
+    /// Print JSON instead of text (everything, as --verbose).
     #[arg(long)]
     pub json: bool,
+    /// Every section and every direction, one row each (default: a one-screen summary).
+    #[arg(long, short)]
+    pub verbose: bool,
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
@@ -19,8 +23,10 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("cannot inspect {}", a.file.display()))?;
     let text = if a.json {
         format!("{}\n", ins.to_json())
-    } else {
+    } else if a.verbose {
         ins.to_string()
+    } else {
+        ins.summary().to_string()
     };
     super::print_stdout(&text)?;
     Ok(ExitCode::SUCCESS)

@@ -82,3 +82,30 @@ pub fn print_stdout(text: &str) -> anyhow::Result<()> {
         _ => Ok(()),
     }
 }
+
+/// Makes ready to write `path` (`-o`): creates its folder and checks a file can be made
+/// there, before any work; an error names the output.
+pub fn prepare_output(path: &std::path::Path) -> anyhow::Result<()> {
+    use anyhow::Context;
+    if path.is_dir() || path.as_os_str().to_string_lossy().ends_with('/') {
+        anyhow::bail!("-o {}: names a folder, not a file", path.display());
+    }
+    let folder = subfield::atomic::folder_of(path);
+    std::fs::create_dir_all(&folder).with_context(|| {
+        format!(
+            "cannot write {}: cannot create the folder {}",
+            path.display(),
+            folder.display()
+        )
+    })?;
+    let probe = folder.join(format!(".subfield-probe-{}", std::process::id()));
+    std::fs::File::create(&probe).with_context(|| {
+        format!(
+            "cannot write {}: the folder {} is not writable",
+            path.display(),
+            folder.display()
+        )
+    })?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}

@@ -4,31 +4,87 @@
 //! library (`subfield::render`); only the string parsing lives in the CLI.
 
 use glam::Vec3;
-use subfield::render::{Aovs, FrameRange, Shard, MAX_SIDE};
+use subfield::render::{Aovs, FrameSet, FrameSpan, Shard, MAX_FRAMES, MAX_SIDE};
 
 fn bad(flag: &str, value: &str, why: impl std::fmt::Display) -> anyhow::Error {
     anyhow::anyhow!("{flag} {value:?}: {why}")
 }
 
-/// `A..B` with integers `A < B`.
-pub fn parse_frames(s: &str) -> anyhow::Result<FrameRange> {
-    let (a, b) = s
-        .split_once("..")
-        .ok_or_else(|| bad("--frames", s, "expected A..B (integers, B exclusive)"))?;
-    let num = |x: &str| {
+/// A comma list of `N`, `A..B` (integers, `A < B`, B exclusive) and `A..B:S` (every
+/// `S`-th frame from `A`), at most [`MAX_FRAMES`] frames in all. Each bad piece is named.
+pub fn parse_frames(s: &str) -> anyhow::Result<FrameSet> {
+    let num = |piece: &str, x: &str| {
         x.trim()
             .parse::<u32>()
-            .map_err(|_| bad("--frames", s, format!("{x:?} is not a frame number")))
+            .ok()
+            .filter(|&n| n < u32::MAX)
+            .ok_or_else(|| {
+                bad(
+                    "--frames",
+                    s,
+                    format!("{piece:?}: {:?} is not a frame number", x.trim()),
+                )
+            })
     };
-    let (start, end) = (num(a)?, num(b)?);
-    if end <= start {
+    let mut spans = Vec::new();
+    for piece in s.split(',') {
+        let p = piece.trim();
+        if p.is_empty() {
+            return Err(bad(
+                "--frames",
+                s,
+                "an empty piece; expected N, A..B or A..B:S, separated by commas",
+            ));
+        }
+        let span = match p.split_once("..") {
+            None => {
+                let n = num(p, p)?;
+                FrameSpan {
+                    start: n,
+                    end: n + 1,
+                    step: 1,
+                }
+            }
+            Some((a, rest)) => {
+                let (b, step) = match rest.split_once(':') {
+                    Some((b, st)) => match st.trim().parse::<u32>() {
+                        Ok(k) if k >= 1 => (b, k),
+                        _ => {
+                            return Err(bad(
+                                "--frames",
+                                s,
+                                format!(
+                                    "{p:?}: the step {:?} is not a whole number >= 1",
+                                    st.trim()
+                                ),
+                            ))
+                        }
+                    },
+                    None => (rest, 1),
+                };
+                let (start, end) = (num(p, a)?, num(p, b)?);
+                if end <= start {
+                    return Err(bad(
+                        "--frames",
+                        s,
+                        format!("{p:?}: the range is empty (the end is exclusive and must be above the start)"),
+                    ));
+                }
+                FrameSpan { start, end, step }
+            }
+        };
+        spans.push(span);
+    }
+    let set = FrameSet::new(spans);
+    let n = set.count();
+    if n > MAX_FRAMES {
         return Err(bad(
             "--frames",
             s,
-            "the range is empty (the end is exclusive and must be above the start)",
+            format!("{n} frames, more than the {MAX_FRAMES} a render takes (a typo?)"),
         ));
     }
-    Ok(FrameRange { start, end })
+    Ok(set)
 }
 
 /// `WxH`, both in `1..=32768`.
@@ -106,17 +162,43 @@ mod tests {
 
     #[test]
     fn frames_parse_and_reject() {
+        let frames = |s: &str| parse_frames(s).unwrap().frames().unwrap();
+        assert_eq!(frames("0..10"), (0..10).collect::<Vec<u32>>());
+        assert_eq!(frames(" 3 .. 4"), [3]);
+        assert_eq!(frames("5"), [5]);
+        assert_eq!(frames("0..800:100"), [0, 100, 200, 300, 400, 500, 600, 700]);
+        assert_eq!(frames("0..7:3"), [0, 3, 6]);
+        let list: Vec<u32> = (0..10).chain([47]).chain(50..60).collect();
+        assert_eq!(frames("0..10,47,50..60"), list);
+        // Overlaps and order do not matter: sorted, each frame once.
+        assert_eq!(frames("8,2..5,3,4..6"), [2, 3, 4, 5, 8]);
+        // The spelling reads back as the same frames.
+        for spec in ["0..10,47,50..60", "0..800:100", "7", "3..9:2,1"] {
+            let set = parse_frames(spec).unwrap();
+            assert_eq!(set.to_string(), spec);
+            let again = FrameSet::from_sorted(&set.frames().unwrap());
+            assert_eq!(again.frames().unwrap(), set.frames().unwrap(), "{spec}");
+        }
         assert_eq!(
-            parse_frames("0..10").unwrap(),
-            FrameRange { start: 0, end: 10 }
+            FrameSet::from_sorted(&[0, 1, 2, 5, 10, 20, 30, 31]).to_string(),
+            "0..3,5,10..31:10,31"
         );
-        assert_eq!(
-            parse_frames(" 3 .. 4").unwrap(),
-            FrameRange { start: 3, end: 4 }
-        );
-        for s in ["5..2", "2..2", "a..3", "3", "-1..4", "1..b"] {
+        for (s, piece) in [
+            ("5..2", "\"5..2\""),
+            ("2..2", "\"2..2\""),
+            ("a..3", "\"a\""),
+            ("-1..4", "\"-1\""),
+            ("1..b", "\"b\""),
+            ("0..10,x", "\"x\""),
+            ("0..10,,12", "empty piece"),
+            ("0..10:0", "step"),
+            ("0..10:-2", "step"),
+            ("4294967295", "not a frame number"),
+            ("0..4000000000", "10000000"),
+            ("0..6000000,0..6000000", "10000000"),
+        ] {
             let e = parse_frames(s).unwrap_err().to_string();
-            assert!(e.contains("--frames"), "{s}: {e}");
+            assert!(e.starts_with("--frames") && e.contains(piece), "{s}: {e}");
         }
     }
 

@@ -26,11 +26,12 @@ pub struct Args {
     /// static part is baked in memory.
     #[arg(long)]
     pub baked: Option<PathBuf>,
-    /// Frames A..B (inclusive A, exclusive B); default: the whole animation.
-    #[arg(long, value_name = "A..B")]
+    /// Frames: A..B (inclusive A, exclusive B), a single frame N, every S-th frame A..B:S,
+    /// or a comma list of these (0..10,47,50..60); default: the whole animation.
+    #[arg(long, value_name = "A..B|N|A..B:S,...")]
     pub frames: Option<String>,
     /// Frames per second; frame i shows time i/F (default: the scene's extras.fps, else 24).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub fps: Option<f32>,
     /// Play one animation clip (name or index); default: all together.
     #[arg(long, value_name = "NAME|INDEX")]
@@ -44,20 +45,21 @@ pub struct Args {
     /// Reflection/refraction depth.
     #[arg(long, default_value_t = 4)]
     pub max_depth: u32,
-    /// A scene camera by name (default: the first; else one framing the scene).
-    #[arg(long)]
+    /// A scene camera by name or by its index in the file's cameras (default: the first;
+    /// else one framing the scene). Not with --look-from.
+    #[arg(long, value_name = "NAME|INDEX")]
     pub camera: Option<String>,
     /// Camera position (world), overriding the scene's camera; needs --look-at.
-    #[arg(long, value_name = "X,Y,Z")]
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub look_from: Option<String>,
     /// Point the camera looks at (world).
-    #[arg(long, value_name = "X,Y,Z")]
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub look_at: Option<String>,
     /// Camera up vector (default 0,1,0).
-    #[arg(long, value_name = "X,Y,Z")]
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub up: Option<String>,
     /// Vertical field of view in degrees for --look-from (default 45).
-    #[arg(long, value_name = "DEG")]
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
     pub yfov: Option<f32>,
     /// Extra EXR channels: depth (Z), normal (N.X/Y/Z), albedo (albedo.R/G/B).
     #[arg(long, value_name = "depth,normal,albedo")]
@@ -74,7 +76,7 @@ pub struct Args {
     /// Render only the frames k with k % N == I.
     #[arg(long, value_name = "I/N")]
     pub shard: Option<String>,
-    /// Worker threads (default: all cores).
+    /// Worker threads; 0 or absent: all cores.
     #[arg(long)]
     pub threads: Option<usize>,
     /// No progress or report.
@@ -240,12 +242,12 @@ pub fn drive(
     let summary = rayon::scope(|_| {
         render::render_sequence(scene, opts, &mut |e| match e {
             RenderEvent::Planned(p) => {
+                pending.extend(p.warnings.iter().map(|w| format!("warning: {w}")));
                 pending.push(format!(
-                    "{}: {}; frames {}..{} at {} fps, {} to render, {}x{} at {} spp",
+                    "{}: {}; frames {} at {} fps, {} to render, {}x{} at {} spp",
                     label.display(),
                     p.split,
-                    p.range.start,
-                    p.range.end,
+                    p.set,
                     p.fps,
                     p.frames.len(),
                     opts.width,
@@ -259,7 +261,8 @@ pub fn drive(
                 seconds,
             } => {
                 pending.push(format!(
-                    "static part: {triangles} triangles, {} in {:.2} s",
+                    "static part: {}, {} in {:.2} s",
+                    subfield::plural(triangles as u64, "triangle"),
                     if baked_file {
                         "opened from the baked file"
                     } else {
@@ -296,8 +299,8 @@ pub fn drive(
         let n = summary.rendered.max(1) as f64;
         let per = |f: fn(&render::FrameStats) -> f64| summary.frames.iter().map(f).sum::<f64>() / n;
         let line = format!(
-            "rendered {} frames ({} skipped as complete) to {} in {:.2} s; per frame: update {:.1} ms, trace {:.1} ms, shade {:.1} ms, write {:.1} ms",
-            summary.rendered,
+            "rendered {} ({} skipped as complete) to {} in {:.2} s; per frame: update {:.1} ms, trace {:.1} ms, shade {:.1} ms, write {:.1} ms",
+            subfield::plural(summary.rendered as u64, "frame"),
             summary.skipped,
             opts.output.display(),
             summary.wall.as_secs_f64(),

@@ -11,7 +11,9 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context};
 use subfield::farm::{self, openjd::OpenJdJob, slurm::SlurmJob};
 use subfield::format::{self, ContentHash, WriteOptions};
-use subfield::render::{self, RenderOptions, RenderPlan};
+use subfield::render::{self, FrameSet, FrameSpan, RenderOptions, RenderPlan};
+
+use subfield::plural;
 
 use super::progress::Progress;
 use super::render as render_cmd;
@@ -205,6 +207,11 @@ fn prepare(r: &render_cmd::Args, dry_run: bool) -> anyhow::Result<Work> {
     let scene = subfield::import::load(&scene_path)?;
     let plan = render::plan(&scene, &opts)
         .with_context(|| format!("cannot render {}", r.scene.display()))?;
+    if !r.quiet {
+        for w in &plan.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
     let missing: Vec<u32> = plan
         .frames
         .iter()
@@ -269,8 +276,11 @@ fn nothing_missing(w: &Work, quiet: bool) -> bool {
     if w.missing.is_empty() {
         if !quiet {
             eprintln!(
-                "all {} frames are complete in {}; nothing to submit",
-                w.plan.frames.len(),
+                "{} complete in {}; nothing to submit",
+                match w.plan.frames.len() {
+                    1 => "the frame is".to_string(),
+                    n => format!("all {n} frames are"),
+                },
                 w.dir.display()
             );
         }
@@ -299,17 +309,14 @@ fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
     if nothing_missing(&w, r.quiet) {
         return Ok(ExitCode::SUCCESS);
     }
-    let range = w.plan.range;
-    let shards = a
-        .tasks
-        .unwrap_or_else(|| (range.end - range.start).min(8))
-        .min(range.end - range.start)
-        .max(1);
+    let count = u32::try_from(w.plan.frames.len()).unwrap_or(u32::MAX);
+    let shards = a.tasks.unwrap_or_else(|| count.min(8)).min(count).max(1);
     let mut array: Vec<u32> = w.missing.iter().map(|f| f % shards).collect();
     array.sort_unstable();
     array.dedup();
     let mut command = w.command.clone();
-    command.push(format!("--frames={}..{}", range.start, range.end));
+    // Every task plans the same frames as this plan, and takes its shard of them.
+    command.push(format!("--frames={}", w.plan.set));
     let job = SlurmJob {
         name: format!("subfield-{}", w.base),
         shards,
@@ -334,13 +341,12 @@ fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
     let id = farm::slurm::sbatch(&path, &a.sbatch_args)?;
     if !r.quiet {
         eprintln!(
-            "submitted job {id}: {} of {} tasks for {} missing frames of {} ({}..{}), script {}, logs {}",
+            "submitted job {id}: {} of {} for {} of {} ({}), script {}, logs {}",
             job.array.len(),
-            shards,
-            w.missing.len(),
+            plural(shards, "task"),
+            plural(w.missing.len() as u64, "missing frame"),
             w.plan.frames.len(),
-            range.start,
-            range.end,
+            w.plan.set,
             path.display(),
             job.log_dir.display()
         );
@@ -391,7 +397,12 @@ fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::R
     if missing.is_empty() {
         if !r.quiet {
             eprintln!(
-                "job {id} done: all {total} frames complete in {:.1} s",
+                "job {id} done: {} complete in {:.1} s",
+                if total == 1 {
+                    "the frame".to_string()
+                } else {
+                    format!("all {total} frames")
+                },
                 start.elapsed().as_secs_f64()
             );
         }
@@ -411,8 +422,9 @@ fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::R
         })
         .collect();
     bail!(
-        "job {id} ended with {} of {total} frames missing: {}; submit the same command again to render them",
+        "job {id} ended with {} of {} missing: {}; submit the same command again to render them",
         missing.len(),
+        plural(total, "frame"),
         runs.join(",")
     )
 }
@@ -460,7 +472,7 @@ fn openjd(a: OpenJdArgs) -> anyhow::Result<ExitCode> {
     }
     let job = OpenJdJob {
         name: format!("subfield render {}", w.base),
-        chunks: farm::frame_chunks(&w.missing, a.chunk),
+        chunks: chunks(&w.missing, a.chunk),
         command: w.command.clone(),
         stage_dir: r.stage_dir.clone(),
     };
@@ -472,10 +484,10 @@ fn openjd(a: OpenJdArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("cannot write {}", a.template.display()))?;
     if !r.quiet {
         eprintln!(
-            "wrote {}: {} tasks for {} missing frames of {}; run it with `openjd run {}`",
+            "wrote {}: {} for {} of {}; run it with `openjd run {}`",
             a.template.display(),
-            job.chunks.len(),
-            w.missing.len(),
+            plural(job.chunks.len() as u64, "task"),
+            plural(w.missing.len() as u64, "missing frame"),
             w.plan.frames.len(),
             a.template.display()
         );
@@ -483,9 +495,46 @@ fn openjd(a: OpenJdArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The missing frames (ascending) as OpenJD tasks of at most `k` frames each, spelled as
+/// `--frames` reads them: consecutive frames in chunks of `A..B` that a gap ends (as
+/// before), and frames with steps between them (`--frames 0..800:100`) `k` to a task.
+fn chunks(missing: &[u32], k: u32) -> Vec<String> {
+    let consecutive = missing.windows(2).all(|w| w[1] == w[0] + 1);
+    let stepped = missing.len() > 1 && !missing.windows(2).any(|w| w[1] == w[0] + 1);
+    if consecutive || !stepped {
+        return farm::frame_chunks(missing, k)
+            .into_iter()
+            .map(|(a, b)| {
+                FrameSet::new(vec![FrameSpan {
+                    start: a,
+                    end: b,
+                    step: 1,
+                }])
+                .to_string()
+            })
+            .collect();
+    }
+    missing
+        .chunks(k.max(1) as usize)
+        .map(|c| FrameSet::from_sorted(c).to_string())
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn openjd_chunks_spell_frames_as_render_reads_them() {
+        assert_eq!(
+            chunks(&[0, 1, 2, 3, 4, 9, 10], 2),
+            ["0..2", "2..4", "4", "9..11"]
+        );
+        assert_eq!(
+            chunks(&[0, 100, 200, 300, 400, 500, 600, 700], 3),
+            ["0..201:100", "300..501:100", "600,700"]
+        );
+    }
 
     #[test]
     fn job_files_are_named_after_the_pattern() {

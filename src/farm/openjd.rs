@@ -13,8 +13,9 @@ use super::shell_quote;
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct OpenJdJob {
     pub name: String,
-    /// One task per chunk `A..B` (B exclusive).
-    pub chunks: Vec<(u32, u32)>,
+    /// One task per chunk, each as `--frames` spells it (`A..B`, B exclusive; or a list
+    /// such as `0..40:10,47`).
+    pub chunks: Vec<String>,
     /// The task's render command without `--frames` and `--stage-dir`.
     pub command: Vec<String>,
     /// The node-local stage; `None`: `$SUBFIELD_STAGE_DIR`, else `$TMPDIR/subfield-stage`.
@@ -51,8 +52,8 @@ impl OpenJdJob {
         let _ = writeln!(t, "    - name: Frames");
         let _ = writeln!(t, "      type: STRING");
         let _ = writeln!(t, "      range:");
-        for (a, b) in &self.chunks {
-            let _ = writeln!(t, "      - {}", yaml_str(&format!("{a}..{b}")));
+        for c in &self.chunks {
+            let _ = writeln!(t, "      - {}", yaml_str(c));
         }
         let _ = writeln!(t, "  script:");
         let _ = writeln!(t, "    embeddedFiles:");
@@ -98,12 +99,15 @@ mod tests {
     fn template_lists_the_chunks_and_embeds_a_valid_script() {
         let job = OpenJdJob {
             name: "subfield render frame".into(),
-            chunks: vec![(0, 8), (8, 12)],
+            chunks: vec!["0..8".into(), "8..12".into(), "20..40:10,47".into()],
             command: vec!["/opt/subfield".into(), "render".into(), "a b.glb".into()],
             stage_dir: Some("/scratch/stage".into()),
         };
         let t = job.template();
-        assert!(t.contains("      - \"0..8\"\n      - \"8..12\"\n"), "{t}");
+        assert!(
+            t.contains("      - \"0..8\"\n      - \"8..12\"\n      - \"20..40:10,47\"\n"),
+            "{t}"
+        );
         assert!(t.contains("specificationVersion: jobtemplate-2023-09\n"));
         let script = job.task_script();
         assert!(script.contains("'a b.glb' --frames \"$1\" --stage-dir \"$stage\""));

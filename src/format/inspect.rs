@@ -213,6 +213,126 @@ fn mib(b: u64) -> f64 {
     b as f64 / (1024.0 * 1024.0)
 }
 
+impl Inspection {
+    /// The one-screen form (`subfield inspect` without `--verbose`): header, hashes,
+    /// sizes by section kind, the directions' grids and the occupancy in a few lines.
+    /// `Display` is the full form with one row per section and per direction.
+    pub fn summary(&self) -> InspectionSummary<'_> {
+        InspectionSummary(self)
+    }
+}
+
+/// See [`Inspection::summary`].
+pub struct InspectionSummary<'a>(&'a Inspection);
+
+impl fmt::Display for InspectionSummary<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let ins = self.0;
+        let h = &ins.header;
+        writeln!(
+            f,
+            "format version {}, {} bytes ({:.2} MiB stored, {:.2} MiB raw, ratio {:.2})",
+            h.version,
+            h.file_length,
+            mib(ins.stored_bytes),
+            mib(ins.raw_bytes),
+            ins.ratio
+        )?;
+        writeln!(
+            f,
+            "{} triangles; level {}: {} subfields, {} tiles per side, margin {:e}",
+            h.triangle_count, h.level, h.subfield_count, h.tiles, h.margin
+        )?;
+        writeln!(f, "content hash {}", ins.content_hash)?;
+        writeln!(f, "scene hash {}", h.scene_hash)?;
+        // Sections by kind (their names without the subfield index), in file order.
+        let mut kinds: Vec<(&str, usize, u64, u64)> = Vec::new();
+        for sec in &ins.sections {
+            let kind = sec.name.split('[').next().unwrap_or(&sec.name);
+            match kinds.iter_mut().find(|k| k.0 == kind) {
+                Some(k) => {
+                    k.1 += 1;
+                    k.2 += sec.stored_length;
+                    k.3 += sec.raw_length;
+                }
+                None => kinds.push((kind, 1, sec.stored_length, sec.raw_length)),
+            }
+        }
+        let kinds: Vec<String> = kinds
+            .iter()
+            .map(|(k, n, st, raw)| {
+                let count = if *n == 1 {
+                    String::new()
+                } else {
+                    format!(" ×{n}")
+                };
+                format!("{k}{count} {:.2}/{:.2}", mib(*st), mib(*raw))
+            })
+            .collect();
+        writeln!(
+            f,
+            "sections: {} (MiB stored/raw) {}",
+            ins.sections.len(),
+            kinds.join(", ")
+        )?;
+        let d = &ins.directions;
+        if !d.is_empty() {
+            let grids = |g: fn(&DirectionInfo) -> u64| {
+                (
+                    d.iter().map(g).min().unwrap_or(0),
+                    d.iter().map(g).max().unwrap_or(0),
+                )
+            };
+            let (tiles_lo, tiles_hi) = grids(|x| x.tiles);
+            let (nu_lo, nu_hi) = grids(|x| x.nu as u64);
+            let (nv_lo, nv_hi) = grids(|x| x.nv as u64);
+            let busiest = d
+                .iter()
+                .max_by(|a, b| {
+                    a.triangles_per_tile_mean
+                        .total_cmp(&b.triangles_per_tile_mean)
+                })
+                .map(|x| x.subfield)
+                .unwrap_or(0);
+            let span = |lo: u64, hi: u64| {
+                if lo == hi {
+                    lo.to_string()
+                } else {
+                    format!("{lo}-{hi}")
+                }
+            };
+            writeln!(
+                f,
+                "directions: {} subfields, grids of {} by {} tiles ({} each); the densest is #{busiest}",
+                d.len(),
+                span(nu_lo, nu_hi),
+                span(nv_lo, nv_hi),
+                span(tiles_lo, tiles_hi),
+            )?;
+        }
+        let o = &ins.occupancy;
+        writeln!(
+            f,
+            "occupancy: {} tiles, {} empty, {} flat, {:.2} triangles per tile (max {}), {} slab entries",
+            o.tiles,
+            o.empty_tiles,
+            o.flat_tiles,
+            o.triangles_per_tile_mean,
+            o.triangles_per_tile_max,
+            o.slab_entries
+        )?;
+        let hist: Vec<String> = o
+            .histogram
+            .iter()
+            .map(|(lo, hi, n)| format!("[{lo},{hi}) {n}"))
+            .collect();
+        if !hist.is_empty() {
+            writeln!(f, "  triangles per tile: {}", hist.join(", "))?;
+        }
+        writeln!(f, "(--verbose: every section and direction)")
+    }
+}
+
 impl fmt::Display for Inspection {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let h = &self.header;

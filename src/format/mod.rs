@@ -30,7 +30,9 @@ use xxhash_rust::xxh3::{xxh3_64, Xxh3};
 
 pub use content::{hash_file, hash_reader, BadContentHash, ContentHash};
 pub use error::FormatError;
-pub use inspect::{inspect, inspect_bytes, DirectionInfo, Inspection, Occupancy, SectionInfo};
+pub use inspect::{
+    inspect, inspect_bytes, DirectionInfo, Inspection, InspectionSummary, Occupancy, SectionInfo,
+};
 pub use read::{from_bytes, open_psf, read_header, BakedPsf, OpenOptions};
 pub use write::{to_bytes, write_psf, WriteOptions, WriteReport};
 

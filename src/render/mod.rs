@@ -37,8 +37,8 @@ use std::time::Duration;
 
 pub use camera::{animation_bounds, CameraModel};
 pub use options::{
-    Aovs, FrameRange, LookAt, PixelType, PreviewOptions, RenderOptions, ShadingOptions, Shard,
-    MAX_SIDE,
+    Aovs, FrameRange, FrameSet, FrameSpan, LookAt, PixelType, PreviewOptions, RenderOptions,
+    ShadingOptions, Shard, MAX_FRAMES, MAX_SIDE,
 };
 pub use output::{channel_names, encode_exr, encode_preview, is_complete, linear_to_srgb8};
 pub use planning::{plan, CameraSource, OutputPattern, RenderPlan};
@@ -57,7 +57,7 @@ pub enum RenderError {
     /// A bad option value (the message names the flag).
     #[error("{0}")]
     Option(String),
-    #[error("no camera {requested:?} in the scene; available: {}", list(.available))]
+    #[error("no camera {requested:?} in the scene (give a camera's name or its index in the file's cameras); available: {}", list(.available))]
     UnknownCamera {
         requested: String,
         available: Vec<String>,
@@ -68,6 +68,13 @@ pub enum RenderError {
     Format(#[from] FormatError),
     #[error(transparent)]
     Psf(#[from] PsfError),
+    /// The baked file (`--baked`) cannot be used; the message names it.
+    #[error("{}: {source}", path.display())]
+    BakedFile {
+        path: PathBuf,
+        #[source]
+        source: FormatError,
+    },
     #[error("{}: {source}", path.display())]
     Io {
         path: PathBuf,
@@ -88,6 +95,19 @@ pub enum RenderError {
     },
     #[error("the frame writer stopped unexpectedly")]
     WriterGone,
+}
+
+impl RenderError {
+    /// An error opening the baked file `path`, naming it (an I/O error names it already).
+    pub(crate) fn baked(path: &std::path::Path, e: FormatError) -> RenderError {
+        match e {
+            FormatError::Io { .. } => RenderError::Format(e),
+            source => RenderError::BakedFile {
+                path: path.to_path_buf(),
+                source,
+            },
+        }
+    }
 }
 
 fn list(v: &[String]) -> String {

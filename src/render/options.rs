@@ -12,6 +12,167 @@ pub struct FrameRange {
     pub end: u32,
 }
 
+/// Most frames one render takes: a typo such as `0..4000000000` is refused before any
+/// memory is spent on it.
+pub const MAX_FRAMES: u64 = 10_000_000;
+
+/// Every `step`-th frame of `start..end` (end exclusive, `step >= 1`): `--frames A..B:S`;
+/// `N` is `N..N+1`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameSpan {
+    pub start: u32,
+    pub end: u32,
+    pub step: u32,
+}
+
+impl FrameSpan {
+    /// How many frames the span names (0 when empty or with step 0).
+    pub fn count(&self) -> u64 {
+        if self.end <= self.start || self.step == 0 {
+            return 0;
+        }
+        (self.end - self.start - 1) as u64 / self.step as u64 + 1
+    }
+}
+
+impl From<FrameRange> for FrameSpan {
+    fn from(r: FrameRange) -> Self {
+        FrameSpan {
+            start: r.start,
+            end: r.end,
+            step: 1,
+        }
+    }
+}
+
+impl std::fmt::Display for FrameSpan {
+    /// As `--frames` spells it: `N`, `A..B` or `A..B:S`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.count() == 1 {
+            write!(f, "{}", self.start)
+        } else if self.step == 1 {
+            write!(f, "{}..{}", self.start, self.end)
+        } else {
+            write!(f, "{}..{}:{}", self.start, self.end, self.step)
+        }
+    }
+}
+
+/// The frames a render is asked for (`--frames 0..10,47,50..60:2`): a list of spans, in
+/// any order, possibly overlapping. [`FrameSet::frames`] checks it and lists its frames
+/// sorted, each once; `Display` spells it back as `--frames` reads it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FrameSet {
+    spans: Vec<FrameSpan>,
+}
+
+impl FrameSet {
+    pub fn new(spans: Vec<FrameSpan>) -> FrameSet {
+        FrameSet { spans }
+    }
+
+    /// The frames of a sorted list, spelled compactly (runs with one step become spans).
+    pub fn from_sorted(frames: &[u32]) -> FrameSet {
+        let mut spans = Vec::new();
+        let mut i = 0;
+        while i < frames.len() {
+            let a = frames[i];
+            let mut j = i + 1;
+            if let Some(&b) = frames.get(j).filter(|&&b| b > a) {
+                let step = b - a;
+                while let (Some(&n), Some(e)) = (frames.get(j + 1), frames[j].checked_add(step)) {
+                    if n != e {
+                        break;
+                    }
+                    j += 1;
+                }
+                // A run of two with a step is clearer as two single frames.
+                if step == 1 || j > i + 1 {
+                    spans.push(FrameSpan {
+                        start: a,
+                        end: frames[j].saturating_add(1),
+                        step,
+                    });
+                    i = j + 1;
+                    continue;
+                }
+                j = i + 1;
+            }
+            spans.push(FrameSpan {
+                start: a,
+                end: a.saturating_add(1),
+                step: 1,
+            });
+            i = j;
+        }
+        FrameSet { spans }
+    }
+
+    pub fn spans(&self) -> &[FrameSpan] {
+        &self.spans
+    }
+
+    /// How many frames the spans name together, repeats counted (cheap: nothing listed).
+    pub fn count(&self) -> u64 {
+        self.spans.iter().map(FrameSpan::count).sum()
+    }
+
+    /// The frames, ascending, each once; refuses an empty span, a step of 0, an empty set
+    /// and more than [`MAX_FRAMES`] frames (checked before anything is listed).
+    pub fn frames(&self) -> Result<Vec<u32>, super::RenderError> {
+        let bad = |why: String| {
+            Err(super::RenderError::Option(format!(
+                "--frames {self}: {why}"
+            )))
+        };
+        for s in &self.spans {
+            if s.step == 0 {
+                return bad(format!("{s}: the step must be at least 1"));
+            }
+            if s.end <= s.start {
+                return bad(format!(
+                    "{s}: the range is empty (the end is exclusive and must be above the start)"
+                ));
+            }
+        }
+        let n = self.count();
+        if n == 0 {
+            return bad("no frames".into());
+        }
+        if n > MAX_FRAMES {
+            return bad(format!(
+                "{n} frames, more than the {MAX_FRAMES} a render takes (a typo?)"
+            ));
+        }
+        let mut out: Vec<u32> = Vec::with_capacity(n as usize);
+        for s in &self.spans {
+            out.extend((s.start..s.end).step_by(s.step as usize));
+        }
+        out.sort_unstable();
+        out.dedup();
+        Ok(out)
+    }
+}
+
+impl From<FrameRange> for FrameSet {
+    fn from(r: FrameRange) -> Self {
+        FrameSet::new(vec![r.into()])
+    }
+}
+
+impl std::fmt::Display for FrameSet {
+    /// As `--frames` reads it: the spans joined by commas.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (i, s) in self.spans.iter().enumerate() {
+            if i > 0 {
+                f.write_str(",")?;
+            }
+            write!(f, "{s}")?;
+        }
+        Ok(())
+    }
+}
+
 /// `--shard I/N`: the frames `k` with `k % count == index`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Shard {
@@ -88,7 +249,7 @@ pub struct RenderOptions {
     /// A baked `.psf` of the scene's static part; `None` bakes in memory.
     pub baked: Option<PathBuf>,
     /// `None`: the whole animation at `fps` (frame 0 alone without animation).
-    pub frames: Option<FrameRange>,
+    pub frames: Option<FrameSet>,
     /// `None`: the scene's `extras.fps`, else 24.
     pub fps: Option<f32>,
     /// One clip by name or index; `None` plays all.

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 
 use super::camera::{animation_bounds, CameraModel};
-use super::options::{FrameRange, RenderOptions, MAX_SIDE};
+use super::options::{FrameRange, FrameSet, RenderOptions, MAX_FRAMES, MAX_SIDE};
 use super::output::is_complete;
 use super::stats;
 use super::writer::check_writable;
@@ -56,6 +56,15 @@ impl OutputPattern {
                 "-o {s:?}: names a folder, not a file"
             )));
         }
+        let exr = pattern
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+        if !exr {
+            return Err(RenderError::Option(format!(
+                "-o {s:?}: frames are OpenEXR files; the pattern must end in .exr"
+            )));
+        }
         Ok(OutputPattern {
             parts,
             fixed: pattern.to_path_buf(),
@@ -90,10 +99,15 @@ pub enum CameraSource {
 pub struct RenderPlan {
     pub selection: ClipSelection,
     pub fps: f32,
-    /// The range before sharding.
+    /// The frames asked for (`--frames`, else the whole animation), before sharding.
+    pub set: FrameSet,
+    /// Their span: the first frame to one past the last, before sharding.
     pub range: FrameRange,
-    /// The frames this run renders (after `--shard`), ascending.
+    /// The frames this run renders (after `--shard`), ascending, each once.
     pub frames: Vec<u32>,
+    /// Warnings about the plan (`--frames` past the end of the animation), one line each,
+    /// without the `warning: ` prefix.
+    pub warnings: Vec<String>,
     pub pattern: OutputPattern,
     pub camera: CameraSource,
     pub split: SplitSummary,
@@ -143,42 +157,50 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
             opts.max_depth
         )));
     }
-    let range = match opts.frames {
-        Some(r) if r.end > r.start => r,
-        Some(r) => {
-            return Err(RenderError::Option(format!(
-                "--frames {}..{}: the range is empty (the end is exclusive and must be above the start)",
-                r.start, r.end
-            )))
-        }
-        None => {
-            let d = scene.duration(selection) as f64;
-            // The last frame at or before the end of the animation. The end is an f32 key
-            // time, a few ulps (2^-24 each, relative) off the frame time it stands for:
-            // 299/30 s is stored as 9.966666 s, 298.99999 frames at 30 fps. Allow 2^-20
-            // of it, so the last key's frame is not dropped.
-            let last = if d > 0.0 {
-                let x = d * fps as f64;
-                (x + x * (1.0 / 1_048_576.0) + 1e-6)
-                    .floor()
-                    .min(u32::MAX as f64 - 1.0) as u32
-            } else {
-                0
-            };
-            FrameRange {
-                start: 0,
-                end: last + 1,
-            }
-        }
+    // The last frame at or before the end of the animation; `None` without animation.
+    let duration = scene.duration(selection) as f64;
+    let last = (duration > 0.0).then(|| {
+        // The end is an f32 key time, a few ulps (2^-24 each, relative) off the frame time
+        // it stands for: 299/30 s is stored as 9.966666 s, 298.99999 frames at 30 fps.
+        // Allow 2^-20 of it, so the last key's frame is not dropped.
+        let x = duration * fps as f64;
+        (x + x * (1.0 / 1_048_576.0) + 1e-6)
+            .floor()
+            .min(u32::MAX as f64 - 1.0) as u32
+    });
+    let set = match &opts.frames {
+        Some(s) => s.clone(),
+        None => FrameSet::from(FrameRange {
+            start: 0,
+            end: last.unwrap_or(0) + 1,
+        }),
     };
+    let all = set.frames().map_err(|e| match opts.frames {
+        Some(_) => e,
+        None => RenderError::Option(format!(
+            "the animation runs {} frames at {fps} fps, more than the {MAX_FRAMES} a render takes: give --frames",
+            last.unwrap_or(0) as u64 + 1
+        )),
+    })?;
+    let (first, final_) = (all[0], all[all.len() - 1]);
+    let range = FrameRange {
+        start: first,
+        end: final_ + 1,
+    };
+    let mut warnings = Vec::new();
+    if let (Some(_), Some(last)) = (&opts.frames, last) {
+        if final_ > last {
+            warnings.push(format!(
+                "--frames {set} runs past the end of the animation (frame {last} at {fps} fps, {duration:.3} s); later frames show its last pose"
+            ));
+        }
+    }
     let pattern = OutputPattern::parse(&opts.output)?;
-    if !pattern.is_numbered() && range.end - range.start != 1 {
+    if !pattern.is_numbered() && all.len() != 1 {
         return Err(RenderError::Option(format!(
-            "-o {}: {} frames ({}..{}) need a '#' in the pattern for the frame number",
+            "-o {}: {} frames ({set}) need a '#' in the pattern for the frame number",
             opts.output.display(),
-            range.end - range.start,
-            range.start,
-            range.end
+            all.len(),
         )));
     }
     let frames: Vec<u32> = match opts.shard {
@@ -188,11 +210,14 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
                 s.index, s.count
             )))
         }
-        Some(s) => (range.start..range.end)
-            .filter(|k| k % s.count == s.index)
-            .collect(),
-        None => (range.start..range.end).collect(),
+        Some(s) => all.into_iter().filter(|k| k % s.count == s.index).collect(),
+        None => all,
     };
+    if let (Some(name), Some(_)) = (&opts.camera, &opts.look_at) {
+        return Err(RenderError::Option(format!(
+            "--camera {name:?} and --look-from both choose the camera; give one of them"
+        )));
+    }
     let camera = if let Some(l) = &opts.look_at {
         CameraSource::Fixed(CameraModel::look_at(l, opts.width, opts.height)?)
     } else if let Some(name) = &opts.camera {
@@ -215,8 +240,10 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
     Ok(RenderPlan {
         selection,
         fps,
+        set,
         range,
         frames,
+        warnings,
         pattern,
         camera,
         split: static_dynamic_split(scene, selection).summary(),
@@ -281,7 +308,17 @@ mod tests {
         let p = OutputPattern::parse(Path::new("still.exr")).unwrap();
         assert!(!p.is_numbered());
         assert_eq!(p.path(9), PathBuf::from("still.exr"));
-        for bad in ["a#b#.exr", "#x#", "", "out/"] {
+        assert!(OutputPattern::parse(Path::new("out/F.####.EXR")).is_ok());
+        for bad in [
+            "a#b#.exr",
+            "#x#",
+            "",
+            "out/",
+            "f.####.png",
+            "f.####",
+            "f.####.exr.tmp",
+            "exr",
+        ] {
             assert!(OutputPattern::parse(Path::new(bad)).is_err(), "{bad}");
         }
     }

@@ -94,7 +94,8 @@ fn static_part(static_soup: &TriangleSoup, opts: &RenderOptions) -> Result<Psf, 
                 &OpenOptions {
                     expect_scene_hash: Some(hash),
                 },
-            )?
+            )
+            .map_err(|e| RenderError::baked(path, e))?
             .psf
         }
         None => Psf::build(

@@ -177,22 +177,32 @@ impl Scene {
         }
     }
 
-    /// The camera at time `t`: the one named `which` (camera name, else node name), or
-    /// the first camera met walking the shown scene. `None` when there is none.
+    /// The camera at time `t`: the one named `which` (camera name, else node name; else,
+    /// when `which` is a number, the first node showing the file's camera of that index),
+    /// or the first camera met walking the shown scene. `None` when there is none.
     pub fn camera_at(&self, sel: ClipSelection, t: f32, which: Option<&str>) -> Option<Camera> {
         let order = self.scene_nodes();
-        let matches = |n: usize| -> bool {
-            let node = &self.nodes[n];
-            let Some(c) = node.camera else { return false };
-            match which {
-                None => true,
-                Some(name) => {
-                    self.cameras[c].name.as_deref() == Some(name)
-                        || node.name.as_deref() == Some(name)
-                }
-            }
+        let named = |n: &usize, name: &str| -> bool {
+            let node = &self.nodes[*n];
+            node.camera.is_some_and(|c| {
+                self.cameras[c].name.as_deref() == Some(name) || node.name.as_deref() == Some(name)
+            })
         };
-        let node = order.into_iter().find(|&n| matches(n))?;
+        let node = match which {
+            None => order
+                .into_iter()
+                .find(|&n| self.nodes[n].camera.is_some())?,
+            // A name first; else an index into the file's cameras (its first placement).
+            Some(name) => match order.iter().copied().find(|n| named(n, name)) {
+                Some(n) => n,
+                None => {
+                    let i = name.trim().parse::<usize>().ok()?;
+                    order
+                        .into_iter()
+                        .find(|&n| self.nodes[n].camera == Some(i))?
+                }
+            },
+        };
         let def = &self.cameras[self.nodes[node].camera?];
         let pose = self.pose_at(sel, t);
         let (_, rotation, position) = pose.world[node].to_scale_rotation_translation();

@@ -37,11 +37,11 @@ impl std::fmt::Display for SplitSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "static: {} triangles in {} instances; dynamic: {} triangles in {} instances",
-            self.static_triangles,
-            self.static_instances,
-            self.dynamic_triangles,
-            self.dynamic_instances
+            "static: {} in {}; dynamic: {} in {}",
+            crate::plural(self.static_triangles as u64, "triangle"),
+            crate::plural(self.static_instances as u64, "instance"),
+            crate::plural(self.dynamic_triangles as u64, "triangle"),
+            crate::plural(self.dynamic_instances as u64, "instance"),
         )
     }
 }
