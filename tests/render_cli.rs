@@ -461,7 +461,7 @@ fn bad_input_gives_one_line_and_writes_nothing() {
             vec![&sc, "-o", &p, "--look-from", "0,0,1", "--look-at", "0,0,1"],
             "same point",
         ),
-        (vec![&sc, "-o", &p, "--aov", "depth,motion"], "motion"),
+        (vec![&sc, "-o", &p, "--aov", "depth,velocity"], "velocity"),
         (vec![&sc, "-o", &p, "--fps", "0"], "--fps"),
         (vec![&sc, "-o", &p, "--plot", "x.pdf"], "--plot"),
         (

@@ -206,7 +206,7 @@ pub fn project(cam: &CameraModel, p: Vec3) -> Option<Vec2> {
     let c = cam.rotation.transpose() * (p - cam.origin);
     let (sx, sy) = match cam.ortho {
         None => {
-            if !(c.z < 0.0) {
+            if c.z >= 0.0 || c.z.is_nan() {
                 return None;
             }
             let d = -c.z;

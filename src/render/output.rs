@@ -87,11 +87,13 @@ fn text(s: &str) -> Text {
 /// `worldToCamera`, `worldToNDC`, `software`, `subfield/options` and the Cryptomatte
 /// metadata. No time stamps.
 fn layer_attributes(header: &FrameHeader) -> LayerAttributes {
-    let mut a = LayerAttributes::default();
-    a.frames_per_second = Some(fps_rational(header.fps));
-    a.world_to_camera = Some(header.world_to_camera);
-    a.world_to_normalized_device = Some(header.world_to_ndc);
-    a.software_name = Some(text(&software()));
+    let mut a = LayerAttributes {
+        frames_per_second: Some(fps_rational(header.fps)),
+        world_to_camera: Some(header.world_to_camera),
+        world_to_normalized_device: Some(header.world_to_ndc),
+        software_name: Some(text(&software())),
+        ..Default::default()
+    };
     a.other.insert(
         text(OPTIONS_ATTRIBUTE),
         AttributeValue::Text(text(&header.options)),

@@ -346,6 +346,7 @@ impl Frames<'_> {
         let update_ms = clock.elapsed().as_secs_f64() * 1e3;
         let tracer = psf.with_dynamic(dl);
         let inputs = AovInputs {
+            aovs: opts.aovs,
             next,
             crypto: self.crypto.as_deref(),
         };
@@ -356,7 +357,6 @@ impl Frames<'_> {
             frame,
             opts.spp,
             opts.max_depth,
-            opts.aovs,
             &inputs,
         );
         let header = FrameHeader::new(&camera, plan.fps, self.options.clone(), self.crypto.clone());

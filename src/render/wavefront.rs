@@ -16,9 +16,11 @@ use crate::geometry::{Hit, Intersector, Ray};
 use crate::psf::Prim;
 use crate::scene::TriangleSoup;
 
-/// What the AOVs beyond the shading need, given only when they are asked for.
+/// Which AOVs a frame has, and what those beyond the shading need (given only when
+/// they are asked for).
 #[derive(Clone, Copy, Default)]
 pub struct AovInputs<'a> {
+    pub aovs: Aovs,
     /// For `motion`: the moving triangles posed at the next frame's time (same order as
     /// this frame's) and the camera of that time.
     pub next: Option<(&'a TriangleSoup, CameraModel)>,
@@ -107,9 +109,9 @@ pub fn render_frame<T: Intersector>(
     frame: u32,
     spp: u32,
     max_depth: u32,
-    aovs: Aovs,
     inputs: &AovInputs<'_>,
 ) -> (FrameBuffers, FrameWork) {
+    let aovs = inputs.aovs;
     let (w, h) = (camera.width as usize, camera.height as usize);
     let spp = spp.max(1) as usize;
     let mut work = FrameWork::default();
