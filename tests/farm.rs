@@ -323,7 +323,8 @@ fn a_dry_run_prints_a_script_naming_both_hashes_and_the_missing_shards() {
     let psf = dir.join("scene.psf");
     let hash = bake(&scene, &psf, &[]);
     let out = dir.join("out/f.##.exr");
-    // Frames 0..8 with 4 shards; shard 1's frames (1, 5) already rendered.
+    // Frames 0..8 with 4 shards; shard 1's frames (1, 5) already rendered, with the
+    // options of the submission (a frame made with others is not complete).
     ok(&[
         "render",
         s(&scene),
@@ -333,6 +334,9 @@ fn a_dry_run_prints_a_script_naming_both_hashes_and_the_missing_shards() {
         "0..8",
         "--size",
         SIZE,
+        "--look-from=-1,2,6",
+        "--look-at",
+        "0,0,0",
         "--shard",
         "1/4",
         "--quiet",

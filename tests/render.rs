@@ -118,6 +118,7 @@ fn depth_matches_brute_force_at_every_pixel() {
             depth: true,
             normal: false,
             albedo: false,
+            ..Default::default()
         },
         spp: 2,
         preview: Some(render::PreviewOptions {
@@ -263,6 +264,7 @@ fn openexr_reads_our_files_and_agrees() {
         depth: true,
         normal: true,
         albedo: true,
+        ..Default::default()
     };
     for (pixel, rgba_type) in [(PixelType::Half, "float16"), (PixelType::Float, "float32")] {
         let out = dir.join(format!("{rgba_type}.exr"));
@@ -359,6 +361,7 @@ fn render_pixels(
             depth: true,
             normal: true,
             albedo: true,
+            ..Default::default()
         },
         ..Default::default()
     };
@@ -624,6 +627,7 @@ fn every_shared_gltf_renders_two_frames() {
                 depth: true,
                 normal: true,
                 albedo: true,
+                ..Default::default()
             },
             ..Default::default()
         };
@@ -633,7 +637,14 @@ fn every_shared_gltf_renders_two_frames() {
         for f in 0..2 {
             let p: PathBuf = out.join(format!("r{rendered}.{f}.exr"));
             assert!(
-                render::is_complete(&p, 32, 24, opts.aovs, PixelType::Half),
+                render::is_complete(
+                    &p,
+                    32,
+                    24,
+                    opts.aovs,
+                    PixelType::Half,
+                    &opts.options_string(s.plan.fps)
+                ),
                 "{}",
                 p.display()
             );

@@ -44,6 +44,8 @@ fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
 }
 
 const SIZE: &str = "48x36";
+/// Every AOV: frames stay byte-identical across threads and shards with all of them on.
+const ALL_AOVS: &str = "depth,normal,albedo,position,motion,cryptomatte";
 
 #[test]
 fn frames_do_not_depend_on_the_thread_count() {
@@ -64,7 +66,7 @@ fn frames_do_not_depend_on_the_thread_count() {
             "--spp",
             "4",
             "--aov",
-            "depth,normal,albedo",
+            ALL_AOVS,
             "--quiet",
         ];
         args.extend(threads.iter().flat_map(|t| ["--threads", *t]));
@@ -155,6 +157,65 @@ fn resume_completes_an_interrupted_run_and_redoes_broken_frames() {
         "--resume",
     ]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("(0 skipped as complete)"));
+}
+
+#[test]
+fn resume_rerenders_frames_made_with_other_options() {
+    let dir = temp_dir("resume-options");
+    let scene = write_scene(&dir);
+    let out = dir.join("o/f.#.exr");
+    let run = |spp: &str, resume: bool| {
+        let mut args = vec![
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--frames",
+            "0..3",
+            "--size",
+            "24x18",
+            "--spp",
+            spp,
+        ];
+        if resume {
+            args.push("--resume");
+        }
+        String::from_utf8_lossy(&ok(&args).stderr).into_owned()
+    };
+    run("1", false);
+    let spp1 = snapshot(&dir.join("o"));
+    // Other options: no frame is complete for this run, every one is rendered again.
+    let log = run("2", true);
+    assert!(log.contains("(0 skipped as complete)"), "{log}");
+    let spp2 = snapshot(&dir.join("o"));
+    assert_eq!(spp2.len(), 3);
+    for ((_, a), (_, b)) in spp1.iter().zip(&spp2) {
+        assert_ne!(a, b, "an --spp 2 frame is not the --spp 1 one");
+    }
+    // The same options: all skipped, nothing rewritten.
+    let log = run("2", true);
+    assert!(log.contains("(3 skipped as complete)"), "{log}");
+    assert_eq!(snapshot(&dir.join("o")), spp2);
+}
+
+#[test]
+fn crypto_levels_is_checked() {
+    let dir = temp_dir("crypto-levels");
+    let scene = write_scene(&dir);
+    let out = dir.join("o/f.#.exr");
+    let o = subfield(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&out),
+        "--aov",
+        "cryptomatte",
+        "--crypto-levels",
+        "0",
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--crypto-levels"));
+    assert!(!dir.join("o").exists());
 }
 
 /// A run really killed (SIGKILL) part-way, then resumed over the whole range, gives the
@@ -254,6 +315,10 @@ fn shards_together_give_the_full_set() {
         "2..7",
         "--size",
         SIZE,
+        "--spp",
+        "2",
+        "--aov",
+        ALL_AOVS,
         "--quiet",
     ]);
     for shard in ["0/2", "1/2"] {
@@ -266,6 +331,10 @@ fn shards_together_give_the_full_set() {
             "2..7",
             "--size",
             SIZE,
+            "--spp",
+            "2",
+            "--aov",
+            ALL_AOVS,
             "--shard",
             shard,
             "--quiet",
@@ -403,7 +472,7 @@ fn bad_input_gives_one_line_and_writes_nothing() {
             vec![&sc, "-o", &p, "--look-from", "0,0,1", "--look-at", "0,0,1"],
             "same point",
         ),
-        (vec![&sc, "-o", &p, "--aov", "depth,motion"], "motion"),
+        (vec![&sc, "-o", &p, "--aov", "depth,velocity"], "velocity"),
         (vec![&sc, "-o", &p, "--fps", "0"], "--fps"),
         (vec![&sc, "-o", &p, "--plot", "x.pdf"], "--plot"),
         (

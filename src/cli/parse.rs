@@ -136,7 +136,7 @@ pub fn parse_vec3(flag: &str, s: &str) -> anyhow::Result<Vec3> {
     Ok(Vec3::from_array(v))
 }
 
-/// `depth,normal,albedo` in any order and subset.
+/// `depth,normal,albedo,position,motion,cryptomatte` in any order and subset.
 pub fn parse_aovs(s: &str) -> anyhow::Result<Aovs> {
     let mut a = Aovs::default();
     for name in s.split(',').map(str::trim).filter(|n| !n.is_empty()) {
@@ -144,11 +144,17 @@ pub fn parse_aovs(s: &str) -> anyhow::Result<Aovs> {
             "depth" | "Z" | "z" => a.depth = true,
             "normal" | "N" => a.normal = true,
             "albedo" => a.albedo = true,
+            "position" | "P" => a.position = true,
+            "motion" => a.motion = true,
+            "cryptomatte" | "crypto" => a.cryptomatte = true,
             other => {
                 return Err(bad(
                     "--aov",
                     s,
-                    format!("unknown AOV {other:?} (known: depth, normal, albedo)"),
+                    format!(
+                        "unknown AOV {other:?} (known: depth, normal, albedo, position, \
+                         motion, cryptomatte)"
+                    ),
                 ))
             }
         }
@@ -222,6 +228,8 @@ mod tests {
         }
         let a = parse_aovs("albedo,depth").unwrap();
         assert!(a.depth && a.albedo && !a.normal);
+        let a = parse_aovs("position,motion,cryptomatte").unwrap();
+        assert!(a.position && a.motion && a.cryptomatte && !a.depth);
         assert!(parse_aovs("depth,colour").is_err());
     }
 }

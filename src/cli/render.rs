@@ -61,9 +61,14 @@ pub struct Args {
     /// Vertical field of view in degrees for --look-from (default 45).
     #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
     pub yfov: Option<f32>,
-    /// Extra EXR channels: depth (Z), normal (N.X/Y/Z), albedo (albedo.R/G/B).
-    #[arg(long, value_name = "depth,normal,albedo")]
+    /// Extra EXR channels: depth (Z), normal (N.X/Y/Z), albedo (albedo.R/G/B), position
+    /// (P.X/Y/Z), motion (motion.X/Y, pixels to the next frame), cryptomatte
+    /// (CryptoObject00…, CryptoMaterial00…).
+    #[arg(long, value_name = "depth,normal,albedo,position,motion,cryptomatte")]
     pub aov: Option<String>,
+    /// Cryptomatte ranks kept per pixel (two a layer).
+    #[arg(long, value_name = "N", default_value_t = render::DEFAULT_CRYPTO_LEVELS)]
+    pub crypto_levels: u32,
     /// RGBA as 16-bit half floats (the default).
     #[arg(long, conflicts_with = "float")]
     pub half: bool,
@@ -166,6 +171,16 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         }
         _ => bail!("--look-from and --look-at go together"),
     };
+    if a.crypto_levels == 0 || a.crypto_levels > 64 {
+        bail!("--crypto-levels {}: must be 1 to 64", a.crypto_levels);
+    }
+    let mut aovs = a
+        .aov
+        .as_deref()
+        .map(parse::parse_aovs)
+        .transpose()?
+        .unwrap_or_default();
+    aovs.crypto_levels = a.crypto_levels;
     Ok(RenderOptions {
         output: a.output.clone(),
         baked: a.baked.clone(),
@@ -178,12 +193,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         max_depth: a.max_depth,
         camera: a.camera.clone(),
         look_at,
-        aovs: a
-            .aov
-            .as_deref()
-            .map(parse::parse_aovs)
-            .transpose()?
-            .unwrap_or_default(),
+        aovs,
         pixel_type: if a.float {
             PixelType::Float
         } else {

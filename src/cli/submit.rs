@@ -144,6 +144,11 @@ fn render_flags(r: &render_cmd::Args) -> Vec<String> {
     opt("up", r.up.clone());
     opt("yfov", r.yfov.map(|f| f.to_string()));
     opt("aov", r.aov.clone());
+    opt(
+        "crypto-levels",
+        (r.crypto_levels != subfield::render::DEFAULT_CRYPTO_LEVELS)
+            .then(|| r.crypto_levels.to_string()),
+    );
     if r.float {
         v.push("--float".into());
     }
@@ -184,6 +189,7 @@ fn complete(plan: &RenderPlan, opts: &RenderOptions, frame: u32) -> bool {
         opts.height,
         opts.aovs,
         opts.pixel_type,
+        &opts.options_string(plan.fps),
     )
 }
 

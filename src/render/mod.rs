@@ -20,9 +20,10 @@
 //!
 //! Files: `planning` (pattern, camera source, frames, the checks before writing, resume
 //! skips), `sequence` (the static part and the frame loop), `writer` (jobs, atomic
-//! writes, folders), `wavefront` (one frame traced level by level), `shade` (Whitted shading of a hit), `camera`,
+//! writes, folders), `aov` (header matrices, projection, Cryptomatte ids), `wavefront` (one frame traced level by level), `shade` (Whitted shading of a hit), `camera`,
 //! `stats`, and `options` / `output` (the options and the EXR / PNG encoders).
 
+mod aov;
 mod camera;
 mod options;
 mod output;
@@ -35,17 +36,24 @@ mod writer;
 use std::path::PathBuf;
 use std::time::Duration;
 
+pub use aov::{
+    camera_to_ndc, crypto_hash, crypto_key, exr_matrix, fps_rational, murmur3_32, project,
+    world_to_camera, CryptoKind, CryptoNames, FrameHeader,
+};
 pub use camera::{animation_bounds, CameraModel};
 pub use options::{
     Aovs, FrameRange, FrameSet, FrameSpan, LookAt, PixelType, PreviewOptions, RenderOptions,
-    ShadingOptions, Shard, MAX_FRAMES, MAX_SIDE,
+    ShadingOptions, Shard, DEFAULT_CRYPTO_LEVELS, MAX_FRAMES, MAX_SIDE,
 };
-pub use output::{channel_names, encode_exr, encode_preview, is_complete, linear_to_srgb8};
+pub use output::{
+    channel_names, encode_exr, encode_preview, is_complete, linear_to_srgb8, software,
+    OPTIONS_ATTRIBUTE,
+};
 pub use planning::{plan, CameraSource, OutputPattern, RenderPlan};
 pub use sequence::render_sequence;
-pub use shade::{FrameBuffers, FrameWork, RayCounts, ShadeContext};
+pub use shade::{CryptoBuffers, FrameBuffers, FrameWork, RayCounts, ShadeContext};
 pub use stats::{plot_png, plot_svg, stats_csv, FrameStats};
-pub use wavefront::{render_frame, sample_offset};
+pub use wavefront::{render_frame, sample_offset, AovInputs};
 
 use crate::format::FormatError;
 use crate::psf::PsfError;

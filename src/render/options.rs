@@ -190,8 +190,9 @@ pub struct LookAt {
     pub yfov_deg: f32,
 }
 
-/// Extra EXR channels (`--aov depth,normal,albedo`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// Extra EXR channels (`--aov depth,normal,albedo,position,motion,cryptomatte`). Each is
+/// computed only when asked for: a render without AOVs does none of their work.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Aovs {
     /// `Z`: distance along the primary ray through the pixel centre; `+inf` on a miss.
     pub depth: bool,
@@ -199,6 +200,82 @@ pub struct Aovs {
     pub normal: bool,
     /// `albedo.R/G/B`: base colour (factor × texture) at the hit; 0 on a miss.
     pub albedo: bool,
+    /// `P.X P.Y P.Z`: world-space hit point of the centre ray; 0 on a miss.
+    pub position: bool,
+    /// `motion.X motion.Y`: where the centre ray's surface point is one frame later
+    /// (`t + 1/fps`, the point carried by its own triangle, seen by the camera of that
+    /// time), minus where it is now, in pixels; +x right, +y down. 0 on a miss, on a
+    /// point behind the next frame's camera, and where nothing moves.
+    pub motion: bool,
+    /// Cryptomatte ID layers `CryptoObject00…` and `CryptoMaterial00…` (Psyop's spec),
+    /// ranked by coverage over every sample of the pixel.
+    pub cryptomatte: bool,
+    /// Ranks of Cryptomatte kept per pixel (`--crypto-levels`, default 6): two ranks a
+    /// layer, so `ceil(levels / 2)` layers of each kind.
+    pub crypto_levels: u32,
+}
+
+/// Default of `--crypto-levels`.
+pub const DEFAULT_CRYPTO_LEVELS: u32 = 6;
+
+impl Default for Aovs {
+    fn default() -> Self {
+        Aovs {
+            depth: false,
+            normal: false,
+            albedo: false,
+            position: false,
+            motion: false,
+            cryptomatte: false,
+            crypto_levels: DEFAULT_CRYPTO_LEVELS,
+        }
+    }
+}
+
+impl Aovs {
+    /// Every AOV (tests and benchmarks).
+    pub fn all() -> Aovs {
+        Aovs {
+            depth: true,
+            normal: true,
+            albedo: true,
+            position: true,
+            motion: true,
+            cryptomatte: true,
+            crypto_levels: DEFAULT_CRYPTO_LEVELS,
+        }
+    }
+
+    /// Whether any AOV made from the pixel-centre ray is asked for.
+    pub fn any_centre(&self) -> bool {
+        self.depth || self.normal || self.albedo || self.position || self.motion
+    }
+
+    /// Cryptomatte layers of each kind (two ranks a layer).
+    pub fn crypto_layers(&self) -> usize {
+        if self.cryptomatte {
+            self.crypto_levels.max(1).div_ceil(2) as usize
+        } else {
+            0
+        }
+    }
+
+    /// The names, comma-separated, as `--aov` spells them (empty when none).
+    pub fn names(&self) -> String {
+        let all = [
+            (self.depth, "depth"),
+            (self.normal, "normal"),
+            (self.albedo, "albedo"),
+            (self.position, "position"),
+            (self.motion, "motion"),
+            (self.cryptomatte, "cryptomatte"),
+        ];
+        all.iter()
+            .filter(|(on, _)| *on)
+            .map(|(_, n)| *n)
+            .collect::<Vec<_>>()
+            .join(",")
+    }
 }
 
 /// Pixel type of the RGBA channels (AOVs are always 32-bit float).
@@ -298,6 +375,63 @@ impl Default for RenderOptions {
             preview: None,
             shading: ShadingOptions::default(),
         }
+    }
+}
+
+impl RenderOptions {
+    /// The options that change pixels, as one string: it goes into every frame's header
+    /// (`subfield/options`) and `--resume` re-renders a frame whose string differs.
+    /// `fps` is the resolved rate (the plan's). Deterministic: no time stamps, no paths.
+    pub fn options_string(&self, fps: f32) -> String {
+        let mut s = format!(
+            "size={}x{} spp={} max-depth={} pixel={} fps={} animation={}",
+            self.width,
+            self.height,
+            self.spp.max(1),
+            self.max_depth,
+            match self.pixel_type {
+                PixelType::Half => "half",
+                PixelType::Float => "float",
+            },
+            fps,
+            self.animation.as_deref().unwrap_or("all"),
+        );
+        match (&self.look_at, &self.camera) {
+            (Some(l), _) => {
+                s += &format!(
+                    " camera=look-from:{},{},{}/look-at:{},{},{}/up:{},{},{}/yfov:{}",
+                    l.from.x,
+                    l.from.y,
+                    l.from.z,
+                    l.at.x,
+                    l.at.y,
+                    l.at.z,
+                    l.up.x,
+                    l.up.y,
+                    l.up.z,
+                    l.yfov_deg
+                )
+            }
+            (None, Some(c)) => s += &format!(" camera={c}"),
+            (None, None) => s += " camera=default",
+        }
+        let names = self.aovs.names();
+        s += &format!(" aov={}", if names.is_empty() { "none" } else { &names });
+        if self.aovs.cryptomatte {
+            s += &format!(" crypto-levels={}", self.aovs.crypto_levels.max(1));
+        }
+        let sh = &self.shading;
+        s += &format!(
+            " ambient={},{},{} background={},{},{} default-light={}",
+            sh.ambient.x,
+            sh.ambient.y,
+            sh.ambient.z,
+            sh.background.x,
+            sh.background.y,
+            sh.background.z,
+            sh.default_light
+        );
+        s
     }
 }
 

@@ -4,29 +4,60 @@
 
 use std::path::Path;
 
+use exr::meta::attribute::{AttributeValue, Text};
 use exr::prelude::{
     f16, read, AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer,
     LayerAttributes, LineOrder, ReadChannels, ReadLayers, SmallVec, Vec2, WritableImage,
 };
 
+use super::aov::{crypto_key, fps_rational, FrameHeader};
 use super::options::{Aovs, PixelType};
 use super::shade::FrameBuffers;
 use super::RenderError;
 
+/// The header attribute holding [`RenderOptions::options_string`](super::RenderOptions).
+pub const OPTIONS_ATTRIBUTE: &str = "subfield/options";
+
+/// The `software` attribute of every frame.
+pub fn software() -> String {
+    format!("subfield {}", env!("CARGO_PKG_VERSION"))
+}
+
 /// Channel names a frame with these settings has, sorted as EXR stores them.
-pub fn channel_names(aovs: Aovs) -> Vec<&'static str> {
-    let mut names = vec!["A", "B", "G", "R"];
+pub fn channel_names(aovs: Aovs) -> Vec<String> {
+    let mut names: Vec<String> = ["A", "B", "G", "R"].map(String::from).to_vec();
+    let mut add = |list: &[&str]| names.extend(list.iter().map(|s| s.to_string()));
     if aovs.depth {
-        names.push("Z");
+        add(&["Z"]);
     }
     if aovs.normal {
-        names.extend(["N.X", "N.Y", "N.Z"]);
+        add(&["N.X", "N.Y", "N.Z"]);
     }
     if aovs.albedo {
-        names.extend(["albedo.B", "albedo.G", "albedo.R"]);
+        add(&["albedo.B", "albedo.G", "albedo.R"]);
+    }
+    if aovs.position {
+        add(&["P.X", "P.Y", "P.Z"]);
+    }
+    if aovs.motion {
+        add(&["motion.X", "motion.Y"]);
+    }
+    for layer in crypto_layer_names(aovs) {
+        for c in ["R", "G", "B", "A"] {
+            names.push(format!("{layer}.{c}"));
+        }
     }
     names.sort_unstable();
     names
+}
+
+/// `CryptoObject00…` then `CryptoMaterial00…`, as many of each as the levels need.
+fn crypto_layer_names(aovs: Aovs) -> Vec<String> {
+    let n = aovs.crypto_layers();
+    ["CryptoObject", "CryptoMaterial"]
+        .iter()
+        .flat_map(|kind| (0..n).map(move |k| format!("{kind}{k:02}")))
+        .collect()
 }
 
 fn encoding() -> Encoding {
@@ -37,8 +68,105 @@ fn encoding() -> Encoding {
     }
 }
 
+/// A channel with its `pLinear` flag set on purpose: `true` for colour in linear light
+/// (R, G, B, albedo.*), `false` for data (A, Z, N, P, motion, Cryptomatte ids and
+/// coverages), which lossy codecs must not treat as perceptual colour. (The `exr`
+/// crate's guess by name would flag A, N.* and albedo.* but not R, G, B or Z.)
+fn channel(name: &str, samples: FlatSamples, linear: bool) -> AnyChannel<FlatSamples> {
+    let mut c = AnyChannel::new(name, samples);
+    c.quantize_linearly = linear;
+    c
+}
+
+/// An attribute text from UTF-8 (OpenEXR strings are bytes; names may be any UTF-8).
+fn text(s: &str) -> Text {
+    Text::from_slice_unchecked(s.as_bytes())
+}
+
+/// The header attributes of a frame (see DESIGN.md §4): `framesPerSecond`,
+/// `worldToCamera`, `worldToNDC`, `software`, `subfield/options` and the Cryptomatte
+/// metadata. No time stamps.
+fn layer_attributes(header: &FrameHeader) -> LayerAttributes {
+    let mut a = LayerAttributes {
+        frames_per_second: Some(fps_rational(header.fps)),
+        world_to_camera: Some(header.world_to_camera),
+        world_to_normalized_device: Some(header.world_to_ndc),
+        software_name: Some(text(&software())),
+        ..Default::default()
+    };
+    a.other.insert(
+        text(OPTIONS_ATTRIBUTE),
+        AttributeValue::Text(text(&header.options)),
+    );
+    if let Some(c) = &header.crypto {
+        for kind in [&c.object, &c.material] {
+            let key = crypto_key(kind.layer);
+            let mut put = |field: &str, value: &str| {
+                a.other.insert(
+                    text(&format!("cryptomatte/{key}/{field}")),
+                    AttributeValue::Text(text(value)),
+                );
+            };
+            put("name", kind.layer);
+            put("hash", "MurmurHash3_32");
+            put("conversion", "uint32_to_float32");
+            put("manifest", &kind.manifest);
+        }
+    }
+    a
+}
+
+/// Sorts the attributes of a single-part EXR's header by name, in place. The `exr`
+/// crate writes custom attributes in a hash map's order, which changes from run to
+/// run; sorted, the same frame gives the same bytes. The header keeps its length, so
+/// the offset table after it stays valid.
+fn sort_header_attributes(bytes: &mut [u8]) {
+    let mut at = 8; // magic number and version
+    let mut attrs: Vec<(usize, usize)> = Vec::new();
+    let cstr = |b: &[u8], from: usize| b[from..].iter().position(|&c| c == 0).map(|n| from + n);
+    loop {
+        let Some(name_end) = cstr(bytes, at) else {
+            return;
+        };
+        if name_end == at {
+            break; // the empty name ends the header
+        }
+        let Some(type_end) = cstr(bytes, name_end + 1) else {
+            return;
+        };
+        let Some(size) = bytes.get(type_end + 1..type_end + 5) else {
+            return;
+        };
+        let size = i32::from_le_bytes([size[0], size[1], size[2], size[3]]);
+        let end = type_end + 5 + size.max(0) as usize;
+        if end > bytes.len() {
+            return;
+        }
+        attrs.push((at, end));
+        at = end;
+    }
+    let Some(&(first, _)) = attrs.first() else {
+        return;
+    };
+    let name = |&(a, _): &(usize, usize)| {
+        let e = cstr(bytes, a).unwrap_or(a);
+        &bytes[a..e]
+    };
+    let mut sorted = attrs.clone();
+    sorted.sort_by(|x, y| name(x).cmp(name(y)));
+    let mut out = Vec::with_capacity(at - first);
+    for &(a, e) in &sorted {
+        out.extend_from_slice(&bytes[a..e]);
+    }
+    bytes[first..at].copy_from_slice(&out);
+}
+
 /// The EXR bytes of a frame.
-pub fn encode_exr(fb: &FrameBuffers, pixel: PixelType) -> Result<Vec<u8>, exr::error::Error> {
+pub fn encode_exr(
+    fb: &FrameBuffers,
+    pixel: PixelType,
+    header: &FrameHeader,
+) -> Result<Vec<u8>, exr::error::Error> {
     let n = fb.rgba.len();
     let rgba = |c: usize| -> FlatSamples {
         match pixel {
@@ -48,42 +176,82 @@ pub fn encode_exr(fb: &FrameBuffers, pixel: PixelType) -> Result<Vec<u8>, exr::e
             PixelType::Float => FlatSamples::F32(fb.rgba.iter().map(|p| p[c]).collect()),
         }
     };
-    let mut list: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
+    type List = SmallVec<[AnyChannel<FlatSamples>; 4]>;
+    let mut list: List = SmallVec::new();
     for (c, name) in ["R", "G", "B", "A"].into_iter().enumerate() {
-        list.push(AnyChannel::new(name, rgba(c)));
+        list.push(channel(name, rgba(c), name != "A"));
     }
     if let Some(z) = &fb.depth {
-        list.push(AnyChannel::new("Z", FlatSamples::F32(z.clone())));
+        list.push(channel("Z", FlatSamples::F32(z.clone()), false));
     }
-    let vec3 =
-        |list: &mut SmallVec<[AnyChannel<FlatSamples>; 4]>, v: &[[f32; 3]], names: [&str; 3]| {
-            for (c, name) in names.into_iter().enumerate() {
-                let s: Vec<f32> = v.iter().map(|p| p[c]).collect();
-                list.push(AnyChannel::new(name, FlatSamples::F32(s)));
-            }
-        };
+    fn split<const K: usize>(list: &mut List, v: &[[f32; K]], names: [&str; K], linear: bool) {
+        for (c, name) in names.into_iter().enumerate() {
+            let s: Vec<f32> = v.iter().map(|p| p[c]).collect();
+            list.push(channel(name, FlatSamples::F32(s), linear));
+        }
+    }
     if let Some(nrm) = &fb.normal {
-        vec3(&mut list, nrm, ["N.X", "N.Y", "N.Z"]);
+        split(&mut list, nrm, ["N.X", "N.Y", "N.Z"], false);
     }
     if let Some(alb) = &fb.albedo {
-        vec3(&mut list, alb, ["albedo.R", "albedo.G", "albedo.B"]);
+        split(&mut list, alb, ["albedo.R", "albedo.G", "albedo.B"], true);
+    }
+    if let Some(p) = &fb.position {
+        split(&mut list, p, ["P.X", "P.Y", "P.Z"], false);
+    }
+    if let Some(m) = &fb.motion {
+        split(&mut list, m, ["motion.X", "motion.Y"], false);
+    }
+    if let Some(c) = &fb.crypto {
+        for (kind, ranks) in [("CryptoObject", &c.object), ("CryptoMaterial", &c.material)] {
+            for layer in 0..c.levels.div_ceil(2) {
+                let at = |pixel: usize, r: usize| {
+                    let k = 2 * layer + r;
+                    if k < c.levels {
+                        ranks[pixel * c.levels + k]
+                    } else {
+                        (0.0, 0.0)
+                    }
+                };
+                let chan = |f: &dyn Fn(usize) -> f32| -> FlatSamples {
+                    FlatSamples::F32((0..n).map(f).collect())
+                };
+                let name = |ch: &str| format!("{kind}{layer:02}.{ch}");
+                list.push(channel(&name("R"), chan(&|i| at(i, 0).0), false));
+                list.push(channel(&name("G"), chan(&|i| at(i, 0).1), false));
+                list.push(channel(&name("B"), chan(&|i| at(i, 1).0), false));
+                list.push(channel(&name("A"), chan(&|i| at(i, 1).1), false));
+            }
+        }
     }
     debug_assert!(list.iter().all(|c| c.sample_data.len() == n));
     let layer = Layer::new(
         (fb.width as usize, fb.height as usize),
-        LayerAttributes::default(),
+        layer_attributes(header),
         encoding(),
         AnyChannels::sort(list),
     );
     let image = Image::from_layer(layer);
     let mut bytes = std::io::Cursor::new(Vec::with_capacity(n * 8));
     image.write().non_parallel().to_buffered(&mut bytes)?;
-    Ok(bytes.into_inner())
+    let mut bytes = bytes.into_inner();
+    sort_header_attributes(&mut bytes);
+    Ok(bytes)
 }
 
-/// Whether `path` is a complete EXR with this size and these channels: every block is
-/// read and decompressed (a truncated or corrupt file is not complete).
-pub fn is_complete(path: &Path, width: u32, height: u32, aovs: Aovs, pixel: PixelType) -> bool {
+/// Whether `path` is a complete EXR with this size, these channels and this options
+/// string (`subfield/options`, see
+/// [`RenderOptions::options_string`](super::RenderOptions::options_string)): every
+/// block is read and decompressed (a truncated or corrupt file is not complete), and a
+/// frame made with other options is not this run's.
+pub fn is_complete(
+    path: &Path,
+    width: u32,
+    height: u32,
+    aovs: Aovs,
+    pixel: PixelType,
+    options: &str,
+) -> bool {
     if !path.is_file() {
         return false;
     }
@@ -105,17 +273,27 @@ pub fn is_complete(path: &Path, width: u32, height: u32, aovs: Aovs, pixel: Pixe
     if layer.size != Vec2(width as usize, height as usize) {
         return false;
     }
+    let key = text(OPTIONS_ATTRIBUTE);
+    let stored = layer
+        .attributes
+        .other
+        .get(&key)
+        .or_else(|| img.attributes.other.get(&key));
+    match stored {
+        Some(AttributeValue::Text(t)) if t.bytes() == options.as_bytes() => {}
+        _ => return false,
+    }
     let want = channel_names(aovs);
     let got = &layer.channel_data.list;
     got.len() == want.len()
         && got.iter().zip(&want).all(|(c, w)| {
-            let ty = match (&c.sample_data, *w) {
+            let ty = match (&c.sample_data, w.as_str()) {
                 (FlatSamples::F16(_), "A" | "B" | "G" | "R") => pixel == PixelType::Half,
                 (FlatSamples::F32(_), "A" | "B" | "G" | "R") => pixel == PixelType::Float,
                 (FlatSamples::F32(_), _) => true,
                 _ => false,
             };
-            ty && c.name.to_string() == *w
+            ty && c.name.bytes() == w.as_bytes()
         })
 }
 
@@ -162,6 +340,7 @@ pub fn encode_preview(fb: &FrameBuffers) -> Result<Vec<u8>, image::ImageError> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::shade::CryptoBuffers;
     use super::*;
 
     fn frame(aovs: Aovs) -> FrameBuffers {
@@ -178,30 +357,80 @@ mod tests {
             }),
             normal: aovs.normal.then(|| vec![[0.0, 1.0, 0.0]; n]),
             albedo: aovs.albedo.then(|| vec![[0.1, 0.2, 0.3]; n]),
+            position: aovs.position.then(|| vec![[1.0, 2.0, 3.0]; n]),
+            motion: aovs.motion.then(|| vec![[0.5, -0.25]; n]),
+            crypto: aovs.cryptomatte.then(|| {
+                let levels = aovs.crypto_levels as usize;
+                let r = |i: usize| (f32::from_bits(0x3f80_0000 + i as u32), 0.5);
+                CryptoBuffers {
+                    levels,
+                    object: (0..n * levels).map(r).collect(),
+                    material: (0..n * levels).map(r).collect(),
+                }
+            }),
         }
+    }
+
+    fn header(aovs: Aovs, options: &str) -> FrameHeader {
+        let mut scene = crate::scene::Scene::default();
+        scene.nodes.push(crate::scene::Node {
+            name: Some("thing".into()),
+            ..Default::default()
+        });
+        let crypto = aovs
+            .cryptomatte
+            .then(|| std::sync::Arc::new(super::super::aov::CryptoNames::new(&scene)));
+        let cam = super::super::CameraModel::framing(glam::Vec3::ZERO, glam::Vec3::ONE, 5, 3);
+        FrameHeader::new(&cam, 24.0, options.into(), crypto)
     }
 
     #[test]
     fn exr_round_trips_and_is_deterministic() {
         let aovs = Aovs {
-            depth: true,
-            normal: true,
-            albedo: true,
+            crypto_levels: 3,
+            ..Aovs::all()
         };
         let fb = frame(aovs);
-        let a = encode_exr(&fb, PixelType::Half).unwrap();
-        let b = encode_exr(&fb, PixelType::Half).unwrap();
-        assert_eq!(a, b);
+        let hd = header(aovs, "spp=1");
+        let a = encode_exr(&fb, PixelType::Half, &hd).unwrap();
+        // Custom attributes come out of a hash map: the sorted header makes every
+        // encoding (in any process) the same bytes.
+        for _ in 0..8 {
+            assert_eq!(
+                a,
+                encode_exr(&fb, PixelType::Half, &header(aovs, "spp=1")).unwrap()
+            );
+        }
         let dir = std::env::temp_dir().join(format!("subfield-exr-unit-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("f.exr");
         write_atomically(&p, &a).unwrap();
-        assert!(is_complete(&p, 5, 3, aovs, PixelType::Half));
-        assert!(!is_complete(&p, 5, 3, aovs, PixelType::Float));
-        assert!(!is_complete(&p, 5, 4, aovs, PixelType::Half));
-        assert!(!is_complete(&p, 5, 3, Aovs::default(), PixelType::Half));
+        let o = "spp=1";
+        assert!(is_complete(&p, 5, 3, aovs, PixelType::Half, o));
+        assert!(!is_complete(&p, 5, 3, aovs, PixelType::Half, "spp=2"));
+        assert!(!is_complete(&p, 5, 3, aovs, PixelType::Float, o));
+        assert!(!is_complete(&p, 5, 4, aovs, PixelType::Half, o));
+        assert!(!is_complete(&p, 5, 3, Aovs::default(), PixelType::Half, o));
+        let four = Aovs {
+            crypto_levels: 4,
+            ..aovs
+        };
+        assert_eq!(channel_names(four), channel_names(aovs));
+        let five = Aovs {
+            crypto_levels: 5,
+            ..aovs
+        };
+        assert!(!is_complete(&p, 5, 3, five, PixelType::Half, o));
+        let img = exr::prelude::read_all_data_from_file(&p).unwrap();
+        let layer = &img.layer_data[0];
+        for c in &layer.channel_data.list {
+            let name = c.name.to_string();
+            let linear = matches!(name.as_str(), "R" | "G" | "B") || name.starts_with("albedo.");
+            assert_eq!(c.quantize_linearly, linear, "{name}");
+        }
+        assert_eq!(layer.attributes.frames_per_second, Some((24, 1)));
         write_atomically(&p, &a[..a.len() - 7]).unwrap();
-        assert!(!is_complete(&p, 5, 3, aovs, PixelType::Half));
+        assert!(!is_complete(&p, 5, 3, aovs, PixelType::Half, o));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -288,9 +288,18 @@ pub(super) fn check_outputs(plan: &RenderPlan, opts: &RenderOptions) -> Result<(
     Ok(())
 }
 
-/// Whether a resumed run skips `path`: its file is complete for these options.
-pub(super) fn skips(opts: &RenderOptions, path: &Path) -> bool {
-    opts.resume && is_complete(path, opts.width, opts.height, opts.aovs, opts.pixel_type)
+/// Whether a resumed run skips `path`: its file is complete for these options
+/// (`options`: [`RenderOptions::options_string`], compared with the file's header).
+pub(super) fn skips(opts: &RenderOptions, path: &Path, options: &str) -> bool {
+    opts.resume
+        && is_complete(
+            path,
+            opts.width,
+            opts.height,
+            opts.aovs,
+            opts.pixel_type,
+            options,
+        )
 }
 
 #[cfg(test)]

@@ -9,13 +9,14 @@ use std::time::Instant;
 
 use glam::Vec3;
 
+use super::aov::{CryptoNames, FrameHeader};
 use super::camera::CameraModel;
 use super::options::RenderOptions;
 use super::output;
 use super::planning::{check_outputs, plan, skips, static_dynamic_split, CameraSource, RenderPlan};
 use super::shade::{FrameBuffers, ShadeContext};
 use super::stats::{self, stats_csv, FrameStats};
-use super::wavefront::render_frame;
+use super::wavefront::{render_frame, AovInputs};
 use super::writer::{write_job, Job};
 use super::{FrameReport, RenderError, RenderEvent, RenderSummary};
 use crate::format::{self, OpenOptions};
@@ -59,6 +60,11 @@ pub fn render_sequence(
         split: &split,
         psf: &psf,
         static_soup: &static_soup,
+        options: opts.options_string(plan.fps),
+        crypto: opts
+            .aovs
+            .cryptomatte
+            .then(|| std::sync::Arc::new(CryptoNames::new(scene))),
     };
     let Done {
         mut stats_out,
@@ -113,6 +119,10 @@ struct Frames<'a> {
     split: &'a Split,
     psf: &'a Psf,
     static_soup: &'a TriangleSoup,
+    /// This run's options string (frame headers, `--resume`).
+    options: String,
+    /// Cryptomatte ids and manifests, when asked for.
+    crypto: Option<std::sync::Arc<CryptoNames>>,
 }
 
 /// What the frame loop leaves: the written frames' stats (in the order written), the
@@ -218,6 +228,7 @@ impl Frames<'_> {
             // The moving triangles get their own grids, sized for their count like a bake.
             let mut dl = DynamicLayer::for_triangles(plan.split.dynamic_triangles);
             let mut dyn_soup = TriangleSoup::new();
+            let mut next_soup = TriangleSoup::new();
             let mut preview_pending = preview_frame;
             for (index, &frame) in plan.frames.iter().enumerate() {
                 while let Ok(r) = done_rx.try_recv() {
@@ -227,7 +238,7 @@ impl Frames<'_> {
                     break;
                 }
                 let path = plan.pattern.path(frame);
-                if skips(opts, &path) {
+                if skips(opts, &path, &self.options) {
                     skipped += 1;
                     on_event(RenderEvent::Frame(&FrameReport {
                         frame,
@@ -239,12 +250,14 @@ impl Frames<'_> {
                     }));
                     continue;
                 }
-                match self.render_one(static_bounds, &mut dl, &mut dyn_soup, frame) {
-                    Ok((fb, st)) => {
+                match self.render_one(static_bounds, &mut dl, &mut dyn_soup, &mut next_soup, frame)
+                {
+                    Ok((fb, header, st)) => {
                         let job = Job {
                             index,
                             path,
                             frame: fb,
+                            header,
                             stats: st,
                             preview: take_preview(&mut preview_pending, frame),
                         };
@@ -274,22 +287,10 @@ impl Frames<'_> {
         })
     }
 
-    /// Poses, updates and renders one frame.
-    fn render_one(
-        &self,
-        static_bounds: Option<(Vec3, Vec3)>,
-        dl: &mut DynamicLayer,
-        dyn_soup: &mut TriangleSoup,
-        frame: u32,
-    ) -> Result<(FrameBuffers, FrameStats), RenderError> {
+    /// The camera at time `t`.
+    fn camera_at(&self, t: f32) -> Result<CameraModel, RenderError> {
         let (scene, opts, plan) = (self.scene, self.opts, self.plan);
-        let (split, psf, static_soup) = (self.split, self.psf, self.static_soup);
-        let time = plan.time(frame);
-        let t = time as f32;
-        let clock = Instant::now();
-        scene.dynamic_triangles_at(split, t, dyn_soup);
-        dl.update(&dyn_soup.positions)?;
-        let camera = match &plan.camera {
+        Ok(match &plan.camera {
             CameraSource::Fixed(c) => *c,
             CameraSource::Scene(name) => {
                 let cam = scene
@@ -300,6 +301,33 @@ impl Frames<'_> {
                     })?;
                 CameraModel::from_scene(&cam, opts.width, opts.height)
             }
+        })
+    }
+
+    /// Poses, updates and renders one frame; its header values.
+    fn render_one(
+        &self,
+        static_bounds: Option<(Vec3, Vec3)>,
+        dl: &mut DynamicLayer,
+        dyn_soup: &mut TriangleSoup,
+        next_soup: &mut TriangleSoup,
+        frame: u32,
+    ) -> Result<(FrameBuffers, FrameHeader, FrameStats), RenderError> {
+        let (scene, opts, plan) = (self.scene, self.opts, self.plan);
+        let (split, psf, static_soup) = (self.split, self.psf, self.static_soup);
+        let time = plan.time(frame);
+        let t = time as f32;
+        let clock = Instant::now();
+        scene.dynamic_triangles_at(split, t, dyn_soup);
+        dl.update(&dyn_soup.positions)?;
+        let camera = self.camera_at(t)?;
+        // The motion AOV: the moving triangles and the camera one frame later.
+        let next = if opts.aovs.motion {
+            let t1 = plan.time(frame.saturating_add(1)) as f32;
+            scene.dynamic_triangles_at(split, t1, next_soup);
+            Some((&*next_soup, self.camera_at(t1)?))
+        } else {
+            None
         };
         let lights = scene.lights_at(plan.selection, t);
         let bounds = match (static_bounds, dyn_soup.bounds()) {
@@ -318,6 +346,11 @@ impl Frames<'_> {
         );
         let update_ms = clock.elapsed().as_secs_f64() * 1e3;
         let tracer = psf.with_dynamic(dl);
+        let inputs = AovInputs {
+            aovs: opts.aovs,
+            next,
+            crypto: self.crypto.as_deref(),
+        };
         let (fb, work) = render_frame(
             &ctx,
             &tracer,
@@ -325,10 +358,12 @@ impl Frames<'_> {
             frame,
             opts.spp,
             opts.max_depth,
-            opts.aovs,
+            &inputs,
         );
+        let header = FrameHeader::new(&camera, plan.fps, self.options.clone(), self.crypto.clone());
         Ok((
             fb,
+            header,
             FrameStats {
                 frame,
                 time,

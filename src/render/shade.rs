@@ -42,6 +42,28 @@ pub struct FrameBuffers {
     pub depth: Option<Vec<f32>>,
     pub normal: Option<Vec<[f32; 3]>>,
     pub albedo: Option<Vec<[f32; 3]>>,
+    /// World-space hit point of the centre ray (`P.X/Y/Z`).
+    pub position: Option<Vec<[f32; 3]>>,
+    /// Screen-space motion to the next frame in pixels (`motion.X/Y`; +x right, +y down).
+    pub motion: Option<Vec<[f32; 2]>>,
+    pub crypto: Option<CryptoBuffers>,
+}
+
+/// Cryptomatte ranks of a frame: `levels` `(id, coverage)` pairs a pixel, pixel by
+/// pixel, most coverage first (`(0, 0)` past the ids a pixel has).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CryptoBuffers {
+    pub levels: usize,
+    pub object: Vec<(f32, f32)>,
+    pub material: Vec<(f32, f32)>,
+}
+
+/// The centre ray's surface values (zero on a miss).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct CentreAov {
+    pub normal: [f32; 3],
+    pub albedo: [f32; 3],
+    pub point: Vec3,
 }
 
 /// Rays traced for one frame.
@@ -265,14 +287,27 @@ impl<'a> ShadeContext<'a> {
     }
 
     /// The AOV values at a primary hit: (normal, albedo).
-    pub(super) fn aov(&self, ray: &Ray, hit: &Hit) -> ([f32; 3], [f32; 3]) {
+    pub(super) fn aov(&self, ray: &Ray, hit: &Hit) -> CentreAov {
         let Some(s) = self.surface(ray, hit) else {
-            return ([0.0; 3], [0.0; 3]);
+            return CentreAov::default();
         };
         let albedo = self
             .material(s.material)
             .map_or(Vec3::ONE, |m| self.base_color(m, s.uv).truncate());
-        (s.ns.to_array(), albedo.to_array())
+        CentreAov {
+            normal: s.ns.to_array(),
+            albedo: albedo.to_array(),
+            point: s.point,
+        }
+    }
+
+    /// Which node placed the hit triangle and its material (Cryptomatte).
+    pub(super) fn ids(&self, hit: &Hit) -> Option<(u32, u32)> {
+        let (soup, i) = match Prim::from_index(hit.tri, self.static_soup.len()) {
+            Prim::Static(i) => (self.static_soup, i as usize),
+            Prim::Moving(i) => (self.dynamic_soup, i as usize),
+        };
+        Some((*soup.node.get(i)?, *soup.material.get(i)?))
     }
 
     /// One ray's contribution: the background on a miss; else the pass-through ray of a

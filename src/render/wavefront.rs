@@ -8,10 +8,25 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::aov::{project, rank, CryptoNames};
 use super::camera::CameraModel;
 use super::options::Aovs;
-use super::shade::{BlockOut, FrameBuffers, FrameWork, Item, ShadeContext};
+use super::shade::{BlockOut, CryptoBuffers, FrameBuffers, FrameWork, Item, ShadeContext};
 use crate::geometry::{Hit, Intersector, Ray};
+use crate::psf::Prim;
+use crate::scene::TriangleSoup;
+
+/// Which AOVs a frame has, and what those beyond the shading need (given only when
+/// they are asked for).
+#[derive(Clone, Copy, Default)]
+pub struct AovInputs<'a> {
+    pub aovs: Aovs,
+    /// For `motion`: the moving triangles posed at the next frame's time (same order as
+    /// this frame's) and the camera of that time.
+    pub next: Option<(&'a TriangleSoup, CameraModel)>,
+    /// For `cryptomatte`: the ids of the scene's nodes and materials.
+    pub crypto: Option<&'a CryptoNames>,
+}
 
 /// Rays shaded by one task.
 const BLOCK: usize = 1024;
@@ -94,8 +109,9 @@ pub fn render_frame<T: Intersector>(
     frame: u32,
     spp: u32,
     max_depth: u32,
-    aovs: Aovs,
+    inputs: &AovInputs<'_>,
 ) -> (FrameBuffers, FrameWork) {
+    let aovs = inputs.aovs;
     let (w, h) = (camera.width as usize, camera.height as usize);
     let spp = spp.max(1) as usize;
     let mut work = FrameWork::default();
@@ -106,8 +122,24 @@ pub fn render_frame<T: Intersector>(
         depth: aovs.depth.then(|| vec![f32::INFINITY; w * h]),
         normal: aovs.normal.then(|| vec![[0.0; 3]; w * h]),
         albedo: aovs.albedo.then(|| vec![[0.0; 3]; w * h]),
+        position: aovs.position.then(|| vec![[0.0; 3]; w * h]),
+        motion: aovs.motion.then(|| vec![[0.0; 2]; w * h]),
+        crypto: None,
     };
-    let any_aov = aovs.depth || aovs.normal || aovs.albedo;
+    let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
+    let levels = aovs.crypto_levels.max(1) as usize;
+    if crypto.is_some() {
+        fb.crypto = Some(CryptoBuffers {
+            levels,
+            object: vec![(0.0, 0.0); w * h * levels],
+            material: vec![(0.0, 0.0); w * h * levels],
+        });
+    }
+    let any_aov = aovs.any_centre();
+    let aov_inputs = CentreInputs {
+        camera,
+        next: inputs.next.filter(|_| aovs.motion),
+    };
     let rows_per_chunk = (CHUNK_SAMPLES / (w * spp)).max(1);
     let mut y0 = 0;
     while y0 < h {
@@ -156,7 +188,13 @@ pub fn render_frame<T: Intersector>(
                 // The centre rays: the primary rays themselves with one sample, else
                 // their own batch (traced below).
                 if spp == 1 {
-                    write_aovs(ctx, &mut fb, px0, &rays, &hits);
+                    write_aovs(ctx, &aov_inputs, &mut fb, px0, &rays, &hits);
+                }
+            }
+            if first {
+                if let (Some(names), Some(buf)) = (crypto, fb.crypto.as_mut()) {
+                    // The primary rays are the samples in order: rank each pixel's.
+                    write_crypto(ctx, names, buf, px0, spp, &hits);
                 }
             }
             first = false;
@@ -224,7 +262,7 @@ pub fn render_frame<T: Intersector>(
             tracer.intersect_batch(&centre, &mut chits);
             work.trace += clock.elapsed();
             let clock = Instant::now();
-            write_aovs(ctx, &mut fb, px0, &centre, &chits);
+            write_aovs(ctx, &aov_inputs, &mut fb, px0, &centre, &chits);
             work.shade += clock.elapsed();
         }
 
@@ -250,9 +288,36 @@ pub fn render_frame<T: Intersector>(
     (fb, work)
 }
 
+/// What the centre-ray AOVs read besides the shading context.
+struct CentreInputs<'a> {
+    camera: &'a CameraModel,
+    next: Option<(&'a TriangleSoup, CameraModel)>,
+}
+
+/// Screen motion of the centre ray's hit to the next frame: the hit point carried by its
+/// own triangle (a static one stays; a moving one is posed at the next time with the
+/// same barycentrics), projected by the next frame's camera, minus its projection now.
+fn motion_of(ctx: &ShadeContext<'_>, inp: &CentreInputs<'_>, hit: &Hit, point: Vec3) -> [f32; 2] {
+    let Some((next_soup, next_cam)) = &inp.next else {
+        return [0.0; 2];
+    };
+    let later = match Prim::from_index(hit.tri, ctx.static_soup.len()) {
+        Prim::Static(_) => point,
+        Prim::Moving(i) => match next_soup.positions.get(i as usize) {
+            Some(p) => p[0] * (1.0 - hit.u - hit.v) + p[1] * hit.u + p[2] * hit.v,
+            None => point,
+        },
+    };
+    match (project(inp.camera, point), project(next_cam, later)) {
+        (Some(a), Some(b)) => (b - a).to_array(),
+        _ => [0.0; 2],
+    }
+}
+
 /// AOVs of the pixels `px0..px0 + rays.len()` from their centre rays.
 fn write_aovs(
     ctx: &ShadeContext<'_>,
+    inp: &CentreInputs<'_>,
     fb: &mut FrameBuffers,
     px0: usize,
     rays: &[Ray],
@@ -267,25 +332,82 @@ fn write_aovs(
                 *z = h.map_or(f32::INFINITY, |h| h.t * r.dir.length());
             });
     }
-    if fb.normal.is_none() && fb.albedo.is_none() {
+    if fb.normal.is_none() && fb.albedo.is_none() && fb.position.is_none() && fb.motion.is_none() {
         return;
     }
-    let vals: Vec<([f32; 3], [f32; 3])> = rays
+    let motion = fb.motion.is_some();
+    let vals: Vec<(super::shade::CentreAov, [f32; 2])> = rays
         .par_iter()
         .zip(hits)
         .with_min_len(BLOCK)
-        .map(|(r, h)| h.map_or(([0.0; 3], [0.0; 3]), |h| ctx.aov(r, &h)))
+        .map(|(r, h)| match h {
+            None => Default::default(),
+            Some(h) => {
+                let a = ctx.aov(r, h);
+                let m = if motion {
+                    motion_of(ctx, inp, h, a.point)
+                } else {
+                    [0.0; 2]
+                };
+                (a, m)
+            }
+        })
         .collect();
     if let Some(normal) = &mut fb.normal {
         for (d, v) in normal[px0..px0 + n].iter_mut().zip(&vals) {
-            *d = v.0;
+            *d = v.0.normal;
         }
     }
     if let Some(albedo) = &mut fb.albedo {
         for (d, v) in albedo[px0..px0 + n].iter_mut().zip(&vals) {
+            *d = v.0.albedo;
+        }
+    }
+    if let Some(position) = &mut fb.position {
+        for (d, v) in position[px0..px0 + n].iter_mut().zip(&vals) {
+            *d = v.0.point.to_array();
+        }
+    }
+    if let Some(m) = &mut fb.motion {
+        for (d, v) in m[px0..px0 + n].iter_mut().zip(&vals) {
             *d = v.1;
         }
     }
+}
+
+/// Cryptomatte ranks of the pixels from `px0` on, from the primary hits of all their
+/// samples (`spp` a pixel, in order).
+fn write_crypto(
+    ctx: &ShadeContext<'_>,
+    names: &CryptoNames,
+    buf: &mut CryptoBuffers,
+    px0: usize,
+    spp: usize,
+    hits: &[Option<Hit>],
+) {
+    let levels = buf.levels;
+    let npix = hits.len() / spp;
+    let range = px0 * levels..(px0 + npix) * levels;
+    buf.object[range.clone()]
+        .par_chunks_mut(levels)
+        .zip(buf.material[range].par_chunks_mut(levels))
+        .zip(hits.par_chunks(spp))
+        .with_min_len(BLOCK / spp.max(1) + 1)
+        .for_each(|((obj, mat), hs)| {
+            let ids: Vec<Option<(u32, u32)>> =
+                hs.iter().map(|h| h.and_then(|h| ctx.ids(&h))).collect();
+            let lookup = |kind: &[u32], i: u32| kind.get(i as usize).copied();
+            let o: Vec<Option<u32>> = ids
+                .iter()
+                .map(|x| x.and_then(|(n, _)| lookup(&names.object.ids, n)))
+                .collect();
+            let m: Vec<Option<u32>> = ids
+                .iter()
+                .map(|x| x.and_then(|(_, m)| lookup(&names.material.ids, m)))
+                .collect();
+            rank(&o, levels, obj);
+            rank(&m, levels, mat);
+        });
 }
 
 #[cfg(test)]

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use super::aov::FrameHeader;
 use super::options::RenderOptions;
 use super::output::{self, encode_exr, encode_preview};
 use super::shade::FrameBuffers;
@@ -15,6 +16,7 @@ pub(super) struct Job {
     pub(super) index: usize,
     pub(super) path: PathBuf,
     pub(super) frame: FrameBuffers,
+    pub(super) header: FrameHeader,
     pub(super) stats: FrameStats,
     pub(super) preview: Option<PathBuf>,
 }
@@ -57,9 +59,11 @@ pub(super) fn check_writable(path: &Path) -> Result<(), RenderError> {
 pub(super) fn write_job(job: &Job, opts: &RenderOptions) -> Result<f64, RenderError> {
     let clock = Instant::now();
     create_parent(&job.path)?;
-    let bytes = encode_exr(&job.frame, opts.pixel_type).map_err(|source| RenderError::Exr {
-        path: job.path.clone(),
-        source,
+    let bytes = encode_exr(&job.frame, opts.pixel_type, &job.header).map_err(|source| {
+        RenderError::Exr {
+            path: job.path.clone(),
+            source,
+        }
     })?;
     output::write_atomically(&job.path, &bytes)?;
     if let Some(p) = &job.preview {

@@ -19,6 +19,8 @@ pub struct TriangleSoup {
     pub uvs: Vec<[Vec2; 3]>,
     /// Index into [`Scene::materials`].
     pub material: Vec<u32>,
+    /// The node that placed the triangle (index into [`Scene::nodes`](super::Scene)).
+    pub node: Vec<u32>,
     scratch: Scratch,
 }
 
@@ -49,6 +51,7 @@ impl TriangleSoup {
         self.normals.clear();
         self.uvs.clear();
         self.material.clear();
+        self.node.clear();
     }
 
     /// Axis-aligned bounds of all corners, `None` when empty.
@@ -186,6 +189,7 @@ impl Scene {
                 None => [Vec2::ZERO; 3],
             });
             out.material.push(prim.material);
+            out.node.push(inst.node as u32);
         }
     }
 }
