@@ -225,6 +225,21 @@ impl Inspection {
 /// See [`Inspection::summary`].
 pub struct InspectionSummary<'a>(&'a Inspection);
 
+impl Occupancy {
+    /// The one line both the summary and the full tables open their occupancy with.
+    fn headline(&self) -> String {
+        format!(
+            "occupancy: {} tiles, {} empty, {} flat, {:.2} triangles per tile (max {}), {} slab entries",
+            self.tiles,
+            self.empty_tiles,
+            self.flat_tiles,
+            self.triangles_per_tile_mean,
+            self.triangles_per_tile_max,
+            self.slab_entries
+        )
+    }
+}
+
 impl fmt::Display for InspectionSummary<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let ins = self.0;
@@ -311,16 +326,7 @@ impl fmt::Display for InspectionSummary<'_> {
             )?;
         }
         let o = &ins.occupancy;
-        writeln!(
-            f,
-            "occupancy: {} tiles, {} empty, {} flat, {:.2} triangles per tile (max {}), {} slab entries",
-            o.tiles,
-            o.empty_tiles,
-            o.flat_tiles,
-            o.triangles_per_tile_mean,
-            o.triangles_per_tile_max,
-            o.slab_entries
-        )?;
+        writeln!(f, "{}", o.headline())?;
         let hist: Vec<String> = o
             .histogram
             .iter()
@@ -394,16 +400,7 @@ impl fmt::Display for Inspection {
             )?;
         }
         let o = &self.occupancy;
-        writeln!(
-            f,
-            "occupancy: {} tiles, {} empty, {} flat, {:.2} triangles per tile (max {}), {} slab entries",
-            o.tiles,
-            o.empty_tiles,
-            o.flat_tiles,
-            o.triangles_per_tile_mean,
-            o.triangles_per_tile_max,
-            o.slab_entries
-        )?;
+        writeln!(f, "{}", o.headline())?;
         for (lo, hi, n) in &o.histogram {
             writeln!(f, "  [{lo}, {hi}) {n}")?;
         }
