@@ -10,15 +10,12 @@
 //! shared file that someone overwrites in place does.
 
 use std::fs::{self, File, OpenOptions};
-use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
-use xxhash_rust::xxh3::Xxh3;
-
 use super::FarmError;
-use crate::format::{hash_file, ContentHash};
+use crate::format::{hash_copy, hash_file, ContentHash, CopyError};
 
 /// The stage a task uses when none is given: `$TMPDIR/subfield-stage` (`/tmp` when
 /// `TMPDIR` is unset), which Slurm and most farms keep node-local.
@@ -125,28 +122,16 @@ fn copy_verified(source: &Path, dest: &Path, want: ContentHash) -> Result<u64, F
         crate::atomic::host_id()
     ));
     let result = (|| {
-        let mut src = File::open(source).map_err(|e| FarmError::io(source, e))?;
+        let src = File::open(source).map_err(|e| FarmError::io(source, e))?;
         let mut out = OpenOptions::new()
             .write(true)
             .create_new(true)
             .open(&tmp)
             .map_err(|e| FarmError::io(&tmp, e))?;
-        let mut h = Xxh3::new();
-        let mut buf = vec![0u8; 1 << 20];
-        let mut total = 0u64;
-        loop {
-            let n = match src.read(&mut buf) {
-                Ok(0) => break,
-                Ok(n) => n,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                Err(e) => return Err(FarmError::io(source, e)),
-            };
-            h.update(&buf[..n]);
-            out.write_all(&buf[..n])
-                .map_err(|e| FarmError::io(&tmp, e))?;
-            total += n as u64;
-        }
-        let found = ContentHash(h.digest128());
+        let (found, total) = hash_copy(src, &mut out).map_err(|e| match e {
+            CopyError::Read(e) => FarmError::io(source, e),
+            CopyError::Write(e) => FarmError::io(&tmp, e),
+        })?;
         if found != want {
             return Err(FarmError::HashMismatch {
                 what: "baked file",

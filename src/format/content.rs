@@ -6,7 +6,7 @@
 
 use std::fmt;
 use std::fs::File;
-use std::io::Read;
+use std::io::{Read, Write};
 use std::path::Path;
 use std::str::FromStr;
 
@@ -63,8 +63,19 @@ impl FromStr for ContentHash {
     }
 }
 
-/// Hashes everything `reader` yields, in 1 MiB reads.
-pub fn hash_reader(mut reader: impl Read) -> std::io::Result<(ContentHash, u64)> {
+/// A copy that stopped: reading its source or writing its destination failed.
+#[derive(Debug)]
+pub enum CopyError {
+    Read(std::io::Error),
+    Write(std::io::Error),
+}
+
+/// Copies everything `reader` yields to `writer` in 1 MiB pieces, hashing it on the
+/// way; returns the hash of what was copied and its length.
+pub fn hash_copy(
+    mut reader: impl Read,
+    mut writer: impl Write,
+) -> Result<(ContentHash, u64), CopyError> {
     let mut h = Xxh3::new();
     let mut buf = vec![0u8; 1 << 20];
     let mut total = 0u64;
@@ -73,12 +84,20 @@ pub fn hash_reader(mut reader: impl Read) -> std::io::Result<(ContentHash, u64)>
             Ok(0) => break,
             Ok(n) => n,
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-            Err(e) => return Err(e),
+            Err(e) => return Err(CopyError::Read(e)),
         };
         h.update(&buf[..n]);
+        writer.write_all(&buf[..n]).map_err(CopyError::Write)?;
         total += n as u64;
     }
     Ok((ContentHash(h.digest128()), total))
+}
+
+/// Hashes everything `reader` yields, in 1 MiB reads.
+pub fn hash_reader(reader: impl Read) -> std::io::Result<(ContentHash, u64)> {
+    hash_copy(reader, std::io::sink()).map_err(|e| match e {
+        CopyError::Read(e) | CopyError::Write(e) => e,
+    })
 }
 
 /// The content hash of the file at `path` (read once, in 1 MiB pieces).

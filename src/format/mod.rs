@@ -28,7 +28,7 @@ use glam::Vec3;
 use serde::Serialize;
 use xxhash_rust::xxh3::{xxh3_64, Xxh3};
 
-pub use content::{hash_file, hash_reader, BadContentHash, ContentHash};
+pub use content::{hash_copy, hash_file, hash_reader, BadContentHash, ContentHash, CopyError};
 pub use error::FormatError;
 pub use inspect::{
     inspect, inspect_bytes, DirectionInfo, Inspection, InspectionSummary, Occupancy, SectionInfo,
