@@ -82,6 +82,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
 /// What both engines share: the plan, the frames still missing, the bake and the
 /// command every task runs.
 struct Work {
+    /// The render's options as the tasks will see them (absolute output).
+    opts: RenderOptions,
     plan: RenderPlan,
     missing: Vec<u32>,
     /// The task's `subfield render ...` without the per-engine flags.
@@ -270,6 +272,7 @@ fn prepare(r: &render_cmd::Args, dry_run: bool) -> anyhow::Result<Work> {
     ];
     command.extend(render_flags(r));
     Ok(Work {
+        opts,
         plan,
         missing,
         command,
@@ -367,7 +370,6 @@ fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
 /// `--wait`: a bar over the frames written until the job leaves the queue, then the
 /// verdict: every frame complete, or the missing ones and the errors the tasks logged.
 fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::Result<ExitCode> {
-    let opts = render_cmd::options(r)?;
     let total = w.plan.frames.len() as u64;
     let bar = Progress::new("frames", total, r.quiet);
     let written = || {
@@ -398,7 +400,7 @@ fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::R
         .frames
         .iter()
         .copied()
-        .filter(|&f| !complete(&w.plan, &opts, f))
+        .filter(|&f| !complete(&w.plan, &w.opts, f))
         .collect();
     if missing.is_empty() {
         if !r.quiet {
