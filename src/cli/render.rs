@@ -33,7 +33,8 @@ pub struct Args {
     /// Frames per second; frame i shows time i/F (default: the scene's extras.fps, else 24).
     #[arg(long, allow_negative_numbers = true)]
     pub fps: Option<f32>,
-    /// Play one animation clip (name or index); default: all together.
+    /// Play one animation clip (name or index); default: all clips together when they
+    /// animate disjoint targets, else the first (warned).
     #[arg(long, value_name = "NAME|INDEX")]
     pub animation: Option<String>,
     /// Image size.

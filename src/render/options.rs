@@ -394,7 +394,7 @@ impl RenderOptions {
                 PixelType::Float => "float",
             },
             fps,
-            self.animation.as_deref().unwrap_or("all"),
+            self.animation.as_deref().unwrap_or("default"),
         );
         match (&self.look_at, &self.camera) {
             (Some(l), _) => {

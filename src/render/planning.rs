@@ -105,8 +105,9 @@ pub struct RenderPlan {
     pub range: FrameRange,
     /// The frames this run renders (after `--shard`), ascending, each once.
     pub frames: Vec<u32>,
-    /// Warnings about the plan (`--frames` past the end of the animation), one line each,
-    /// without the `warning: ` prefix.
+    /// Warnings about the plan (clips left out by the default selection, a `--size` off
+    /// the camera's aspect ratio, `--frames` past the end of the animation), one line
+    /// each, without the `warning: ` prefix.
     pub warnings: Vec<String>,
     pub pattern: OutputPattern,
     pub camera: CameraSource,
@@ -122,9 +123,14 @@ impl RenderPlan {
 
 /// Checks `opts` against `scene` without touching the file system.
 pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderError> {
+    let mut warnings = Vec::new();
     let selection = match &opts.animation {
         Some(a) => scene.resolve_clip(a)?,
-        None => ClipSelection::All,
+        None => {
+            let (sel, warning) = scene.default_clips();
+            warnings.extend(warning);
+            sel
+        }
     };
     let fps = match opts.fps {
         Some(f) if f.is_finite() && f > 0.0 => f,
@@ -187,7 +193,6 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
         start: first,
         end: final_ + 1,
     };
-    let mut warnings = Vec::new();
     if let (Some(_), Some(last)) = (&opts.frames, last) {
         if final_ > last {
             warnings.push(format!(
