@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
-use super::camera::{animation_bounds, CameraModel};
+use super::camera::{animation_bounds, aspect_warning, CameraModel, MAX_EXPOSURE};
 use super::options::{FrameRange, FrameSet, RenderOptions, MAX_FRAMES, MAX_SIDE};
 use super::output::is_complete;
 use super::stats;
@@ -157,6 +157,12 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
             opts.spp
         )));
     }
+    if !(opts.exposure.is_finite() && opts.exposure.abs() <= MAX_EXPOSURE) {
+        return Err(RenderError::Option(format!(
+            "--exposure {}: must be a number of stops between -{MAX_EXPOSURE} and {MAX_EXPOSURE}",
+            opts.exposure
+        )));
+    }
     if opts.max_depth > 64 {
         return Err(RenderError::Option(format!(
             "--max-depth {}: at most 64",
@@ -239,8 +245,24 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
         let (lo, hi) = animation_bounds(scene, selection).unwrap_or((-Vec3::ONE, Vec3::ONE));
         CameraSource::Fixed(CameraModel::framing(lo, hi, opts.width, opts.height))
     };
+    if let CameraSource::Scene(_) = camera {
+        warnings.extend(aspect_warning(scene, opts));
+    }
     if let Some(p) = &opts.plot {
         stats::plot_kind(p)?;
+    }
+    if let Some(p) = &opts.preview {
+        let png = p
+            .path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+        if !png {
+            return Err(RenderError::Option(format!(
+                "--preview {}: the preview is a PNG file; the name must end in .png",
+                p.path.display()
+            )));
+        }
     }
     Ok(RenderPlan {
         selection,
