@@ -215,12 +215,13 @@ fn depth_matches_brute_force_at_every_pixel() {
         h,
         &all_triangles(&scene, 7.0 / 24.0),
         |x, y| {
-            // The side camera records aspect 1: the image is stretched, as the contract says.
+            // The side camera records aspect 1, but pixels are square (issue 24): the
+            // horizontal extent follows the image, as the contract says.
             contract_ray(
                 Mat3::from_quat(cam.rotation),
                 cam.position,
                 0.5f32.tan(),
-                1.0,
+                w as f32 / h as f32,
                 (w, h),
                 (x, y),
             )

@@ -61,13 +61,13 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
             .fps
             .map_or("no animation".to_string(), |f| format!("{f} fps"));
         eprintln!(
-            "wrote {}: {} triangles ({} animated), {} materials, {} textures, {} lights, {} ({fps})",
+            "wrote {}: {} ({} animated), {}, {}, {}, {} ({fps})",
             a.output.display(),
-            scene.triangle_count(),
+            subfield::plural(scene.triangle_count() as u64, "triangle"),
             scene.animated_triangle_count(),
-            gltf.materials.len(),
-            gltf.textures.len(),
-            scene.lights.len(),
+            subfield::plural(gltf.materials.len() as u64, "material"),
+            subfield::plural(gltf.textures.len() as u64, "texture"),
+            subfield::plural(scene.lights.len() as u64, "light"),
             subfield::plural(frames as u64, "frame"),
         );
     }

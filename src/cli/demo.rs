@@ -28,6 +28,14 @@ pub struct Args {
     /// Image size.
     #[arg(long, value_name = "WxH", default_value = "640x480")]
     pub size: String,
+    /// Exposure in stops: the RGB written (frames and preview) is the radiance × 2^EV.
+    #[arg(
+        long,
+        value_name = "EV",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
+    pub exposure: f32,
     /// Skip frames already in DIR that read back complete.
     #[arg(long)]
     pub resume: bool,
@@ -81,6 +89,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         width,
         height,
         resume: a.resume,
+        exposure: a.exposure,
         stats: Some(dir.join("stats.csv")),
         plot: Some(dir.join("plot.svg")),
         // The middle frame of the range (of the whole animation: the triangles gathered

@@ -123,11 +123,11 @@ fn animart(a: AnimartArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("cannot write {}", a.output.display()))?;
     if !a.quiet {
         eprintln!(
-            "wrote {}: {} (seed {}, {} frames)",
+            "wrote {}: {} (seed {}, {})",
             a.output.display(),
             subfield::plural(a.triangles as u64, "animated triangle"),
             a.seed,
-            a.frames
+            subfield::plural(a.frames as u64, "frame")
         );
     }
     Ok(ExitCode::SUCCESS)

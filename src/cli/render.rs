@@ -8,7 +8,7 @@ use anyhow::{bail, Context};
 use subfield::farm;
 use subfield::format::ContentHash;
 use subfield::import;
-use subfield::render::{self, LookAt, PixelType, RenderEvent, RenderOptions};
+use subfield::render::{self, LookAt, PixelType, PreviewOptions, RenderEvent, RenderOptions};
 use subfield::scene::Scene;
 
 use super::parse;
@@ -33,12 +33,26 @@ pub struct Args {
     /// Frames per second; frame i shows time i/F (default: the scene's extras.fps, else 24).
     #[arg(long, allow_negative_numbers = true)]
     pub fps: Option<f32>,
-    /// Play one animation clip (name or index); default: all together.
+    /// Play one animation clip (name or index); default: all clips together when they
+    /// animate disjoint targets, else the first (warned).
     #[arg(long, value_name = "NAME|INDEX")]
     pub animation: Option<String>,
-    /// Image size.
-    #[arg(long, value_name = "WxH", default_value = "640x480")]
-    pub size: String,
+    /// Image size; default: 640 wide at the camera's aspect ratio, else 640x480. Pixels
+    /// are square: a size of another shape shows more or less of the scene (warned).
+    #[arg(long, value_name = "WxH")]
+    pub size: Option<String>,
+    /// Exposure in stops: the RGB written is the radiance × 2^EV (alpha and AOVs as
+    /// traced).
+    #[arg(
+        long,
+        value_name = "EV",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
+    pub exposure: f32,
+    /// Also write the first frame this run renders as a tone-mapped sRGB PNG.
+    #[arg(long, value_name = "FILE.png")]
+    pub preview: Option<PathBuf>,
     /// Samples per pixel (stratified; 1 = the pixel centre).
     #[arg(long, default_value_t = 1)]
     pub spp: u32,
@@ -152,7 +166,10 @@ pub fn resolve_inputs(a: &Args) -> anyhow::Result<(Option<PathBuf>, Option<Strin
 
 /// The library's options from the flags (every value checked, one error line each).
 pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
-    let (width, height) = parse::parse_size(&a.size)?;
+    let (width, height) = match &a.size {
+        Some(s) => parse::parse_size(s)?,
+        None => (render::DEFAULT_WIDTH, 480),
+    };
     let look_at = match (&a.look_from, &a.look_at) {
         (Some(f), Some(t)) => Some(LookAt {
             from: parse::parse_vec3("--look-from", f)?,
@@ -203,9 +220,21 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         shard: a.shard.as_deref().map(parse::parse_shard).transpose()?,
         stats: a.stats.clone(),
         plot: a.plot.clone(),
-        preview: None,
+        preview: a
+            .preview
+            .clone()
+            .map(|path| PreviewOptions { frame: None, path }),
         shading: Default::default(),
+        exposure: a.exposure,
     })
+}
+
+/// Without `--size`, the image is 640 wide at the aspect ratio of the camera the options
+/// choose (DESIGN.md §4); `options` left 640x480 until the scene is known.
+pub fn size_from_scene(a: &Args, scene: &Scene, opts: &mut RenderOptions) {
+    if a.size.is_none() {
+        (opts.width, opts.height) = render::default_size(scene, opts);
+    }
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
@@ -218,14 +247,25 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     opts.baked = baked;
     let clock = std::time::Instant::now();
     let scene = import::load(&a.scene)?;
+    size_from_scene(&a, &scene, &mut opts);
     let mut preface: Vec<String> = staged.into_iter().collect();
     preface.push(format!(
         "imported {} in {:.2} s",
         a.scene.display(),
         clock.elapsed().as_secs_f64()
     ));
-    drive(&scene, &a.scene, &opts, a.quiet, preface)
+    let summary = drive(&scene, &a.scene, &opts, a.quiet, preface)
         .with_context(|| format!("cannot render {}", a.scene.display()))?;
+    if !a.quiet {
+        match (&summary.preview, &opts.preview) {
+            (Some(p), _) => eprintln!("preview: {}", p.display()),
+            (None, Some(p)) => eprintln!(
+                "no preview written to {}: every frame was skipped as complete",
+                p.path.display()
+            ),
+            (None, None) => {}
+        }
+    }
     Ok(ExitCode::SUCCESS)
 }
 

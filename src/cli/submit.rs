@@ -111,6 +111,7 @@ fn refuse_task_flags(r: &render_cmd::Args) -> anyhow::Result<()> {
         (r.resume, "--resume (tasks always resume)"),
         (r.stats.is_some(), "--stats (one file per run)"),
         (r.plot.is_some(), "--plot (one file per run)"),
+        (r.preview.is_some(), "--preview (one file per run)"),
         (
             r.baked_hash.is_some(),
             "--baked-hash (submit hashes the bake)",
@@ -137,7 +138,11 @@ fn render_flags(r: &render_cmd::Args) -> Vec<String> {
     };
     opt("fps", r.fps.map(|f| f.to_string()));
     opt("animation", r.animation.clone());
-    opt("size", Some(r.size.clone()));
+    opt("size", r.size.clone());
+    opt(
+        "exposure",
+        (r.exposure != 0.0).then(|| r.exposure.to_string()),
+    );
     opt("spp", Some(r.spp.to_string()));
     opt("max-depth", Some(r.max_depth.to_string()));
     opt("camera", r.camera.clone());
@@ -213,6 +218,7 @@ fn prepare(r: &render_cmd::Args, dry_run: bool) -> anyhow::Result<Work> {
         }
     }
     let scene = subfield::import::load(&scene_path)?;
+    render_cmd::size_from_scene(r, &scene, &mut opts);
     let plan = render::plan(&scene, &opts)
         .with_context(|| format!("cannot render {}", r.scene.display()))?;
     if !r.quiet {

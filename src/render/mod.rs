@@ -40,7 +40,10 @@ pub use aov::{
     camera_to_ndc, crypto_hash, crypto_key, exr_matrix, fps_rational, murmur3_32, project,
     world_to_camera, CryptoKind, CryptoNames, FrameHeader,
 };
-pub use camera::{animation_bounds, CameraModel};
+pub use camera::{
+    animation_bounds, apply_exposure, aspect_warning, camera_aspect, default_size, size_for_aspect,
+    size_matches, CameraModel, DEFAULT_WIDTH, MAX_EXPOSURE,
+};
 pub use options::{
     Aovs, FrameRange, FrameSet, FrameSpan, LookAt, PixelType, PreviewOptions, RenderOptions,
     ShadingOptions, Shard, DEFAULT_CRYPTO_LEVELS, MAX_FRAMES, MAX_SIDE,

@@ -350,6 +350,9 @@ pub struct RenderOptions {
     pub plot: Option<PathBuf>,
     pub preview: Option<PreviewOptions>,
     pub shading: ShadingOptions,
+    /// `--exposure EV`: the RGB written (EXR and preview) is the radiance × 2^EV; alpha
+    /// and the AOVs are unchanged. 0 leaves the pixels as traced.
+    pub exposure: f32,
 }
 
 impl Default for RenderOptions {
@@ -374,6 +377,7 @@ impl Default for RenderOptions {
             plot: None,
             preview: None,
             shading: ShadingOptions::default(),
+            exposure: 0.0,
         }
     }
 }
@@ -394,7 +398,7 @@ impl RenderOptions {
                 PixelType::Float => "float",
             },
             fps,
-            self.animation.as_deref().unwrap_or("all"),
+            self.animation.as_deref().unwrap_or("default"),
         );
         match (&self.look_at, &self.camera) {
             (Some(l), _) => {
@@ -431,6 +435,7 @@ impl RenderOptions {
             sh.background.z,
             sh.default_light
         );
+        s += &format!(" exposure={}", self.exposure);
         s
     }
 }

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
-use super::camera::{animation_bounds, CameraModel};
+use super::camera::{animation_bounds, aspect_warning, CameraModel, MAX_EXPOSURE};
 use super::options::{FrameRange, FrameSet, RenderOptions, MAX_FRAMES, MAX_SIDE};
 use super::output::is_complete;
 use super::stats;
@@ -105,8 +105,9 @@ pub struct RenderPlan {
     pub range: FrameRange,
     /// The frames this run renders (after `--shard`), ascending, each once.
     pub frames: Vec<u32>,
-    /// Warnings about the plan (`--frames` past the end of the animation), one line each,
-    /// without the `warning: ` prefix.
+    /// Warnings about the plan (clips left out by the default selection, a `--size` off
+    /// the camera's aspect ratio, `--frames` past the end of the animation), one line
+    /// each, without the `warning: ` prefix.
     pub warnings: Vec<String>,
     pub pattern: OutputPattern,
     pub camera: CameraSource,
@@ -122,9 +123,14 @@ impl RenderPlan {
 
 /// Checks `opts` against `scene` without touching the file system.
 pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderError> {
+    let mut warnings = Vec::new();
     let selection = match &opts.animation {
         Some(a) => scene.resolve_clip(a)?,
-        None => ClipSelection::All,
+        None => {
+            let (sel, warning) = scene.default_clips();
+            warnings.extend(warning);
+            sel
+        }
     };
     let fps = match opts.fps {
         Some(f) if f.is_finite() && f > 0.0 => f,
@@ -149,6 +155,12 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
         return Err(RenderError::Option(format!(
             "--spp {}: must be in 1..=65536",
             opts.spp
+        )));
+    }
+    if !(opts.exposure.is_finite() && opts.exposure.abs() <= MAX_EXPOSURE) {
+        return Err(RenderError::Option(format!(
+            "--exposure {}: must be a number of stops between -{MAX_EXPOSURE} and {MAX_EXPOSURE}",
+            opts.exposure
         )));
     }
     if opts.max_depth > 64 {
@@ -187,7 +199,6 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
         start: first,
         end: final_ + 1,
     };
-    let mut warnings = Vec::new();
     if let (Some(_), Some(last)) = (&opts.frames, last) {
         if final_ > last {
             warnings.push(format!(
@@ -234,8 +245,24 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
         let (lo, hi) = animation_bounds(scene, selection).unwrap_or((-Vec3::ONE, Vec3::ONE));
         CameraSource::Fixed(CameraModel::framing(lo, hi, opts.width, opts.height))
     };
+    if let CameraSource::Scene(_) = camera {
+        warnings.extend(aspect_warning(scene, opts));
+    }
     if let Some(p) = &opts.plot {
         stats::plot_kind(p)?;
+    }
+    if let Some(p) = &opts.preview {
+        let png = p
+            .path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+        if !png {
+            return Err(RenderError::Option(format!(
+                "--preview {}: the preview is a PNG file; the name must end in .png",
+                p.path.display()
+            )));
+        }
     }
     Ok(RenderPlan {
         selection,

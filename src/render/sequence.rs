@@ -10,7 +10,7 @@ use std::time::Instant;
 use glam::Vec3;
 
 use super::aov::{CryptoNames, FrameHeader};
-use super::camera::CameraModel;
+use super::camera::{apply_exposure, CameraModel};
 use super::options::RenderOptions;
 use super::output;
 use super::planning::{check_outputs, plan, skips, static_dynamic_split, CameraSource, RenderPlan};
@@ -351,7 +351,7 @@ impl Frames<'_> {
             next,
             crypto: self.crypto.as_deref(),
         };
-        let (fb, work) = render_frame(
+        let (mut fb, work) = render_frame(
             &ctx,
             &tracer,
             &camera,
@@ -360,6 +360,7 @@ impl Frames<'_> {
             opts.max_depth,
             &inputs,
         );
+        apply_exposure(&mut fb.rgba, opts.exposure);
         let header = FrameHeader::new(&camera, plan.fps, self.options.clone(), self.crypto.clone());
         Ok((
             fb,

@@ -1,5 +1,5 @@
 //! Per-frame statistics: the CSV of `--stats` and the stacked bar chart of `--plot`
-//! (SVG written by hand; PNG drawn into an `image` buffer with a tiny built-in font).
+//! (SVG written by hand; PNG drawn into an `image` buffer, labels in an 8×8 bitmap font).
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -53,6 +53,9 @@ const SERIES: [(&str, [u8; 3]); 4] = [
     ("shade", [0x59, 0xa1, 0x4f]),
     ("write", [0xb0, 0x7a, 0xa1]),
 ];
+
+/// The chart's title (SVG and PNG).
+const PLOT_TITLE: &str = "time per frame (ms), stacked";
 
 fn values(f: &FrameStats) -> [f64; 4] {
     [f.update_ms, f.trace_ms, f.shade_ms, f.write_ms].map(|v| {
@@ -140,7 +143,7 @@ pub fn plot_svg(frames: &[FrameStats]) -> String {
     let _ = writeln!(s, r#"<rect width="100%" height="100%" fill="white"/>"#);
     let _ = writeln!(
         s,
-        r#"<text x="{}" y="18" text-anchor="middle" font-size="14">time per frame (ms), stacked</text>"#,
+        r#"<text x="{}" y="18" text-anchor="middle" font-size="14">{PLOT_TITLE}</text>"#,
         l.left + l.plot_w() / 2.0
     );
     // Y grid and labels.
@@ -231,40 +234,28 @@ fn fmt_num(v: f64) -> String {
     }
 }
 
-/// 3×5 bitmap glyphs for the PNG's labels (digits, a few letters); rows top to bottom,
-/// bit 2 is the left column.
-fn glyph(c: char) -> Option<[u8; 5]> {
-    Some(match c {
-        '0' => [7, 5, 5, 5, 7],
-        '1' => [2, 6, 2, 2, 7],
-        '2' => [7, 1, 7, 4, 7],
-        '3' => [7, 1, 7, 1, 7],
-        '4' => [5, 5, 7, 1, 1],
-        '5' => [7, 4, 7, 1, 7],
-        '6' => [7, 4, 7, 5, 7],
-        '7' => [7, 1, 1, 1, 1],
-        '8' => [7, 5, 7, 5, 7],
-        '9' => [7, 5, 7, 1, 7],
-        '.' => [0, 0, 0, 0, 2],
-        'a' => [0, 7, 1, 7, 7],
-        'd' => [1, 1, 7, 5, 7],
-        'e' => [7, 5, 7, 4, 7],
-        'f' => [3, 4, 6, 4, 4],
-        'h' => [4, 4, 7, 5, 5],
-        'i' => [2, 0, 2, 2, 2],
-        'm' => [0, 7, 7, 5, 5],
-        'p' => [0, 7, 5, 7, 4],
-        'r' => [0, 7, 4, 4, 4],
-        's' => [0, 7, 6, 3, 7],
-        't' => [4, 7, 4, 4, 3],
-        'u' => [0, 5, 5, 5, 7],
-        'w' => [0, 5, 5, 7, 7],
-        ' ' => [0; 5],
-        _ => return None,
-    })
+/// Side of a label glyph, pixels: the PNG's labels use the 8×8 bitmap font of
+/// `font8x8`, which draws every printable ASCII character (the 3×5 font it replaced had
+/// 25, so "trace" came out "tra e").
+const GLYPH: f64 = 8.0;
+
+/// The 8×8 bitmap of `c`: rows top to bottom, bit 0 the left column. A character outside
+/// ASCII is drawn as `?` (the labels are ASCII: numbers, series names, titles).
+fn glyph(c: char) -> [u8; 8] {
+    let i = if c.is_ascii() {
+        c as usize
+    } else {
+        '?' as usize
+    };
+    font8x8::legacy::BASIC_LEGACY[i]
 }
 
-/// The PNG bytes of the same chart (labels in a 3×5 pixel font scaled ×2).
+/// Width of `text` drawn with [`glyph`], pixels.
+fn text_width(text: &str) -> f64 {
+    text.chars().count() as f64 * GLYPH
+}
+
+/// The PNG bytes of the same chart (labels in an 8×8 pixel font).
 pub fn plot_png(frames: &[FrameStats]) -> Result<Vec<u8>, image::ImageError> {
     let l = Layout::new(frames);
     let (w, h) = (l.w as u32, l.h as u32);
@@ -283,7 +274,7 @@ pub fn plot_png(frames: &[FrameStats]) -> Result<Vec<u8>, image::ImageError> {
     while v <= l.ymax * 1.000_001 {
         let y = l.y(v);
         rect(l.left, y, l.left + l.plot_w(), y + 1.0, [0xdd; 3]);
-        labels.push((l.left - 6.0, y - 5.0, fmt_num(v), true));
+        labels.push((l.left - 6.0, y - GLYPH / 2.0, fmt_num(v), true));
         v += l.ystep;
     }
     let n = frames.len();
@@ -297,7 +288,7 @@ pub fn plot_png(frames: &[FrameStats]) -> Result<Vec<u8>, image::ImageError> {
         if i % Layout::x_label_every(n) == 0 {
             let t = f.frame.to_string();
             labels.push((
-                x + bw / 2.0 - t.len() as f64 * 4.0,
+                x + bw / 2.0 - text_width(&t) / 2.0,
                 l.top + l.plot_h() + 8.0,
                 t,
                 false,
@@ -308,30 +299,34 @@ pub fn plot_png(frames: &[FrameStats]) -> Result<Vec<u8>, image::ImageError> {
     rect(x0 - 1.0, l.top, x0, y0, [0; 3]);
     rect(x0 - 1.0, y0, l.left + l.plot_w(), y0 + 1.0, [0; 3]);
     labels.push((
-        l.left + l.plot_w() / 2.0 - 20.0,
+        l.left + l.plot_w() / 2.0 - text_width("frame") / 2.0,
         l.h - 22.0,
         "frame".into(),
         false,
     ));
     labels.push((8.0, l.top + l.plot_h() / 2.0, "ms".into(), false));
-    labels.push((l.left, 8.0, "time per frame ms".into(), false));
+    let title = PLOT_TITLE;
+    labels.push((
+        l.left + l.plot_w() / 2.0 - text_width(title) / 2.0,
+        10.0,
+        title.into(),
+        false,
+    ));
     for (k, (name, c)) in SERIES.iter().rev().enumerate() {
         let y = l.top + 10.0 + 22.0 * k as f64;
         let x = l.w - l.right + 20.0;
         rect(x, y, x + 14.0, y + 14.0, *c);
-        labels.push((x + 20.0, y + 2.0, (*name).to_string(), false));
+        labels.push((x + 20.0, y + 3.0, (*name).to_string(), false));
     }
     for (x, y, text, right) in labels {
-        let width = text.chars().count() as f64 * 8.0;
-        let x = if right { x - width } else { x };
+        let x = if right { x - text_width(&text) } else { x };
         for (k, ch) in text.chars().enumerate() {
-            let Some(g) = glyph(ch) else { continue };
-            for (row, bits) in g.iter().enumerate() {
-                for col in 0..3 {
-                    if bits & (4 >> col) != 0 {
-                        let px = x + k as f64 * 8.0 + col as f64 * 2.0;
-                        let py = y + row as f64 * 2.0;
-                        rect(px, py, px + 2.0, py + 2.0, [0; 3]);
+            for (row, bits) in glyph(ch).iter().enumerate() {
+                for col in 0..8 {
+                    if bits & (1 << col) != 0 {
+                        let px = x + k as f64 * GLYPH + col as f64;
+                        let py = y + row as f64;
+                        rect(px, py, px + 1.0, py + 1.0, [0; 3]);
                     }
                 }
             }
@@ -415,5 +410,53 @@ mod tests {
         assert_eq!(nice_axis(0.7), (1.0, 0.2));
         let png = plot_png(&frames()).unwrap();
         assert_eq!(&png[1..4], b"PNG");
+    }
+
+    /// Issue 24: the 3×5 font had no 'c', 'n', 'l', ... so "trace" was drawn "tra e".
+    #[test]
+    fn every_label_character_has_a_glyph_of_its_own() {
+        let mut labels: Vec<String> = vec![PLOT_TITLE.into(), "frame".into(), "ms".into()];
+        labels.extend(SERIES.iter().map(|(n, _)| n.to_string()));
+        labels.extend(["0123456789".into(), fmt_num(0.025), fmt_num(12.5)]);
+        let mut seen: Vec<(char, [u8; 8])> = Vec::new();
+        for c in labels.iter().flat_map(|l| l.chars()).filter(|c| *c != ' ') {
+            let g = glyph(c);
+            assert_ne!(g, [0; 8], "{c:?} has no glyph");
+            if let Some((d, _)) = seen.iter().find(|(d, h)| *h == g && *d != c) {
+                panic!("{c:?} and {d:?} share a glyph");
+            }
+            seen.push((c, g));
+        }
+        // All of printable ASCII is drawn, each character differently.
+        let printable: Vec<[u8; 8]> = ('!'..='~').map(glyph).collect();
+        assert!(printable.iter().all(|g| *g != [0; 8]));
+        for (i, g) in printable.iter().enumerate() {
+            assert!(
+                !printable[i + 1..].contains(g),
+                "{:?}",
+                (b'!' + i as u8) as char
+            );
+        }
+    }
+
+    #[test]
+    fn png_legend_labels_are_drawn_glyph_for_glyph() {
+        let png = plot_png(&frames()).unwrap();
+        let img = image::load_from_memory(&png).unwrap().to_rgb8();
+        let l = Layout::new(&frames());
+        for (k, (name, _)) in SERIES.iter().rev().enumerate() {
+            let x0 = (l.w - l.right + 40.0) as u32;
+            let y0 = (l.top + 13.0 + 22.0 * k as f64) as u32;
+            for (i, c) in name.chars().enumerate() {
+                let g = glyph(c);
+                for row in 0..8u32 {
+                    for col in 0..8u32 {
+                        let ink = img.get_pixel(x0 + 8 * i as u32 + col, y0 + row).0 == [0; 3];
+                        let bit = g[row as usize] & (1 << col) != 0;
+                        assert_eq!(ink, bit, "{name:?}: {c:?} at row {row}, column {col}");
+                    }
+                }
+            }
+        }
     }
 }

@@ -6,8 +6,9 @@
 //! * LINEAR interpolates component-wise, rotations by slerp along the shorter arc;
 //!   STEP holds the previous keyframe; CUBICSPLINE is the Hermite spline of the spec,
 //!   tangents scaled by the keyframe interval; rotations are renormalised;
-//! * several clips play together by default; where two channels drive the same property
-//!   of the same node, the later one in file order wins.
+//! * by default ([`Scene::default_clips`]) every clip plays when no two clips drive the
+//!   same property of the same node; otherwise the first clip plays alone. Where two
+//!   channels of the selection drive one property, the later one in file order wins.
 
 use glam::{Mat4, Quat, Vec3};
 
@@ -16,7 +17,9 @@ use super::{Camera, Channel, Interpolation, Light, Property, Scene, SceneError, 
 /// Which clips play.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash)]
 pub enum ClipSelection {
-    /// Every clip together (the later clip wins where two drive the same property).
+    /// Every clip together (the later clip wins where two drive the same property; the
+    /// default selection picks this only when no two clips do, see
+    /// [`Scene::default_clips`]).
     #[default]
     All,
     /// One clip, by index into [`Scene::animations`].
@@ -61,6 +64,56 @@ impl Scene {
                 available: self.clip_names(),
             }),
         }
+    }
+
+    /// The clips played without `--animation`: all of them when no two clips animate the
+    /// same target (node and property), else the first clip alone, with a warning (one
+    /// line, no `warning: ` prefix) that names the clips left out and `--animation`.
+    pub fn default_clips(&self) -> (ClipSelection, Option<String>) {
+        let mut owner: std::collections::HashMap<(usize, Property), usize> =
+            std::collections::HashMap::new();
+        let mut shared = None;
+        'clips: for (i, clip) in self.animations.iter().enumerate() {
+            for ch in &clip.channels {
+                match owner.entry((ch.node, ch.property)) {
+                    std::collections::hash_map::Entry::Occupied(e) if *e.get() != i => {
+                        shared = Some((*e.get(), i, ch.node, ch.property));
+                        break 'clips;
+                    }
+                    std::collections::hash_map::Entry::Occupied(_) => {}
+                    std::collections::hash_map::Entry::Vacant(e) => {
+                        e.insert(i);
+                    }
+                }
+            }
+        }
+        let Some((a, b, node, property)) = shared else {
+            return (ClipSelection::All, None);
+        };
+        let label = |i: usize| match &self.animations[i].name {
+            Some(n) => format!("{i} {n:?}"),
+            None => format!("{i} (unnamed)"),
+        };
+        let node_name = match self.nodes.get(node).and_then(|n| n.name.as_deref()) {
+            Some(n) => format!("node {node} {n:?}"),
+            None => format!("node {node}"),
+        };
+        let others: Vec<String> = (1..self.animations.len()).map(label).collect();
+        let warning = format!(
+            "clips {} and {} both animate the {} of {node_name}, so they cannot play together: \
+             playing the first clip, {}, alone; not played: {} (choose one with --animation NAME|INDEX)",
+            label(a),
+            label(b),
+            match property {
+                Property::Translation => "translation",
+                Property::Rotation => "rotation",
+                Property::Scale => "scale",
+                Property::Weights => "morph weights",
+            },
+            label(0),
+            others.join(", "),
+        );
+        (ClipSelection::One(0), Some(warning))
     }
 
     /// The clips that `sel` plays, in file order (empty for an index out of range).
