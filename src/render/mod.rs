@@ -20,14 +20,20 @@
 //!
 //! Files: `planning` (pattern, camera source, frames, the checks before writing, resume
 //! skips), `sequence` (the static part and the frame loop), `writer` (jobs, atomic
-//! writes, folders), `aov` (header matrices, projection, Cryptomatte ids), `wavefront` (one frame traced level by level), `shade` (Whitted shading of a hit), `camera`,
+//! writes, folders), `aov` (header matrices, projection, Cryptomatte ids), `wavefront` (one frame traced level by level), `shade` (Whitted shading of a hit, with
+//! glossy reflection and area lights), `lights` (emissive triangles as area lights),
+//! `sampling` (deterministic random numbers, GGX), `mips` (mip-maps, trilinear
+//! lookups), `camera`,
 //! `stats`, and `options` / `output` (the options and the EXR / PNG encoders).
 
 mod aov;
 mod camera;
+mod lights;
+mod mips;
 mod options;
 mod output;
 mod planning;
+mod sampling;
 mod sequence;
 mod shade;
 mod stats;
@@ -44,6 +50,7 @@ pub use camera::{
     animation_bounds, apply_exposure, aspect_warning, camera_aspect, default_size, size_for_aspect,
     size_matches, CameraModel, DEFAULT_WIDTH, MAX_EXPOSURE,
 };
+pub use mips::TextureMips;
 pub use options::{
     Aovs, FrameRange, FrameSet, FrameSpan, LookAt, PixelType, PreviewOptions, RenderOptions,
     ShadingOptions, Shard, DEFAULT_CRYPTO_LEVELS, MAX_FRAMES, MAX_SIDE,

@@ -11,6 +11,7 @@ use glam::Vec3;
 
 use super::aov::{CryptoNames, FrameHeader};
 use super::camera::{apply_exposure, CameraModel};
+use super::mips::TextureMips;
 use super::options::RenderOptions;
 use super::output;
 use super::planning::{check_outputs, plan, skips, static_dynamic_split, CameraSource, RenderPlan};
@@ -53,8 +54,10 @@ pub fn render_sequence(
         seconds: static_seconds,
     });
 
+    let mips = TextureMips::build(scene);
     let frames = Frames {
         scene,
+        mips: &mips,
         opts,
         plan: &plan,
         split: &split,
@@ -114,6 +117,8 @@ fn static_part(static_soup: &TriangleSoup, opts: &RenderOptions) -> Result<Psf, 
 /// What the frame loop renders from.
 struct Frames<'a> {
     scene: &'a Scene,
+    /// The scene's texture mip-maps, built once for the whole sequence.
+    mips: &'a TextureMips,
     opts: &'a RenderOptions,
     plan: &'a RenderPlan,
     split: &'a Split,
@@ -343,6 +348,7 @@ impl Frames<'_> {
             &camera,
             opts.shading,
             extent,
+            self.mips,
         );
         let update_ms = clock.elapsed().as_secs_f64() * 1e3;
         let tracer = psf.with_dynamic(dl);

@@ -10,27 +10,47 @@
 //! pixel, sample). Nothing depends on the thread count.
 //!
 //! Model (linear RGB; `KHR_lights_punctual` units): base colour = factor × texture
-//! (sRGB texels linearised before bilinear filtering); `F0 = mix(0.04, base, metallic)`;
-//! gloss `g = (1 − roughness)²`; mirror weight `F·g` (Schlick; exact dielectric Fresnel
-//! with the material's IOR for transmissive surfaces); refraction weight
-//! `(1 − F)·transmission·(1 − metallic)·base` (total internal reflection goes to the
-//! mirror ray); diffuse colour `base·((1 − metallic)(1 − transmission)(1 − F·g) +
-//! metallic·(1 − g))` (a rough metal's glossy lobe stands in as diffuse, since Whitted
-//! has no glossy rays), lit by every light through a shadow ray as `kd/π·E·cos`, plus a
-//! normalised Blinn–Phong highlight for the lights (exponent `2/r⁴ − 2`, at most 256), an ambient term `kd·ambient` and the
-//! emission `emissive·strength·texture`. Irradiance: directional `E = intensity`
-//! (lux), point and spot `E = intensity/d²` (candela) with the spec's range window and
-//! spot cone falloff.
+//! (sRGB texels linearised before filtering; textures are mip-mapped and looked up
+//! trilinearly at the level of detail of the ray's cone, see `mips`); the shading normal
+//! bent by the normal map, if any (tangents from the triangle's uvs);
+//! `F0 = mix(0.04, base, metallic)`; Fresnel `F` by Schlick (exact dielectric Fresnel
+//! with the material's IOR for transmissive surfaces).
+//!
+//! * Reflection: below roughness [`GLOSSY_LIMIT`] one reflection ray a sample, weight
+//!   `F`: the mirror direction for a polished surface (GGX width `α = roughness²`
+//!   under 1e-3), else a direction drawn from the GGX distribution of visible normals
+//!   (weight `F·G1(l)`), so a rough surface reflects a blur that converges with `--spp`.
+//!   From the limit on, no reflection ray; a rough metal's lobe then stands in as diffuse
+//!   (`metallic·(1 − g)·base`, `g = (1 − roughness)²`).
+//! * Refraction weight `(1 − F)·transmission·(1 − metallic)·base` (total internal
+//!   reflection goes to the reflection ray).
+//! * Diffuse colour `kd = base·(1 − metallic)(1 − transmission)(1 − F)` with a reflection
+//!   ray, `base·((1 − metallic)(1 − transmission)(1 − F·g) + metallic·(1 − g))` without.
+//!   Lit by every punctual light through a shadow ray as `kd/π·E·cos`, plus a normalised
+//!   Blinn–Phong highlight (exponent `2/r⁴ − 2`, at most 256); by the emissive triangles
+//!   (area lights, `lights`) through `ceil(8 / spp)` shadow rays at a camera ray's hit and
+//!   one deeper, each to a point drawn by power and area, as
+//!   `kd/π·Le·cos·cos'/d²/pdf` (their highlight only without a reflection ray: with one,
+//!   the reflection ray finds the emitter itself, so nothing is counted twice); an
+//!   ambient term `kd·ambient` and the emission `emissive·strength·texture` (from the
+//!   front face, both faces when double-sided).
+//!
+//! Irradiance: directional `E = intensity` (lux), point and spot `E = intensity/d²`
+//! (candela) with the spec's range window and spot cone falloff. Without punctual lights
+//! and emitters, the options' default light.
 
 use std::time::Duration;
 
 use glam::{Vec2, Vec3, Vec4};
 
 use super::camera::CameraModel;
+use super::lights::AreaLights;
+use super::mips::TextureMips;
 use super::options::ShadingOptions;
+use super::sampling::{sample_ggx_vndf, smith_g1, stratified, Purpose, Seed};
 use crate::geometry::{Hit, Ray};
 use crate::psf::Prim;
-use crate::scene::{AlphaMode, Light, LightKind, Material, Scene, TextureRef, TriangleSoup, Wrap};
+use crate::scene::{AlphaMode, Light, LightKind, Material, Scene, TextureRef, TriangleSoup};
 
 /// Linear radiance and AOVs of one frame, rows top to bottom.
 #[derive(Clone, Debug, PartialEq)]
@@ -114,7 +134,8 @@ pub struct ShadeContext<'a> {
     /// Size of the scene (bounding box diagonal), for ray offsets.
     pub extent: f32,
     lights: Vec<PreLight>,
-    lut: [f32; 256],
+    area: AreaLights,
+    mips: &'a TextureMips,
 }
 
 /// Passes through alpha-cut surfaces a ray may make.
@@ -123,18 +144,30 @@ const MAX_PASSES: u16 = 16;
 const MIN_WEIGHT: f32 = 1e-4;
 /// Largest Blinn–Phong exponent (roughness below about 0.3 gets this).
 const MAX_SHININESS: f32 = 256.0;
+/// From this roughness on, a surface traces no reflection ray. Chosen against Cycles on
+/// CornellBox (walls of roughness 0.5): Cycles shows no reflection in them, and at 0.6
+/// our GGX rays from them that found the small ceiling light (radiance 100) were
+/// fireflies, there being no multiple importance sampling.
+pub const GLOSSY_LIMIT: f32 = 0.4;
+/// GGX widths below this reflect as a perfect mirror.
+const MIRROR_ALPHA: f32 = 1e-3;
+/// Area-light samples a pixel gets at its camera rays' hits, over all its samples
+/// (`ceil(LIGHT_SAMPLES / spp)` a hit; one at deeper hits).
+const LIGHT_SAMPLES: u32 = 8;
 
-fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
+/// A ray cone (Akenine-Möller et al. 2021): its width where the ray starts and how fast
+/// it widens (radians), for texture level of detail.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct Cone {
+    pub(super) width: f32,
+    pub(super) spread: f32,
 }
 
 impl<'a> ShadeContext<'a> {
-    /// `lights` posed for this frame; an empty list gets the default light when the
-    /// options ask for it (placed relative to `camera`).
+    /// `lights` posed for this frame and the emissive triangles of both soups; a scene
+    /// with neither gets the default light when the options ask for it (placed
+    /// relative to `camera`). `mips`: the scene's texture chains, built once a render.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         scene: &'a Scene,
         static_soup: &'a TriangleSoup,
@@ -143,6 +176,7 @@ impl<'a> ShadeContext<'a> {
         camera: &CameraModel,
         options: ShadingOptions,
         extent: f32,
+        mips: &'a TextureMips,
     ) -> ShadeContext<'a> {
         let mut pre: Vec<PreLight> = lights
             .iter()
@@ -155,7 +189,8 @@ impl<'a> ShadeContext<'a> {
                 range: l.range.filter(|r| *r > 0.0),
             })
             .collect();
-        if lights.is_empty() && options.default_light {
+        let area = AreaLights::new(scene, static_soup, dynamic_soup);
+        if lights.is_empty() && area.is_empty() && options.default_light {
             let towards = (camera.rotation * Vec3::new(-0.4, 0.6, 0.7)).normalize_or_zero();
             pre.push(PreLight {
                 kind: LightKind::Directional,
@@ -164,10 +199,6 @@ impl<'a> ShadeContext<'a> {
                 direction: -towards,
                 range: None,
             });
-        }
-        let mut lut = [0.0; 256];
-        for (i, v) in lut.iter_mut().enumerate() {
-            *v = srgb_to_linear(i as f32 / 255.0);
         }
         ShadeContext {
             scene,
@@ -180,7 +211,8 @@ impl<'a> ShadeContext<'a> {
                 1.0
             },
             lights: pre,
-            lut,
+            area,
+            mips,
         }
     }
 
@@ -188,49 +220,24 @@ impl<'a> ShadeContext<'a> {
         self.scene.materials.get(i as usize)
     }
 
-    /// Samples a texture (RGBA, linearised RGB when `srgb`), or `None` without one.
-    fn texture(&self, slot: Option<TextureRef>, uv: Vec2, srgb: bool) -> Option<Vec4> {
-        let tex = self.scene.textures.get(slot?.texture as usize)?;
+    /// Samples a texture (RGBA, linearised RGB when `srgb`) at `uv`, filtered for a
+    /// footprint of level `lod + log2(√(width·height))` (see [`Surface::lod`]), or
+    /// `None` without one.
+    fn texture(&self, slot: Option<TextureRef>, uv: Vec2, lod: f32, srgb: bool) -> Option<Vec4> {
+        let t = slot?.texture as usize;
+        let tex = self.scene.textures.get(t)?;
         let img = self.scene.images.get(tex.image as usize)?;
-        let (w, h) = (img.width as i64, img.height as i64);
-        if w == 0 || h == 0 || img.rgba8.len() as i64 != w * h * 4 {
+        let (w, h) = (img.width, img.height);
+        if w == 0 || h == 0 || img.rgba8.len() as u64 != u64::from(w) * u64::from(h) * 4 {
             return None;
         }
-        let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
-        let fetch = |x: i64, y: i64| -> Vec4 {
-            let x = wrap(x, w, tex.wrap_s);
-            let y = wrap(y, h, tex.wrap_t);
-            let at = ((y * w + x) * 4) as usize;
-            match img.rgba8.get(at..at + 4) {
-                Some(p) => {
-                    let c = |b: u8| {
-                        if srgb {
-                            self.lut[b as usize]
-                        } else {
-                            b as f32 / 255.0
-                        }
-                    };
-                    Vec4::new(c(p[0]), c(p[1]), c(p[2]), p[3] as f32 / 255.0)
-                }
-                None => Vec4::ONE,
-            }
-        };
-        let x = uv.x as f64 * w as f64;
-        let y = uv.y as f64 * h as f64;
-        if tex.nearest {
-            return Some(fetch(x.floor() as i64, y.floor() as i64));
-        }
-        let (x, y) = (x - 0.5, y - 0.5);
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let top = fetch(x0, y0).lerp(fetch(x0 + 1, y0), fx);
-        let bottom = fetch(x0, y0 + 1).lerp(fetch(x0 + 1, y0 + 1), fx);
-        Some(top.lerp(bottom, fy))
+        let lod = lod + 0.5 * ((w as f32) * (h as f32)).log2();
+        Some(self.mips.lookup(t, tex, &img.rgba8, w, h, uv, lod, srgb))
     }
 
-    /// Geometry at a hit, `None` for a triangle index out of range.
-    fn surface(&self, ray: &Ray, hit: &Hit) -> Option<Surface> {
+    /// Geometry at a hit, `None` for a triangle index out of range. `width`: the ray
+    /// cone's width at the hit (0: the finest texture level).
+    fn surface(&self, ray: &Ray, hit: &Hit, width: f32) -> Option<Surface> {
         let (soup, i) = match Prim::from_index(hit.tri, self.static_soup.len()) {
             Prim::Static(i) => (self.static_soup, i as usize),
             Prim::Moving(i) => (self.dynamic_soup, i as usize),
@@ -242,11 +249,13 @@ impl<'a> ShadeContext<'a> {
         let (u, v) = (hit.u, hit.v);
         let w = 1.0 - u - v;
         let point = p[0] * w + p[1] * u + p[2] * v;
-        let mut ng = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+        let cross = (p[1] - p[0]).cross(p[2] - p[0]);
+        let mut ng = cross.normalize_or_zero();
         let dir = ray.dir.normalize_or_zero();
         if ng == Vec3::ZERO {
             ng = -dir;
         }
+        let front = ng;
         // `entering`: the ray meets the side the winding makes the front.
         let entering = ng.dot(dir) < 0.0;
         if !entering {
@@ -256,11 +265,27 @@ impl<'a> ShadeContext<'a> {
             .map(|n| (n[0] * w + n[1] * u + n[2] * v).normalize_or_zero())
             .unwrap_or(Vec3::ZERO);
         if ns == Vec3::ZERO || !ns.is_finite() {
-            ns = ng;
-        } else if ns.dot(ng) < 0.0 {
-            ns = -ns;
+            ns = front;
         }
         let uv = uvs.map_or(Vec2::ZERO, |t| t[0] * w + t[1] * u + t[2] * v);
+        // Level of detail without the texture's size: log2 of the footprint's width in
+        // uv units (Akenine-Möller et al. 2021, eq. 34, for a unit texture).
+        let uv_area = uvs.map_or(0.0, |t| (t[1] - t[0]).perp_dot(t[2] - t[0]).abs());
+        let world_area = cross.length();
+        let cos = ng.dot(dir).abs().max(1e-4);
+        let lod = if width > 0.0 && uv_area > 0.0 && world_area > 0.0 {
+            (width / cos).log2() + 0.5 * (uv_area / world_area).log2()
+        } else {
+            f32::NEG_INFINITY
+        };
+        if let (Some(m), Some(t)) = (self.material(material), uvs) {
+            if m.normal_texture.is_some() {
+                ns = self.normal_mapped(m, ns, p, t, uv, lod).unwrap_or(ns);
+            }
+        }
+        if ns.dot(ng) < 0.0 {
+            ns = -ns;
+        }
         Some(Surface {
             point,
             ng,
@@ -268,13 +293,58 @@ impl<'a> ShadeContext<'a> {
             dir,
             entering,
             uv,
+            lod,
             material,
+            tri: hit.tri,
         })
     }
 
+    /// The front-side normal `n` bent by the material's normal map at `uv`. Tangent
+    /// `T = ∂p/∂u` of the triangle (per triangle, from its uvs: the file's `TANGENT`
+    /// attribute is not read), made orthogonal to `n`; bitangent `B = ±n × T`, the sign
+    /// making it point along `−∂p/∂v` (glTF's normal maps have +Y towards decreasing `v`,
+    /// and mirrored uvs flip it). `None` where the uvs are degenerate.
+    fn normal_mapped(
+        &self,
+        m: &Material,
+        n: Vec3,
+        p: &[Vec3; 3],
+        t: &[Vec2; 3],
+        uv: Vec2,
+        lod: f32,
+    ) -> Option<Vec3> {
+        let c = self.texture(m.normal_texture, uv, lod, false)?;
+        let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+        let (d1, d2) = (t[1] - t[0], t[2] - t[0]);
+        let det = d1.perp_dot(d2);
+        if det.abs() < 1e-12 {
+            return None;
+        }
+        let dpdu = (e1 * d2.y - e2 * d1.y) / det;
+        let dpdv = (e2 * d1.x - e1 * d2.x) / det;
+        let tangent = (dpdu - n * n.dot(dpdu)).try_normalize()?;
+        let mut bitangent = n.cross(tangent);
+        if bitangent.dot(dpdv) > 0.0 {
+            bitangent = -bitangent;
+        }
+        let s = if m.normal_scale.is_finite() {
+            m.normal_scale
+        } else {
+            1.0
+        };
+        let local = Vec3::new(
+            (2.0 * c.x - 1.0) * s,
+            (2.0 * c.y - 1.0) * s,
+            2.0 * c.z - 1.0,
+        );
+        let bent = (tangent * local.x + bitangent * local.y + n * local.z).try_normalize()?;
+        // A map cannot turn the normal to the far side of the surface.
+        (bent.dot(n) > 0.0).then_some(bent)
+    }
+
     /// Base colour (factor × texture) at a surface.
-    fn base_color(&self, m: &Material, uv: Vec2) -> Vec4 {
-        match self.texture(m.base_color_texture, uv, true) {
+    fn base_color(&self, m: &Material, uv: Vec2, lod: f32) -> Vec4 {
+        match self.texture(m.base_color_texture, uv, lod, true) {
             Some(t) => m.base_color * t,
             None => m.base_color,
         }
@@ -288,12 +358,12 @@ impl<'a> ShadeContext<'a> {
 
     /// The AOV values at a primary hit: (normal, albedo).
     pub(super) fn aov(&self, ray: &Ray, hit: &Hit) -> CentreAov {
-        let Some(s) = self.surface(ray, hit) else {
+        let Some(s) = self.surface(ray, hit, 0.0) else {
             return CentreAov::default();
         };
         let albedo = self
             .material(s.material)
-            .map_or(Vec3::ONE, |m| self.base_color(m, s.uv).truncate());
+            .map_or(Vec3::ONE, |m| self.base_color(m, s.uv, s.lod).truncate());
         CentreAov {
             normal: s.ns.to_array(),
             albedo: albedo.to_array(),
@@ -311,30 +381,38 @@ impl<'a> ShadeContext<'a> {
     }
 
     /// One ray's contribution: the background on a miss; else the pass-through ray of a
-    /// surface not wholly opaque, emission and ambient, shadow rays to the lights, and
-    /// the refracted and mirror rays.
+    /// surface not wholly opaque, emission and ambient, shadow rays to the lights and
+    /// the emitters, and the refracted and reflected rays. `spp`: the frame's samples a
+    /// pixel (sets the area-light samples a hit).
     pub(super) fn shade(
         &self,
         ray: &Ray,
         item: &Item,
         hit: Option<Hit>,
         max_depth: u32,
+        spp: u32,
         out: &mut BlockOut,
     ) {
         let Some(hit) = hit else {
             out.add(item.sample, item.weight * self.options.background);
             return;
         };
-        let Some(s) = self.surface(ray, &hit) else {
+        let distance = hit.t * ray.dir.length();
+        let width = item.cone.width + item.cone.spread * distance;
+        let Some(s) = self.surface(ray, &hit, width) else {
             return;
         };
         let default = Material::default();
         let m = self.material(s.material).unwrap_or(&default);
-        let base = self.base_color(m, s.uv);
+        let base = self.base_color(m, s.uv, s.lod);
         let alpha = alpha_of(m, base);
         let eps = self.eps(s.point);
+        let cone = Cone {
+            width,
+            spread: item.cone.spread,
+        };
         if alpha < 1.0 && item.passes < MAX_PASSES {
-            pass_through(&s, item, alpha, eps, out);
+            pass_through(&s, item, alpha, eps, cone, out);
         }
         if alpha <= 0.0 {
             return;
@@ -343,13 +421,12 @@ impl<'a> ShadeContext<'a> {
         let weight = item.weight * alpha;
         let lobes = self.lobes(m, &s, base.truncate());
 
-        // Emission and ambient.
-        let mut emitted = m.emissive * m.emissive_strength;
-        if emitted != Vec3::ZERO {
-            if let Some(t) = self.texture(m.emissive_texture, s.uv, true) {
-                emitted *= t.truncate();
-            }
-        }
+        // Emission (front face; both when double-sided) and ambient.
+        let emitted = if s.entering || m.double_sided {
+            self.emission(m, s.uv, s.lod)
+        } else {
+            Vec3::ZERO
+        };
         out.add(
             item.sample,
             weight * (emitted + lobes.kd * self.options.ambient),
@@ -358,18 +435,37 @@ impl<'a> ShadeContext<'a> {
         // Direct light through shadow rays.
         let origin = s.point + s.ng * eps;
         self.direct_light(&s, &lobes, weight, origin, item.sample, out);
+        if !self.area.is_empty() {
+            let n = if item.depth == 0 {
+                LIGHT_SAMPLES.div_ceil(spp.max(1))
+            } else {
+                1
+            };
+            self.area_light(&s, &lobes, weight, origin, item, n, spp, out);
+        }
 
         if item.depth >= max_depth {
             return;
         }
-        secondary(&s, &lobes, item, weight, eps, origin, out);
+        secondary(&s, &lobes, item, weight, eps, origin, cone, out);
+    }
+
+    /// Emitted radiance of `m` at `uv`.
+    fn emission(&self, m: &Material, uv: Vec2, lod: f32) -> Vec3 {
+        let mut e = m.emissive * m.emissive_strength;
+        if e != Vec3::ZERO {
+            if let Some(t) = self.texture(m.emissive_texture, uv, lod, true) {
+                e *= t.truncate();
+            }
+        }
+        e
     }
 
     /// The material's lobes at `s`: metallic and roughness (textured), Fresnel, and the
-    /// mirror, transmitted and diffuse weights.
+    /// reflected, transmitted and diffuse weights.
     fn lobes(&self, m: &Material, s: &Surface, albedo: Vec3) -> Lobes {
         let (mut metallic, mut roughness) = (m.metallic, m.roughness);
-        if let Some(t) = self.texture(m.metallic_roughness_texture, s.uv, false) {
+        if let Some(t) = self.texture(m.metallic_roughness_texture, s.uv, s.lod, false) {
             metallic *= t.z;
             roughness *= t.y;
         }
@@ -392,14 +488,29 @@ impl<'a> ShadeContext<'a> {
         } else {
             f0 + (Vec3::ONE - f0) * (1.0 - cos_o).powi(5)
         };
-        let kr = fresnel * gloss;
+        let reflects = roughness < GLOSSY_LIMIT;
+        let alpha = roughness * roughness;
         let kt = (Vec3::ONE - fresnel) * transmission * albedo;
-        let kd = albedo
-            * ((1.0 - metallic) * (1.0 - transmission) * (1.0 - fresnel.max_element() * gloss)
-                + metallic * (1.0 - gloss));
+        let (kr, kd) = if reflects {
+            (
+                fresnel,
+                albedo * ((1.0 - metallic) * (1.0 - transmission) * (1.0 - fresnel.max_element())),
+            )
+        } else {
+            (
+                Vec3::ZERO,
+                albedo
+                    * ((1.0 - metallic)
+                        * (1.0 - transmission)
+                        * (1.0 - fresnel.max_element() * gloss)
+                        + metallic * (1.0 - gloss)),
+            )
+        };
         Lobes {
             roughness,
             gloss,
+            glossy_alpha: (reflects && alpha >= MIRROR_ALPHA).then_some(alpha),
+            reflects,
             v,
             f0,
             eta,
@@ -407,6 +518,32 @@ impl<'a> ShadeContext<'a> {
             kt,
             kd,
         }
+    }
+
+    /// The Blinn–Phong exponent of the highlight for lights (0: none).
+    fn shininess(roughness: f32) -> f32 {
+        if roughness < 0.9 {
+            // Capped: a point light is a delta, and the glint of one on a polished
+            // surface would otherwise be a tiny spot of enormous radiance (one that
+            // mirrors then multiply around the scene).
+            (2.0 / roughness.powi(4).max(1e-4) - 2.0).min(MAX_SHININESS)
+        } else {
+            0.0
+        }
+    }
+
+    /// Diffuse plus (when `highlight`) the capped Blinn–Phong glint, for light arriving
+    /// from `to_light`.
+    fn brdf(lobes: &Lobes, s: &Surface, to_light: Vec3, highlight: bool) -> Vec3 {
+        let mut brdf = lobes.kd * std::f32::consts::FRAC_1_PI;
+        let shininess = Self::shininess(lobes.roughness);
+        if highlight && shininess > 0.0 {
+            let h = (to_light + lobes.v).normalize_or_zero();
+            let nh = s.ns.dot(h).max(0.0);
+            let norm = (shininess + 8.0) / (8.0 * std::f32::consts::PI);
+            brdf += lobes.f0 * (1.0 - lobes.gloss * 0.5) * (norm * nh.powf(shininess)).min(1e3);
+        }
+        brdf
     }
 
     /// A shadow ray towards each light that lights `s` (from `origin`, just off the
@@ -421,22 +558,6 @@ impl<'a> ShadeContext<'a> {
         sample: u32,
         out: &mut BlockOut,
     ) {
-        let Lobes {
-            roughness,
-            gloss,
-            v,
-            f0,
-            kd,
-            ..
-        } = *lobes;
-        let shininess = if roughness < 0.9 {
-            // Capped: a point light is a delta, and the glint of one on a polished
-            // surface would otherwise be a tiny spot of enormous radiance (one that
-            // mirrors then multiply around the scene).
-            (2.0 / roughness.powi(4).max(1e-4) - 2.0).min(MAX_SHININESS)
-        } else {
-            0.0
-        };
         for (li, l) in self.lights.iter().enumerate() {
             let Some((to_light, dist, irradiance)) = light_at(l, origin) else {
                 continue;
@@ -445,13 +566,7 @@ impl<'a> ShadeContext<'a> {
             if cos_i <= 0.0 || s.ng.dot(to_light) <= 0.0 {
                 continue;
             }
-            let mut brdf = kd * std::f32::consts::FRAC_1_PI;
-            if shininess > 0.0 {
-                let h = (to_light + v).normalize_or_zero();
-                let nh = s.ns.dot(h).max(0.0);
-                let norm = (shininess + 8.0) / (8.0 * std::f32::consts::PI);
-                brdf += f0 * (1.0 - gloss * 0.5) * (norm * nh.powf(shininess)).min(1e3);
-            }
+            let brdf = Self::brdf(lobes, s, to_light, true);
             let c = weight * brdf * irradiance * cos_i;
             if c.max_element() <= MIN_WEIGHT * 1e-2 || !c.is_finite() {
                 continue;
@@ -464,6 +579,94 @@ impl<'a> ShadeContext<'a> {
             out.shadow(shadow, li, sample, c);
         }
     }
+
+    /// `n` shadow rays to points on the emissive triangles (stratified over the
+    /// triangle, each triangle drawn by power), each carrying `1/n` of its estimate.
+    #[allow(clippy::too_many_arguments)]
+    fn area_light(
+        &self,
+        s: &Surface,
+        lobes: &Lobes,
+        weight: Vec3,
+        origin: Vec3,
+        item: &Item,
+        n: u32,
+        spp: u32,
+        out: &mut BlockOut,
+    ) {
+        // One batch for every area-light shadow ray, after the punctual lights'.
+        let batch = self.lights.len();
+        // At a camera ray's hit the pixel's `spp · n` samples share one stratification
+        // (jittered: cell `j·spp + k` for light sample `j` of pixel sample `k`), and
+        // the emitter choice is stratified too, over the cells in a scrambled order, so
+        // the pick and the point do not go together.
+        let (k, cells) = if item.depth == 0 {
+            (item.sample % spp.max(1), n * spp.max(1))
+        } else {
+            (0, n)
+        };
+        for j in 0..n {
+            let cell = j * (cells / n) + k;
+            let rp = item.seed.get(Purpose::AreaLight, 2 * j);
+            let scrambled = if cells % 7919 == 0 {
+                cell as f32
+            } else {
+                (u64::from(cell) * 7919 % u64::from(cells)) as f32
+            };
+            let pick = ((scrambled + rp.x) / cells as f32).min(0.999_999_9);
+            let r = stratified(cell, cells, item.seed.get(Purpose::AreaLight, 2 * j + 1));
+            let Some(lp) = self.area.sample(pick, r) else {
+                continue;
+            };
+            if lp.tri == s.tri {
+                continue;
+            }
+            let d = lp.point - origin;
+            let d2 = d.length_squared();
+            if !(d2 > 0.0 && d2.is_finite()) {
+                continue;
+            }
+            let dist = d2.sqrt();
+            let to = d / dist;
+            let cos_i = s.ns.dot(to);
+            if cos_i <= 0.0 || s.ng.dot(to) <= 0.0 {
+                continue;
+            }
+            let mut cos_l = -lp.normal.dot(to);
+            if lp.two_sided {
+                cos_l = cos_l.abs();
+            }
+            if cos_l <= 0.0 {
+                continue;
+            }
+            let Some(m) = self.material(lp.material) else {
+                continue;
+            };
+            let le = self.emission(m, self.uv_at(lp.tri, lp.bary), f32::NEG_INFINITY);
+            let brdf = Self::brdf(lobes, s, to, !lobes.reflects);
+            let c = weight * brdf * le * (cos_i * cos_l / (d2 * lp.pdf_area * n as f32));
+            if c.max_element() <= MIN_WEIGHT * 1e-2 || !c.is_finite() {
+                continue;
+            }
+            out.shadow(
+                Ray::segment(origin, to, 0.0, dist * (1.0 - 1e-3)),
+                batch,
+                item.sample,
+                c,
+            );
+        }
+    }
+
+    /// Texture coordinates at barycentrics `b` of hit number `tri`.
+    fn uv_at(&self, tri: u32, b: Vec2) -> Vec2 {
+        let uvs = match Prim::from_index(tri, self.static_soup.len()) {
+            Prim::Static(i) => self.static_soup.uvs.get(i as usize),
+            Prim::Moving(i) => self.dynamic_soup.uvs.get(i as usize),
+        };
+        uvs.map_or(Vec2::ZERO, |t| {
+            t[0] * (1.0 - b.x - b.y) + t[1] * b.x + t[2] * b.y
+        })
+    }
 }
 
 /// What a surface's material makes of light, as [`ShadeContext::lobes`] finds it.
@@ -471,12 +674,16 @@ impl<'a> ShadeContext<'a> {
 struct Lobes {
     roughness: f32,
     gloss: f32,
+    /// GGX width of the reflection lobe; `None` for a mirror or no reflection ray.
+    glossy_alpha: Option<f32>,
+    /// Whether a reflection ray is traced (roughness under [`GLOSSY_LIMIT`]).
+    reflects: bool,
     /// Towards the viewer.
     v: Vec3,
     f0: Vec3,
     /// The ratio of the indices of refraction across the surface, as the ray crosses it.
     eta: f32,
-    /// Mirror, transmitted and diffuse weights.
+    /// Reflected, transmitted and diffuse weights.
     kr: Vec3,
     kt: Vec3,
     kd: Vec3,
@@ -498,7 +705,7 @@ fn alpha_of(m: &Material, base: Vec4) -> f32 {
 }
 
 /// On through a surface of coverage `alpha`, same direction, same depth.
-fn pass_through(s: &Surface, item: &Item, alpha: f32, eps: f32, out: &mut BlockOut) {
+fn pass_through(s: &Surface, item: &Item, alpha: f32, eps: f32, cone: Cone, out: &mut BlockOut) {
     let w = item.weight * (1.0 - alpha);
     if w.max_element() > MIN_WEIGHT || item.coverage > 0.0 {
         out.next(
@@ -509,6 +716,8 @@ fn pass_through(s: &Surface, item: &Item, alpha: f32, eps: f32, out: &mut BlockO
                 coverage: item.coverage * (1.0 - alpha),
                 depth: item.depth,
                 passes: item.passes + 1,
+                seed: item.seed.child(2),
+                cone,
             },
         );
     }
@@ -547,8 +756,9 @@ fn light_at(l: &PreLight, origin: Vec3) -> Option<(Vec3, f32, Vec3)> {
     })
 }
 
-/// The refracted ray (or, on total internal reflection, more weight for the mirror)
-/// and the mirror ray, one level deeper.
+/// The refracted ray (or, on total internal reflection, more weight for the reflected
+/// one) and the reflected ray (mirror, or drawn from the GGX lobe), one level deeper.
+#[allow(clippy::too_many_arguments)]
 fn secondary(
     s: &Surface,
     lobes: &Lobes,
@@ -556,46 +766,60 @@ fn secondary(
     weight: Vec3,
     eps: f32,
     origin: Vec3,
+    cone: Cone,
     out: &mut BlockOut,
 ) {
     let (eta, kt, mut kr) = (lobes.eta, lobes.kt, lobes.kr);
-    let next = |w: Vec3| Item {
+    let next = |w: Vec3, kind: u64, spread: f32| Item {
         sample: item.sample,
         weight: w,
         coverage: 0.0,
         depth: item.depth + 1,
         passes: item.passes,
+        seed: item.seed.child(kind),
+        cone: Cone {
+            width: cone.width,
+            spread,
+        },
     };
-    // Refraction (or total internal reflection, which adds to the mirror ray).
+    // Refraction (or total internal reflection, which adds to the reflected ray).
     let kt_w = weight * kt;
     if kt_w.max_element() > MIN_WEIGHT {
         match refract(s.dir, s.ns, eta).or_else(|| refract(s.dir, s.ng, eta)) {
             Some(t) if t.dot(s.ng) < 0.0 => {
-                out.next(Ray::new(s.point - s.ng * eps, t), next(kt_w));
+                out.next(
+                    Ray::new(s.point - s.ng * eps, t),
+                    next(kt_w, 1, cone.spread),
+                );
             }
             _ => kr += kt,
         }
     }
     let kr_w = weight * kr;
-    if kr_w.max_element() > MIN_WEIGHT {
-        let mut r = reflect(s.dir, s.ns);
-        if r.dot(s.ng) <= 0.0 {
-            r = reflect(s.dir, s.ng);
-        }
-        out.next(Ray::new(origin, r), next(kr_w));
+    if kr_w.max_element() <= MIN_WEIGHT {
+        return;
     }
-}
-
-fn wrap(i: i64, n: i64, mode: Wrap) -> i64 {
-    match mode {
-        Wrap::Repeat => i.rem_euclid(n),
-        Wrap::ClampToEdge => i.clamp(0, n - 1),
-        Wrap::MirroredRepeat => {
-            let m = i.rem_euclid(2 * n);
-            if m >= n {
-                2 * n - 1 - m
-            } else {
-                m
+    match lobes.glossy_alpha {
+        None => {
+            let mut r = reflect(s.dir, s.ns);
+            if r.dot(s.ng) <= 0.0 {
+                r = reflect(s.dir, s.ng);
+            }
+            out.next(Ray::new(origin, r), next(kr_w, 0, cone.spread));
+        }
+        Some(alpha) => {
+            // One direction from the visible normals: the estimator's weight is
+            // F · G2/G1(v), with Smith's separable G2 that is F · G1(l).
+            let m = sample_ggx_vndf(lobes.v, s.ns, alpha, item.seed.get(Purpose::Glossy, 0));
+            let r = reflect(s.dir, m);
+            let cos_l = r.dot(s.ns);
+            if cos_l <= 0.0 || r.dot(s.ng) <= 0.0 {
+                return; // into the surface: this sample reflects nothing
+            }
+            let w = kr_w * smith_g1(cos_l, alpha);
+            if w.max_element() > MIN_WEIGHT {
+                // The lobe's width widens the cone (for the texture level of detail).
+                out.next(Ray::new(origin, r), next(w, 0, cone.spread + alpha));
             }
         }
     }
@@ -639,7 +863,12 @@ struct Surface {
     dir: Vec3,
     entering: bool,
     uv: Vec2,
+    /// Texture level of detail for a unit texture: a `w × h` texture adds
+    /// `log2(√(w·h))`; `-∞` for the finest level.
+    lod: f32,
     material: u32,
+    /// Hit number of the triangle.
+    tri: u32,
 }
 
 /// A ray's bookkeeping: which sample it adds to, with what weight.
@@ -652,6 +881,9 @@ pub(super) struct Item {
     pub(super) coverage: f32,
     pub(super) depth: u32,
     pub(super) passes: u16,
+    /// The ray's own random numbers.
+    pub(super) seed: Seed,
+    pub(super) cone: Cone,
 }
 
 #[derive(Default)]
@@ -706,16 +938,5 @@ mod tests {
         // Normal incidence: ((n1-n2)/(n1+n2))^2 = 0.04.
         assert!((fresnel_dielectric(1.0, 1.0 / 1.5) - 0.04).abs() < 1e-6);
         assert!(reflect(d, n).abs_diff_eq(Vec3::new(d.x, -d.y, 0.0), 1e-6));
-    }
-
-    #[test]
-    fn wrap_modes() {
-        assert_eq!(wrap(-1, 4, Wrap::Repeat), 3);
-        assert_eq!(wrap(5, 4, Wrap::Repeat), 1);
-        assert_eq!(wrap(-1, 4, Wrap::ClampToEdge), 0);
-        assert_eq!(wrap(9, 4, Wrap::ClampToEdge), 3);
-        assert_eq!(wrap(4, 4, Wrap::MirroredRepeat), 3);
-        assert_eq!(wrap(-1, 4, Wrap::MirroredRepeat), 0);
-        assert_eq!(wrap(8, 4, Wrap::MirroredRepeat), 0);
     }
 }

@@ -11,7 +11,8 @@ use rayon::prelude::*;
 use super::aov::{project, rank, CryptoNames};
 use super::camera::CameraModel;
 use super::options::Aovs;
-use super::shade::{BlockOut, CryptoBuffers, FrameBuffers, FrameWork, Item, ShadeContext};
+use super::sampling::Seed;
+use super::shade::{BlockOut, Cone, CryptoBuffers, FrameBuffers, FrameWork, Item, ShadeContext};
 use crate::geometry::{Hit, Intersector, Ray};
 use crate::psf::Prim;
 use crate::scene::TriangleSoup;
@@ -101,6 +102,22 @@ pub fn sample_offset(frame: u32, x: u32, y: u32, k: u32, spp: u32) -> (f32, f32)
     )
 }
 
+/// The cone of a camera ray: a pixel wide, from a point (perspective: the angle a pixel
+/// spans at the image centre) or a pixel wide and parallel (orthographic).
+fn primary_cone(camera: &CameraModel) -> Cone {
+    let h = camera.height.max(1) as f32;
+    match camera.ortho {
+        Some((_, ymag)) => Cone {
+            width: 2.0 * ymag / h,
+            spread: 0.0,
+        },
+        None => Cone {
+            width: 0.0,
+            spread: 2.0 * camera.tan_half / h,
+        },
+    }
+}
+
 /// Traces and shades one frame.
 pub fn render_frame<T: Intersector>(
     ctx: &ShadeContext<'_>,
@@ -160,13 +177,20 @@ pub fn render_frame<T: Intersector>(
                 camera.ray(x as f32 + ox, y as f32 + oy)
             })
             .collect();
+        let cone = primary_cone(camera);
         let mut items: Vec<Item> = (0..nsamples)
-            .map(|s| Item {
-                sample: s as u32,
-                weight: Vec3::ONE,
-                coverage: 1.0,
-                depth: 0,
-                passes: 0,
+            .map(|s| {
+                let p = px0 + s / spp;
+                let (x, y) = ((p % w) as u32, (p / w) as u32);
+                Item {
+                    sample: s as u32,
+                    weight: Vec3::ONE,
+                    coverage: 1.0,
+                    depth: 0,
+                    passes: 0,
+                    seed: Seed::camera(frame, x, y, (s % spp) as u32),
+                    cone,
+                }
             })
             .collect();
         work.rays.primary += nsamples as u64;
@@ -205,7 +229,7 @@ pub fn render_frame<T: Intersector>(
                 .map(|((r, it), hs)| {
                     let mut out = BlockOut::default();
                     for ((ray, item), hit) in r.iter().zip(it).zip(hs) {
-                        ctx.shade(ray, item, *hit, max_depth, &mut out);
+                        ctx.shade(ray, item, *hit, max_depth, spp as u32, &mut out);
                     }
                     out
                 })

@@ -141,6 +141,11 @@ pub struct Material {
     /// `emissive * emissive_strength` (times the texture).
     pub emissive_strength: f32,
     pub emissive_texture: Option<TextureRef>,
+    /// Tangent-space normal map (glTF `normalTexture`, linear RGB, +Y towards
+    /// decreasing `v`); tangents come from the triangle's uvs (see `render::shade`).
+    pub normal_texture: Option<TextureRef>,
+    /// `normalTexture.scale`: multiplies the map's X and Y; 1 when absent.
+    pub normal_scale: f32,
     /// `KHR_materials_transmission` factor; 0 when absent.
     pub transmission: f32,
     /// `KHR_materials_ior`; 1.5 when absent.
@@ -163,6 +168,8 @@ impl Default for Material {
             emissive: Vec3::ZERO,
             emissive_strength: 1.0,
             emissive_texture: None,
+            normal_texture: None,
+            normal_scale: 1.0,
             transmission: 0.0,
             ior: 1.5,
             double_sided: false,

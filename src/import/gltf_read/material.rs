@@ -38,12 +38,19 @@ impl Importer<'_> {
     pub(super) fn materials(&mut self) -> (Vec<Material>, Vec<usize>) {
         let mut used = Vec::new();
         let mut out = Vec::new();
+        let mut occluded = Vec::new();
         for m in self.doc.materials() {
             let pbr = m.pbr_metallic_roughness();
             let base_color_texture = self.texture_ref(pbr.base_color_texture(), &mut used);
             let metallic_roughness_texture =
                 self.texture_ref(pbr.metallic_roughness_texture(), &mut used);
             let emissive_texture = self.texture_ref(m.emissive_texture(), &mut used);
+            let normal = m.normal_texture();
+            let normal_scale = normal.as_ref().map_or(1.0, |n| n.scale());
+            let normal_texture = normal.and_then(|n| self.normal_ref(n, &mut used));
+            if m.occlusion_texture().is_some() {
+                occluded.push(m.index().unwrap_or(0).to_string());
+            }
             if m.transmission()
                 .and_then(|t| t.transmission_texture())
                 .is_some()
@@ -63,6 +70,8 @@ impl Importer<'_> {
                 emissive: Vec3::from_array(m.emissive_factor()),
                 emissive_strength: m.emissive_strength().unwrap_or(1.0),
                 emissive_texture,
+                normal_texture,
+                normal_scale,
                 transmission: m.transmission().map_or(0.0, |t| t.transmission_factor()),
                 ior: m.ior().unwrap_or(1.5),
                 double_sided: m.double_sided(),
@@ -75,7 +84,38 @@ impl Importer<'_> {
                 },
             });
         }
+        if !occluded.is_empty() {
+            // Once for the file, naming every material that has one.
+            self.warn(format!(
+                "occlusionTexture is not supported and is ignored (materials {})",
+                occluded.join(", ")
+            ));
+        }
         (out, used)
+    }
+
+    /// The slot of a material's `normalTexture` (as [`Self::texture_ref`] does for the
+    /// other textures).
+    fn normal_ref(
+        &mut self,
+        n: gltf::material::NormalTexture,
+        used: &mut Vec<usize>,
+    ) -> Option<TextureRef> {
+        let t = n.texture().index();
+        if n.tex_coord() != 0 {
+            self.warn(format!(
+                "textures[{t}] (a normal map) uses TEXCOORD_{}; only TEXCOORD_0 is imported",
+                n.tex_coord()
+            ));
+        }
+        let slot = used.iter().position(|&u| u == t).unwrap_or_else(|| {
+            used.push(t);
+            used.len() - 1
+        });
+        Some(TextureRef {
+            texture: slot as u32,
+            tex_coord: n.tex_coord(),
+        })
     }
 
     /// Builds the textures that materials use and decodes only the images behind them.
