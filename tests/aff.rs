@@ -402,13 +402,13 @@ fn time_range_gives_frame_times_and_fps() {
     assert_eq!(r.frame_time(299), 5.0);
     assert!((r.frame_time(100) - (-1.0 + 100.0 * 6.0 / 299.0)).abs() < 1e-12);
     assert!((r.fps().unwrap() - 299.0 / 6.0).abs() < 1e-12);
-    let g = aff.to_gltf().unwrap();
+    let g = aff.to_scene().unwrap();
     assert_eq!(g.fps, Some((299.0f64 / 6.0) as f32));
     assert_eq!(aff.frame_times().len(), 300);
     // A single frame: no clip, no fps.
     let one = AffScene::parse_str("a 2 2 1\n", Path::new("one.aff"), Path::new(".")).unwrap();
     assert_eq!(one.time.unwrap().fps(), None);
-    assert_eq!(one.to_gltf().unwrap().fps, None);
+    assert_eq!(one.to_scene().unwrap().fps, None);
 }
 
 #[test]
@@ -654,6 +654,106 @@ fn malformed_input_names_file_and_line() {
     assert!(e.contains("nested more than"), "{e}");
 }
 
+/// Issue 25: an include or a texture name is a file in the scene's folder, under the
+/// policy of glTF URIs. An absolute path, a `..` above the folder and a symbolic link out
+/// of it were followed, and the parse error then quoted the outside file's first word.
+#[test]
+fn aff_includes_and_textures_outside_the_scene_folder_are_refused() {
+    let root = temp_dir("confined");
+    let folder = root.join("scene");
+    std::fs::create_dir_all(folder.join("parts")).unwrap();
+    // Outside files a lax reader would read: an "AFF" whose first word is a secret, and
+    // an image.
+    std::fs::write(root.join("outside.aff"), "secretword 1 2 3\n").unwrap();
+    let mut ppm = b"P6\n1 1\n255\n".to_vec();
+    ppm.extend_from_slice(&[1, 2, 3]);
+    std::fs::write(root.join("outside.ppm"), &ppm).unwrap();
+    std::fs::write(folder.join("parts/inside.aff"), "s 0 0 0 1\n").unwrap();
+    std::fs::write(folder.join("parts/inside.ppm"), &ppm).unwrap();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::symlink;
+        symlink(root.join("outside.aff"), folder.join("link.aff")).unwrap();
+        symlink(root.join("outside.ppm"), folder.join("link.ppm")).unwrap();
+        symlink(&root, folder.join("up")).unwrap();
+        symlink(folder.join("parts/inside.aff"), folder.join("near.aff")).unwrap();
+    }
+    let abs_aff = root.join("outside.aff").display().to_string();
+    let abs_ppm = root.join("outside.ppm").display().to_string();
+    let tri = "0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1\n";
+    let mut cases: Vec<(String, &str, &str)> = vec![
+        (format!("\ni 0 {abs_aff}\n"), "include", "an absolute path"),
+        (
+            "\ni 0 ../outside.aff\n".into(),
+            "include",
+            "above the folder",
+        ),
+        (
+            "\ni 0 parts/../../outside.aff\n".into(),
+            "include",
+            "above the folder",
+        ),
+        (
+            format!("\ntt {abs_ppm}\n{tri}"),
+            "texture",
+            "an absolute path",
+        ),
+        (
+            format!("\ntt ../outside.ppm\n{tri}"),
+            "texture",
+            "above the folder",
+        ),
+    ];
+    if cfg!(unix) {
+        cases.push(("\ni 0 link.aff\n".into(), "include", "symbolic link"));
+        cases.push(("\ni 0 up/outside.aff\n".into(), "include", "symbolic link"));
+        cases.push((format!("\ntt link.ppm\n{tri}"), "texture", "symbolic link"));
+    }
+    let top = folder.join("top.aff");
+    for (text, what, why) in &cases {
+        std::fs::write(&top, text).unwrap();
+        let e = AffScene::load(&top).unwrap_err();
+        assert!(
+            matches!(e, ImportError::OutsideFolder { .. }),
+            "{text:?}: {e}"
+        );
+        let msg = e.to_string();
+        let name = text
+            .split_whitespace()
+            .nth(if *what == "include" { 2 } else { 1 })
+            .unwrap();
+        // One line naming the file and line, the include or texture, and the folder.
+        assert!(!msg.contains('\n'), "{msg}");
+        assert!(
+            msg.starts_with(&format!("{}:2: {what} {name:?}", top.display())),
+            "{msg}"
+        );
+        assert!(
+            msg.contains(&format!("leaves the scene's folder {}", folder.display()))
+                && msg.contains(why),
+            "{msg}"
+        );
+        // Nothing outside was read: its contents are never quoted.
+        assert!(!msg.contains("secretword"), "{msg}");
+        assert_eq!(import::load(&top).unwrap_err().to_string(), msg);
+    }
+    // Inside the folder, through a sub-folder, `..` that stays inside, or a link to a file
+    // inside: read.
+    let mut ok = vec![
+        "i 0 parts/inside.aff\n".to_string(),
+        "i 0 parts/../parts/inside.aff\n".into(),
+        format!("tt parts/inside.ppm\n{tri}"),
+    ];
+    if cfg!(unix) {
+        ok.push("i 0 near.aff\n".into());
+    }
+    for text in ok {
+        std::fs::write(&top, &text).unwrap();
+        let aff = AffScene::load(&top).unwrap_or_else(|e| panic!("{text:?}: {e}"));
+        assert!(aff.triangle_count() > 0, "{text:?}");
+    }
+}
+
 #[test]
 fn keyframes_naming_nothing_are_a_warning_not_an_error() {
     // BART's robots scene has `k old_camera` that nothing uses; BART ignores it, so do we
@@ -690,7 +790,7 @@ fn mutated_input_never_panics() {
     let name = folder.join("fuzz.aff");
     let seed = AffScene::parse_str(FUZZ_SEED_TEXT, &name, &folder).unwrap();
     assert!(seed.triangle_count() > 0);
-    seed.to_gltf().unwrap().to_glb().unwrap();
+    import::to_glb(&seed.to_scene().unwrap()).unwrap();
 
     let mut state = 0x1234_5678_9abc_def0u64;
     let mut rnd = |n: usize| {
@@ -722,7 +822,7 @@ fn mutated_input_never_panics() {
         let text = String::from_utf8_lossy(&text).into_owned();
         // Parse, convert, write and import again: errors are fine, panics are not.
         match AffScene::parse_str(&text, &name, &folder) {
-            Ok(s) => match s.to_gltf().and_then(|g| g.to_glb()) {
+            Ok(s) => match s.to_scene().and_then(|g| import::to_glb(&g)) {
                 Ok(glb) => {
                     let _ = s.triangles_at(0.5);
                     match import::from_gltf_slice(&glb, &name, &folder) {

@@ -2,17 +2,17 @@
 //! file opens and traces like an in-memory bake, the split is reported, thread counts
 //! give the same bytes, and bad input gives one line, a non-zero exit and no file.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use common::build::{linear, placed, soup_prim, SceneBuilder};
 use glam::{Quat, Vec3};
 use subfield::format::{open_psf, scene_hash, OpenOptions};
 use subfield::gen::synth::{self, Rng};
 use subfield::import;
-use subfield::import::{
-    AnimationDesc, ChannelDesc, GltfBuilder, MeshDesc, NodeDesc, PrimitiveDesc,
-};
-use subfield::scene::{ClipSelection, Interpolation, Property};
+use subfield::scene::{Animation, ClipSelection, Mesh, Node, Property};
 use subfield::{Intersector, Psf, PsfParams, Ray};
 
 fn temp_dir(name: &str) -> PathBuf {
@@ -33,40 +33,37 @@ fn subfield(args: &[&str]) -> Output {
 
 /// A room (static, 1 instance) and a spinning box (dynamic, 1 instance).
 fn write_scene(path: &Path) {
-    let mut b = GltfBuilder::new();
-    let mesh = |tris: Vec<[Vec3; 3]>| MeshDesc {
-        primitives: vec![PrimitiveDesc {
-            positions: tris.into_iter().flatten().collect(),
-            ..Default::default()
-        }],
+    let mut b = SceneBuilder::new();
+    let material = b.scene.default_material_index();
+    let mesh = |tris: Vec<[Vec3; 3]>| Mesh {
+        primitives: vec![soup_prim(tris.into_iter().flatten().collect(), material)],
         ..Default::default()
     };
     let mut rng = Rng::new(3);
     let room = b.add_mesh(mesh(synth::room(&mut rng, 2_000)));
     let cube = b.add_mesh(mesh(synth::box_faces(Vec3::splat(-0.5), Vec3::splat(0.5))));
-    let n_room = b.add_node(NodeDesc {
+    let n_room = b.add_node(Node {
         mesh: Some(room),
         ..Default::default()
     });
-    let n_cube = b.add_node(NodeDesc {
+    let n_cube = b.add_node(Node {
         mesh: Some(cube),
-        translation: Vec3::new(0.0, 2.0, 0.0),
+        transform: placed(Vec3::new(0.0, 2.0, 0.0), Quat::IDENTITY),
         ..Default::default()
     });
     b.add_root(n_room);
     b.add_root(n_cube);
     let q = Quat::from_rotation_y(1.0);
-    b.add_animation(AnimationDesc {
+    b.add_animation(Animation {
         name: Some("spin".into()),
-        channels: vec![ChannelDesc {
-            node: n_cube,
-            property: Property::Rotation,
-            interpolation: Interpolation::Linear,
-            times: vec![0.0, 1.0],
-            values: [Quat::IDENTITY.to_array(), q.to_array()].concat(),
-        }],
+        channels: vec![linear(
+            n_cube,
+            Property::Rotation,
+            vec![0.0, 1.0],
+            [Quat::IDENTITY.to_array(), q.to_array()].concat(),
+        )],
     });
-    b.write(path).unwrap();
+    import::write_gltf(&b.finish(), path).unwrap();
 }
 
 #[test]

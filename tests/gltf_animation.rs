@@ -5,13 +5,13 @@
 
 mod common;
 
+use common::build::{soup_prim, targets, SceneBuilder};
 use common::{max_dist, RawGltf};
 use glam::{Mat4, Quat, Vec3};
 use subfield::import;
-use subfield::import::{
-    AnimationDesc, ChannelDesc, GltfBuilder, MeshDesc, NodeDesc, PrimitiveDesc,
+use subfield::scene::{
+    Animation, Channel, ClipSelection, Interpolation, Mesh, Node, Property, Scene, TriangleSoup,
 };
-use subfield::scene::{ClipSelection, Interpolation, Property, Scene, TriangleSoup};
 
 /// The library's posed vertices, recovered from its triangles through the file's own
 /// index list (each corner of triangle `t` is vertex `indices[3t + k]`).
@@ -287,39 +287,45 @@ fn cubic_spline_camera_and_light() {
     }
 }
 
-fn triangle_mesh() -> MeshDesc {
-    MeshDesc {
-        primitives: vec![PrimitiveDesc {
-            positions: vec![Vec3::X, Vec3::Y, Vec3::ZERO],
-            ..Default::default()
-        }],
+/// One triangle with the scene's default material (which `material` names).
+fn triangle_mesh(material: u32) -> Mesh {
+    Mesh {
+        primitives: vec![soup_prim(vec![Vec3::X, Vec3::Y, Vec3::ZERO], material)],
         ..Default::default()
     }
 }
 
-fn built(b: &GltfBuilder, name: &str) -> Scene {
+/// A builder whose scene has the default material, and its index.
+fn builder() -> (SceneBuilder, u32) {
+    let mut b = SceneBuilder::new();
+    let m = b.scene.default_material_index();
+    (b, m)
+}
+
+/// The scene written as `name` and imported again.
+fn built(b: SceneBuilder, name: &str) -> Scene {
     let dir = std::env::temp_dir().join(format!("subfield-anim-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join(name);
-    b.write(&path).unwrap();
+    import::write_gltf(&b.finish(), &path).unwrap();
     import::load(&path).unwrap()
 }
 
 /// A triangle translated by a CUBICSPLINE channel; expected positions by hand.
 #[test]
 fn cubic_spline_vertices_by_hand() {
-    let mut b = GltfBuilder::new();
-    let mesh = b.add_mesh(triangle_mesh());
-    let node = b.add_node(NodeDesc {
+    let (mut b, m) = builder();
+    let mesh = b.add_mesh(triangle_mesh(m));
+    let node = b.add_node(Node {
         mesh: Some(mesh),
         ..Default::default()
     });
     b.add_root(node);
     // key 0 at t=0: in (0,0,0), value (0,0,0), out (1,0,0)
     // key 1 at t=2: in (0,1,0), value (4,0,0), out (0,0,0)
-    b.add_animation(AnimationDesc {
+    b.add_animation(Animation {
         name: Some("spline".into()),
-        channels: vec![ChannelDesc {
+        channels: vec![Channel {
             node,
             property: Property::Translation,
             interpolation: Interpolation::CubicSpline,
@@ -329,7 +335,7 @@ fn cubic_spline_vertices_by_hand() {
             ],
         }],
     });
-    let scene = built(&b, "spline.glb");
+    let scene = built(b, "spline.glb");
     // t = 1: s = 1/2, td = 2; h00 = 1/2, h10 = 1/8, h01 = 1/2, h11 = -1/8:
     //   p = 1/8·2·(1,0,0) + 1/2·(4,0,0) − 1/8·2·(0,1,0) = (2.25, −0.25, 0)
     // t = 0.5: s = 1/4: h10 = 9/64, h01 = 5/32, h11 = −3/64:
@@ -357,16 +363,16 @@ fn cubic_spline_vertices_by_hand() {
 /// Two clips driving the same translation: all clips → the later wins; one clip → its own.
 #[test]
 fn later_clip_wins_and_selection() {
-    let mut b = GltfBuilder::new();
-    let mesh = b.add_mesh(triangle_mesh());
-    let node = b.add_node(NodeDesc {
+    let (mut b, m) = builder();
+    let mesh = b.add_mesh(triangle_mesh(m));
+    let node = b.add_node(Node {
         mesh: Some(mesh),
         ..Default::default()
     });
     b.add_root(node);
-    let clip = |name: &str, x: f32, end: f32| AnimationDesc {
+    let clip = |name: &str, x: f32, end: f32| Animation {
         name: Some(name.into()),
-        channels: vec![ChannelDesc {
+        channels: vec![Channel {
             node,
             property: Property::Translation,
             interpolation: Interpolation::Linear,
@@ -376,7 +382,7 @@ fn later_clip_wins_and_selection() {
     };
     b.add_animation(clip("first", 10.0, 1.0));
     b.add_animation(clip("second", -2.0, 4.0));
-    let scene = built(&b, "clips.gltf");
+    let scene = built(b, "clips.gltf");
     assert_eq!(scene.duration(ClipSelection::All), 4.0);
     assert_eq!(scene.duration(ClipSelection::One(0)), 1.0);
     let x_at = |sel, t| {
@@ -397,52 +403,51 @@ fn later_clip_wins_and_selection() {
 /// The split rules, each on its own node.
 #[test]
 fn split_rules() {
-    let mut b = GltfBuilder::new();
-    let tri = b.add_mesh(triangle_mesh());
-    let morph = b.add_mesh(MeshDesc {
-        primitives: vec![PrimitiveDesc {
-            positions: vec![Vec3::X, Vec3::Y, Vec3::ZERO],
-            morph_targets: vec![vec![Vec3::Z; 3]],
-            ..Default::default()
+    let (mut b, m) = builder();
+    let tri = b.add_mesh(triangle_mesh(m));
+    let morph = b.add_mesh(Mesh {
+        primitives: vec![subfield::scene::Primitive {
+            morph_targets: targets(vec![vec![Vec3::Z; 3]]),
+            ..soup_prim(vec![Vec3::X, Vec3::Y, Vec3::ZERO], m)
         }],
         weights: vec![0.5],
         ..Default::default()
     });
-    let still = b.add_node(NodeDesc {
+    let still = b.add_node(Node {
         mesh: Some(tri),
         ..Default::default()
     });
-    let constant = b.add_node(NodeDesc {
+    let constant = b.add_node(Node {
         mesh: Some(tri),
         ..Default::default()
     });
-    let child = b.add_node(NodeDesc {
+    let child = b.add_node(Node {
         mesh: Some(tri),
         ..Default::default()
     });
-    let mover = b.add_node(NodeDesc {
+    let mover = b.add_node(Node {
         children: vec![child],
         ..Default::default()
     });
-    let morphing = b.add_node(NodeDesc {
+    let morphing = b.add_node(Node {
         mesh: Some(morph),
         ..Default::default()
     });
-    let morph_still = b.add_node(NodeDesc {
+    let morph_still = b.add_node(Node {
         mesh: Some(morph),
         ..Default::default()
     });
     for n in [still, constant, mover, morphing, morph_still] {
         b.add_root(n);
     }
-    let ch = |node, property, values: Vec<f32>| ChannelDesc {
+    let ch = |node, property, values: Vec<f32>| Channel {
         node,
         property,
         interpolation: Interpolation::Linear,
         times: vec![0.0, 1.0],
         values,
     };
-    b.add_animation(AnimationDesc {
+    b.add_animation(Animation {
         name: None,
         channels: vec![
             ch(
@@ -455,10 +460,9 @@ fn split_rules() {
             ch(morph_still, Property::Weights, vec![0.25, 0.25]),
         ],
     });
-    let scene = built(&b, "split.glb");
+    let scene = built(b, "split.glb");
     let split = scene.split(ClipSelection::All);
-    let nodes =
-        |v: &[subfield::scene::Instance]| v.iter().map(|i| i.node as u32).collect::<Vec<_>>();
+    let nodes = |v: &[subfield::scene::Instance]| v.iter().map(|i| i.node).collect::<Vec<_>>();
     assert_eq!(
         nodes(&split.static_instances),
         vec![still, constant, morph_still]

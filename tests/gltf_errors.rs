@@ -6,15 +6,14 @@ mod common;
 use std::panic::AssertUnwindSafe;
 use std::path::{Path, PathBuf};
 
+use common::build::{linear, perspective, placed, targets, SceneBuilder};
 use glam::{Quat, Vec3};
 use serde_json::{json, Value};
 use subfield::import;
-use subfield::import::{
-    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, ImportError, MaterialDesc, MeshDesc,
-    NodeDesc, PrimitiveDesc,
-};
+use subfield::import::ImportError;
 use subfield::scene::{
-    ClipSelection, Interpolation, LightDef, LightKind, Property, Scene, TriangleSoup,
+    Animation, Channel, ClipSelection, Interpolation, LightDef, LightKind, Material, Mesh, Node,
+    Primitive, Property, Scene, TriangleSoup,
 };
 
 fn temp_dir(name: &str) -> PathBuf {
@@ -80,7 +79,7 @@ fn the_base_file_is_fine() {
 
 #[test]
 fn truncated_glb() {
-    let glb = sample_builder().to_glb().unwrap();
+    let glb = import::to_glb(&sample_scene()).unwrap();
     let dir = temp_dir("truncated");
     let path = dir.join("cut.glb");
     for cut in [glb.len() - 1, glb.len() / 2, 30, 13, 5] {
@@ -198,6 +197,25 @@ fn uri_leaving_the_folder_is_refused() {
     let mut j = json.clone();
     j["buffers"][0]["uri"] = json!("sub/../tri.bin");
     load_json(&path, &j).unwrap();
+    // A symbolic link out of the folder is refused (the policy AFF includes share), one
+    // to a file inside it followed.
+    #[cfg(unix)]
+    {
+        let folder = path.parent().unwrap();
+        std::os::unix::fs::symlink(&above, folder.join("out.bin")).unwrap();
+        std::os::unix::fs::symlink(folder.join("tri.bin"), folder.join("in.bin")).unwrap();
+        let mut j = json.clone();
+        j["buffers"][0]["uri"] = json!("out.bin");
+        let e = load_json(&path, &j).unwrap_err();
+        assert!(matches!(e, ImportError::UriOutsideFolder { .. }), "{e}");
+        assert_names(
+            &e,
+            &path,
+            &["buffers[0]", "out.bin", "leaves the scene's folder"],
+        );
+        j["buffers"][0]["uri"] = json!("in.bin");
+        load_json(&path, &j).unwrap();
+    }
 }
 
 #[test]
@@ -278,34 +296,29 @@ fn bad_json_and_unsupported_extensions() {
 }
 
 /// A scene using most of what the writer can express.
-fn sample_builder() -> GltfBuilder {
-    let mut b = GltfBuilder::new();
-    let mat = b.add_material(MaterialDesc {
+fn sample_scene() -> Scene {
+    let mut b = SceneBuilder::new();
+    let mat = b.add_material(Material {
         emissive: Vec3::new(2.0, 1.0, 0.0),
         transmission: 0.5,
         ior: 1.33,
-        ..Default::default()
+        metallic: 0.0,
+        ..Material::default()
     });
-    let mesh = b.add_mesh(MeshDesc {
+    let mesh = b.add_mesh(Mesh {
         name: Some("quad".into()),
-        primitives: vec![PrimitiveDesc {
+        primitives: vec![Primitive {
             positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE],
             normals: Some(vec![Vec3::Z; 4]),
             uvs: Some(vec![glam::Vec2::ZERO; 4]),
-            indices: Some(vec![0, 1, 2, 2, 1, 3]),
-            material: Some(mat),
-            morph_targets: vec![vec![Vec3::Z; 4]],
+            triangles: vec![[0, 1, 2], [2, 1, 3]],
+            material: mat,
+            morph_targets: targets(vec![vec![Vec3::Z; 4]]),
             ..Default::default()
         }],
         weights: vec![0.0],
     });
-    let cam = b.add_camera(CameraDesc {
-        name: Some("cam".into()),
-        yfov: 0.8,
-        aspect: None,
-        znear: 0.1,
-        zfar: None,
-    });
+    let cam = b.add_camera(perspective("cam", 0.8, None, 0.1, None));
     let light = b.add_light(LightDef {
         name: None,
         kind: LightKind::Spot {
@@ -316,33 +329,32 @@ fn sample_builder() -> GltfBuilder {
         intensity: 10.0,
         range: Some(5.0),
     });
-    let child = b.add_node(NodeDesc {
+    let child = b.add_node(Node {
         mesh: Some(mesh),
         ..Default::default()
     });
-    let root = b.add_node(NodeDesc {
+    let root = b.add_node(Node {
         children: vec![child],
-        rotation: Quat::from_rotation_y(0.3),
+        transform: placed(Vec3::ZERO, Quat::from_rotation_y(0.3)),
         ..Default::default()
     });
-    let c = b.add_node(NodeDesc {
+    let c = b.add_node(Node {
         camera: Some(cam),
         light: Some(light),
         ..Default::default()
     });
     b.add_root(root);
     b.add_root(c);
-    b.add_animation(AnimationDesc {
+    b.add_animation(Animation {
         name: Some("a".into()),
         channels: vec![
-            ChannelDesc {
-                node: root,
-                property: Property::Rotation,
-                interpolation: Interpolation::Linear,
-                times: vec![0.0, 1.0],
-                values: vec![0., 0., 0., 1., 0., 1., 0., 0.],
-            },
-            ChannelDesc {
+            linear(
+                root,
+                Property::Rotation,
+                vec![0.0, 1.0],
+                vec![0., 0., 0., 1., 0., 1., 0., 0.],
+            ),
+            Channel {
                 node: child,
                 property: Property::Weights,
                 interpolation: Interpolation::CubicSpline,
@@ -351,8 +363,8 @@ fn sample_builder() -> GltfBuilder {
             },
         ],
     });
-    b.fps = Some(30.0);
-    b
+    b.scene.fps = Some(30.0);
+    b.finish()
 }
 
 /// Tiny deterministic generator (xorshift64*), so a failure names its seed.
@@ -469,10 +481,13 @@ fn mutate_json(rng: &mut Rng, input: &[u8]) -> Option<Vec<u8>> {
 #[test]
 fn fuzz_mutated_files_never_panic() {
     let dir = temp_dir("fuzz");
-    let b = sample_builder();
+    let b = sample_scene();
     let mut corpus: Vec<(String, Vec<u8>)> = vec![
-        ("built.glb".into(), b.to_glb().unwrap()),
-        ("built.gltf".into(), b.to_gltf_json().unwrap().into_bytes()),
+        ("built.glb".into(), import::to_glb(&b).unwrap()),
+        (
+            "built.gltf".into(),
+            import::to_gltf_json(&b).unwrap().into_bytes(),
+        ),
     ];
     if let Some(shared) = common::shared_gltf() {
         for rel in [

@@ -382,40 +382,32 @@ fn rgb(chans: &[(String, Vec<f32>)], i: usize) -> Vec3 {
 
 #[test]
 fn shading_follows_the_model() {
-    use subfield::import::{GltfBuilder, MaterialDesc, MeshDesc, NodeDesc};
-    use subfield::scene::{LightDef, LightKind};
+    use common::build::{diffuse, placed, SceneBuilder};
+    use subfield::scene::{LightDef, LightKind, Material, Mesh, Node};
     let dir = temp_dir("shading");
     // A floor lit by a directional light straight down (E = 2 lux), a blocker casting
     // a shadow, a mirror facing the camera with a red emitter behind the camera.
-    let mut b = GltfBuilder::new();
-    let white = b.add_material(MaterialDesc {
-        base_color: Vec4::new(0.5, 0.5, 0.5, 1.0),
-        roughness: 1.0,
-        ..Default::default()
-    });
-    let mirror = b.add_material(MaterialDesc {
-        base_color: Vec4::ONE,
+    let mut b = SceneBuilder::new();
+    let unnamed = |m: Material| Material { name: None, ..m };
+    let white = b.add_material(unnamed(diffuse("", Vec4::new(0.5, 0.5, 0.5, 1.0), 1.0)));
+    let mirror = b.add_material(unnamed(Material {
         metallic: 1.0,
-        roughness: 0.0,
-        ..Default::default()
-    });
-    let glass = b.add_material(MaterialDesc {
-        base_color: Vec4::ONE,
-        roughness: 0.0,
+        ..diffuse("", Vec4::ONE, 0.0)
+    }));
+    let glass = b.add_material(unnamed(Material {
         transmission: 1.0,
         ior: 1.5,
-        ..Default::default()
-    });
+        ..diffuse("", Vec4::ONE, 0.0)
+    }));
     let mut slab = render_scene::cube(Vec3::new(1.0, 0.1, 1.0), glass);
     for p in &mut slab.positions {
         *p += Vec3::new(8.0, 0.5, 0.0);
     }
-    let red = b.add_material(MaterialDesc {
-        base_color: Vec4::new(0.0, 0.0, 0.0, 1.0),
+    let red = b.add_material(unnamed(Material {
         emissive: Vec3::new(1.0, 0.0, 0.0),
-        ..Default::default()
-    });
-    let mesh = b.add_mesh(MeshDesc {
+        ..diffuse("", Vec4::new(0.0, 0.0, 0.0, 1.0), 1.0)
+    }));
+    let mesh = b.add_mesh(Mesh {
         primitives: vec![
             render_scene::quad(Vec3::ZERO, Vec3::Z * 10.0, Vec3::X * 10.0, white),
             // Blocker: a horizontal square at y = 1 over x in [4, 6] (its shadow falls straight down).
@@ -441,19 +433,22 @@ fn shading_follows_the_model() {
         intensity: 2.0,
         range: None,
     });
-    let n = b.add_node(NodeDesc {
+    let n = b.add_node(Node {
         mesh: Some(mesh),
         ..Default::default()
     });
-    let l = b.add_node(NodeDesc {
+    let l = b.add_node(Node {
         light: Some(sun),
-        rotation: glam::Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2),
+        transform: placed(
+            Vec3::ZERO,
+            glam::Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2),
+        ),
         ..Default::default()
     });
     b.add_root(n);
     b.add_root(l);
     let path = dir.join("s.glb");
-    b.write(&path).unwrap();
+    import::write_gltf(&b.finish(), &path).unwrap();
     let scene = import::load(&path).unwrap();
     let ambient = 0.05;
     let down = |x: f32| render::LookAt {

@@ -8,14 +8,13 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use common::build::{diffuse, linear, mesh, perspective, placed, SceneBuilder};
 use common::render_scene::{quad, temp_dir};
 use glam::{Quat, Vec2, Vec3, Vec4};
 use serde_json::Value;
-use subfield::import::{
-    self, AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, MaterialDesc, MeshDesc, NodeDesc,
-};
+use subfield::import;
 use subfield::render::{self, Aovs, FrameRange, RenderOptions};
-use subfield::scene::{ClipSelection, Interpolation, Property, Scene, TriangleSoup};
+use subfield::scene::{Animation, ClipSelection, Node, Property, Scene, TriangleSoup};
 use subfield::{BruteForce, Intersector, Ray};
 
 const W: usize = 64;
@@ -30,44 +29,24 @@ const CAMERA_AT: Vec3 = Vec3::new(0.0, 0.0, 5.0);
 /// quad ("still", right) at z = 0, seen by a camera at (0, 0, 5) looking down −Z that
 /// may slide along +X too.
 fn scene(dir: &Path, slider_moves: bool, camera_moves: bool) -> PathBuf {
-    let mut b = GltfBuilder::new();
-    let mat = |b: &mut GltfBuilder, name: &str, c: Vec4| {
-        b.add_material(MaterialDesc {
-            name: Some(name.into()),
-            base_color: c,
-            roughness: 0.9,
-            metallic: 0.0,
-            ..Default::default()
-        })
+    let mut b = SceneBuilder::new();
+    let wall = b.add_material(diffuse("wall", Vec4::new(0.5, 0.5, 0.5, 1.0), 0.9));
+    let paint = b.add_material(diffuse("paint", Vec4::new(0.8, 0.2, 0.1, 1.0), 0.9));
+    let blue = b.add_material(diffuse("blue paint", Vec4::new(0.1, 0.2, 0.8, 1.0), 0.9));
+    let square = |name: &str, centre: Vec3, half: f32, m: u32| {
+        mesh(name, vec![quad(centre, Vec3::X * half, Vec3::Y * half, m)])
     };
-    let wall = mat(&mut b, "wall", Vec4::new(0.5, 0.5, 0.5, 1.0));
-    let paint = mat(&mut b, "paint", Vec4::new(0.8, 0.2, 0.1, 1.0));
-    let blue = mat(&mut b, "blue paint", Vec4::new(0.1, 0.2, 0.8, 1.0));
-    let mesh = |b: &mut GltfBuilder, name: &str, centre: Vec3, half: f32, m: u32| {
-        b.add_mesh(MeshDesc {
-            name: Some(name.into()),
-            primitives: vec![quad(centre, Vec3::X * half, Vec3::Y * half, m)],
-            weights: vec![],
-        })
-    };
-    let back = mesh(&mut b, "back", Vec3::new(0.0, 0.0, -2.0), 10.0, wall);
-    let left = mesh(&mut b, "left", Vec3::new(-1.0, 0.0, 0.0), 0.5, paint);
-    let right = mesh(&mut b, "right", Vec3::new(1.0, 0.0, 0.0), 0.5, blue);
-    let cam = b.add_camera(CameraDesc {
-        name: Some("cam".into()),
-        yfov: YFOV,
-        aspect: None,
-        znear: 0.1,
-        zfar: None,
-    });
+    let back = b.add_mesh(square("back", Vec3::new(0.0, 0.0, -2.0), 10.0, wall));
+    let left = b.add_mesh(square("left", Vec3::new(-1.0, 0.0, 0.0), 0.5, paint));
+    let right = b.add_mesh(square("right", Vec3::new(1.0, 0.0, 0.0), 0.5, blue));
+    let cam = b.add_camera(perspective("cam", YFOV, None, 0.1, None));
     let node =
-        |b: &mut GltfBuilder, name: &str, mesh: Option<u32>, camera: Option<u32>, at: Vec3| {
-            let n = b.add_node(NodeDesc {
+        |b: &mut SceneBuilder, name: &str, mesh: Option<usize>, camera: Option<usize>, at: Vec3| {
+            let n = b.add_node(Node {
                 name: Some(name.into()),
                 mesh,
                 camera,
-                translation: at,
-                rotation: Quat::IDENTITY,
+                transform: placed(at, Quat::IDENTITY),
                 ..Default::default()
             });
             b.add_root(n);
@@ -77,12 +56,13 @@ fn scene(dir: &Path, slider_moves: bool, camera_moves: bool) -> PathBuf {
     let slider = node(&mut b, "slider", Some(left), None, Vec3::ZERO);
     node(&mut b, "still", Some(right), None, Vec3::ZERO);
     let camera = node(&mut b, "camera", None, Some(cam), CAMERA_AT);
-    let slide = |node: u32, from: Vec3| ChannelDesc {
-        node,
-        property: Property::Translation,
-        interpolation: Interpolation::Linear,
-        times: vec![0.0, 1.0],
-        values: [from.to_array(), (from + Vec3::X * SPEED).to_array()].concat(),
+    let slide = |node: usize, from: Vec3| {
+        linear(
+            node,
+            Property::Translation,
+            vec![0.0, 1.0],
+            [from.to_array(), (from + Vec3::X * SPEED).to_array()].concat(),
+        )
     };
     let mut channels = Vec::new();
     if slider_moves {
@@ -92,14 +72,14 @@ fn scene(dir: &Path, slider_moves: bool, camera_moves: bool) -> PathBuf {
         channels.push(slide(camera, CAMERA_AT));
     }
     if !channels.is_empty() {
-        b.add_animation(AnimationDesc {
+        b.add_animation(Animation {
             name: Some("slide".into()),
             channels,
         });
     }
-    b.fps = Some(FPS);
+    b.scene.fps = Some(FPS);
     let p = dir.join("scene.glb");
-    b.write(&p).unwrap();
+    import::write_gltf(&b.finish(), &p).unwrap();
     p
 }
 

@@ -409,10 +409,11 @@ fn stats_plot_and_the_default_range() {
         .starts_with(b"\x89PNG"));
 
     // A file baked from another static scene is refused.
-    let mut other = render_scene::builder();
-    other.nodes[0].translation = glam::Vec3::new(0.0, 0.1, 0.0);
+    let mut other = render_scene::scene();
+    other.nodes[0].transform =
+        common::build::placed(glam::Vec3::new(0.0, 0.1, 0.0), glam::Quat::IDENTITY);
     let other_path = dir.join("other.glb");
-    other.write(&other_path).unwrap();
+    subfield::import::write_gltf(&other, &other_path).unwrap();
     let o = subfield(&[
         "render",
         s(&other_path),
@@ -631,7 +632,7 @@ fn frames_past_the_end_warn_once() {
 fn cameras_by_index_and_not_with_look_from() {
     let dir = temp_dir("camera_index");
     // The test scene with its cameras and their nodes unnamed.
-    let mut b = render_scene::builder();
+    let mut b = render_scene::scene();
     for c in &mut b.cameras {
         c.name = None;
     }
@@ -639,7 +640,7 @@ fn cameras_by_index_and_not_with_look_from() {
         n.name = None;
     }
     let scene = dir.join("unnamed.glb");
-    b.write(&scene).unwrap();
+    subfield::import::write_gltf(&b, &scene).unwrap();
     let render = |camera: &str| {
         let out = dir.join(format!("c{camera}.exr"));
         ok(&[

@@ -1,5 +1,6 @@
 //! `subfield convert INPUT.aff -o OUTPUT.glb|.gltf`: a BART AFF / NFF scene to glTF 2.0,
-//! keyframes included (see `subfield::import::aff` for the mapping), written atomically.
+//! keyframes included: parsed, mapped onto the one `Scene` model (see
+//! `subfield::import::aff` for the mapping) and written by the glTF writer, atomically.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -44,30 +45,30 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         );
     }
     super::prepare_output(&a.output)?;
-    let scene = AffScene::load(&a.input)?;
+    let aff = AffScene::load(&a.input)?;
     if !a.quiet {
-        for w in &scene.warnings {
+        for w in &aff.warnings {
             eprintln!("warning: {w}");
         }
     }
-    let gltf = scene
-        .to_gltf()
+    let scene = aff
+        .to_scene()
         .with_context(|| format!("cannot convert {}", a.input.display()))?;
-    gltf.write(&a.output)
+    subfield::import::write_gltf(&scene, &a.output)
         .with_context(|| format!("cannot write {}", a.output.display()))?;
     if !a.quiet {
-        let frames = scene.frame_times().len();
-        let fps = gltf
+        let frames = aff.frame_times().len();
+        let fps = scene
             .fps
             .map_or("no animation".to_string(), |f| format!("{f} fps"));
         eprintln!(
             "wrote {}: {} ({} animated), {}, {}, {}, {} ({fps})",
             a.output.display(),
-            subfield::plural(scene.triangle_count() as u64, "triangle"),
-            scene.animated_triangle_count(),
-            subfield::plural(gltf.materials.len() as u64, "material"),
-            subfield::plural(gltf.textures.len() as u64, "texture"),
-            subfield::plural(scene.lights.len() as u64, "light"),
+            subfield::plural(aff.triangle_count() as u64, "triangle"),
+            aff.animated_triangle_count(),
+            subfield::plural(scene.materials.len() as u64, "material"),
+            subfield::plural(scene.textures.len() as u64, "texture"),
+            subfield::plural(aff.lights.len() as u64, "light"),
             subfield::plural(frames as u64, "frame"),
         );
     }

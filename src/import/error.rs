@@ -146,9 +146,23 @@ pub enum ImportError {
         reason: String,
     },
 
-    /// The scene is fine as AFF but cannot be written as glTF (too large, degenerate time
-    /// range...).
-    #[error("{path}: cannot convert to glTF: {reason}")]
+    /// An AFF include or texture name that would leave the scene's folder (an absolute
+    /// path, `..` above it, a symbolic link out; the policy of glTF URIs): refused, never
+    /// opened.
+    #[error("{path}:{line}: {what} {name:?} leaves the scene's folder {folder} ({why}); refused")]
+    OutsideFolder {
+        path: PathBuf,
+        line: u32,
+        /// `"include"` or `"texture"`.
+        what: &'static str,
+        name: String,
+        folder: PathBuf,
+        why: super::Outside,
+    },
+
+    /// The scene is fine as AFF but the model (and so glTF) cannot hold it: a time range
+    /// too short for its frames in single precision.
+    #[error("{path}: cannot map onto the scene model: {reason}")]
     Convert { path: PathBuf, reason: String },
 
     /// The glTF writer could not write its output.

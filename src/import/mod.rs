@@ -1,24 +1,30 @@
-//! The import layer: scene files in, the one [`Scene`] model out; and the glTF writer.
+//! The import layer: scene files in, the one [`Scene`] model out; and the glTF writer,
+//! the model out again.
 //!
 //! * [`load`]: one entry for every format we read, chosen by extension (any case):
 //!   `.aff` / `.nff` go through the BART reader ([`aff`]), everything else through the
-//!   glTF 2.0 reader (`.gltf` with external or data-URI buffers, `.glb`).
+//!   glTF 2.0 reader (`.gltf` with external or data-URI buffers, `.glb`). Each reader
+//!   produces a [`Scene`] on its own; neither goes through the other.
 //! * [`from_gltf_slice`]: glTF or GLB bytes already in memory.
 //! * [`validate`]: the border check every importer runs before handing a scene out; past
 //!   it the rest of the crate relies on the invariants it checks (every index in range,
 //!   every float finite, the node hierarchy a forest).
-//! * [`GltfBuilder`] and the `*Desc` types: a glTF writer for scenes built in code (the
-//!   `convert` command, the generators in `crate::gen`, tests).
+//! * [`write_gltf`], [`to_glb`], [`to_gltf_json`]: a [`Scene`] written as glTF 2.0 (the
+//!   `convert` command, the generators in `crate::gen`, tests that build scenes in code).
+//! * Files a scene names beside itself (glTF URIs, AFF includes and textures) follow one
+//!   policy: inside the scene's folder, or refused ([`Outside`]).
 //!
 //! Every failure is an [`ImportError`] naming the file and the accessor, node, URI or line.
 //!
-//! Layering: `import` uses `scene` (the model it fills); `scene` never uses `import`. The
-//! AFF reader builds its glTF document with the writer and imports it with the glTF reader
-//! (both here), so `bake`, `render` and a file written by `subfield convert` see the same
-//! scene by construction.
+//! Layering: `import` uses `scene` (the model it fills and writes); `scene` never uses
+//! `import`. The readers do not use the writer: `subfield convert` is AFF → `Scene` →
+//! glTF, and the AFF reader builds the model as the glTF reader builds it from the
+//! converted file, so `bake`, `render` and a converted file see the same scene
+//! (`tests/aff_bart.rs` checks it at several frames).
 
 pub mod aff;
 mod error;
+mod folder;
 mod gltf_read;
 mod gltf_write;
 mod validate;
@@ -26,10 +32,8 @@ mod validate;
 use std::path::Path;
 
 pub use error::ImportError;
-pub use gltf_write::{
-    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, ImageDesc, MaterialDesc, MeshDesc,
-    NodeDesc, PrimitiveDesc, TextureDesc,
-};
+pub use folder::Outside;
+pub use gltf_write::{to_glb, to_gltf_json, write_gltf};
 pub use validate::validate;
 
 use crate::scene::Scene;
@@ -42,9 +46,8 @@ use crate::scene::Scene;
 /// emissive strength, transmission, ior), textures decoded to RGBA8, cameras,
 /// `KHR_lights_punctual` lights, animation clips and `extras.fps`.
 ///
-/// A BART `.aff` or `.nff` file is parsed and converted to glTF in memory first
-/// ([`aff::load_scene`]), so it imports exactly as the file `subfield convert` writes
-/// would.
+/// A BART `.aff` or `.nff` file is parsed and mapped onto the model
+/// ([`aff::load_scene`]), as the file `subfield convert` writes would import.
 pub fn load(path: &Path) -> Result<Scene, ImportError> {
     let is_aff = path
         .extension()

@@ -55,7 +55,21 @@ pub struct Scene {
     pub animations: Vec<Animation>,
     /// Frames per second recorded by the scene (`scenes[i].extras.fps` in glTF).
     pub fps: Option<f32>,
+    /// Application data carried beside the model, which the glTF writer passes on.
+    pub extras: Extras,
     pub warnings: Vec<Warning>,
+}
+
+/// Application data a scene carries beside the model (glTF `extras`): nothing here changes
+/// the picture. The AFF reader keeps the AFF numbers glTF has no place for here; the glTF
+/// writer writes them back out.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Extras {
+    /// Members of the scene's `extras` besides `fps` (which is [`Scene::fps`]).
+    pub scene: serde_json::Map<String, serde_json::Value>,
+    /// A material's `extras` (a JSON object), by material index; missing entries and
+    /// `None` mean none.
+    pub materials: Vec<Option<serde_json::Value>>,
 }
 
 /// A mesh: primitives drawn together, and the default weights of its morph targets.
@@ -466,6 +480,22 @@ impl Scene {
             ..Material::default()
         });
         (self.materials.len() - 1) as u32
+    }
+
+    /// Sets every node's `parent` from the `children` lists (for scenes built in code,
+    /// which list children and leave parents to this).
+    pub fn link_parents(&mut self) {
+        for n in &mut self.nodes {
+            n.parent = None;
+        }
+        for p in 0..self.nodes.len() {
+            for k in 0..self.nodes[p].children.len() {
+                let c = self.nodes[p].children[k];
+                if let Some(child) = self.nodes.get_mut(c) {
+                    child.parent = Some(p);
+                }
+            }
+        }
     }
 
     /// Names of the clips, as `"INDEX: NAME"` (for messages and `--animation` help).

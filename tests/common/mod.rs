@@ -4,6 +4,7 @@
 //! out expected values without calling the code under test.
 #![allow(dead_code)]
 
+pub mod build;
 pub mod farm;
 pub mod render_scene;
 pub mod reseal;
@@ -60,6 +61,36 @@ pub fn shared_scene(rel: impl AsRef<Path>) -> Option<PathBuf> {
         "SKIPPED: {test}: {shown} missing (third-party scenes; see docs/TESTING.md)"
     );
     None
+}
+
+/// Validates `file` with the Khronos glTF validator (`.ci/node_modules/gltf-validator`,
+/// installed by `.ci/run` or `npm install --prefix .ci`); returns (errors, warnings, the
+/// report line). A missing validator fails the test, naming the install command: a file
+/// that is never validated must not pass silently.
+pub fn khronos_validate(file: &Path) -> (u64, u64, String) {
+    let ci = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci");
+    assert!(
+        ci.join("node_modules/gltf-validator").is_dir(),
+        "the Khronos glTF validator is not installed: run `npm install --prefix .ci` \
+         (or .ci/run, which does it)"
+    );
+    let out = std::process::Command::new("node")
+        .arg(ci.join("gltf-validate.js"))
+        .arg(file)
+        .output()
+        .expect("node must be installed to run the glTF validator");
+    let line = String::from_utf8_lossy(&out.stdout).trim().to_string();
+    let v: Value = serde_json::from_str(&line).unwrap_or_else(|e| {
+        panic!(
+            "validator output {line:?} ({e}); stderr {}",
+            String::from_utf8_lossy(&out.stderr)
+        )
+    });
+    (
+        v["errors"].as_u64().unwrap(),
+        v["warnings"].as_u64().unwrap(),
+        line,
+    )
 }
 
 /// `../shared/scenes/gltf`, the Khronos sample models (see [`shared_scene`]).

@@ -1,16 +1,14 @@
 //! A small scene built in code for the renderer's tests: a floor, a mirror, a glass
 //! cube (static), a cube that moves and turns (dynamic), an animated camera, a point
-//! light and a directional light. Written as .glb with `GltfBuilder`.
+//! light and a directional light, as a `Scene` (see `build`), written as .glb.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 
 use glam::{Quat, Vec3, Vec4};
-use subfield::import::{
-    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, MaterialDesc, MeshDesc, NodeDesc,
-    PrimitiveDesc,
-};
-use subfield::scene::{Interpolation, LightDef, LightKind, Property};
+use subfield::scene::{Animation, LightDef, LightKind, Material, Node, Primitive, Property, Scene};
+
+use super::build::{diffuse, linear, mesh, perspective, placed, tris, SceneBuilder};
 
 /// A fresh, empty folder under the system temp dir for one test.
 pub fn temp_dir(name: &str) -> PathBuf {
@@ -24,7 +22,7 @@ pub fn temp_dir(name: &str) -> PathBuf {
 
 /// An axis-aligned box of half size `h` around the origin: 24 vertices with face
 /// normals, 36 indices.
-pub fn cube(h: Vec3, material: u32) -> PrimitiveDesc {
+pub fn cube(h: Vec3, material: u32) -> Primitive {
     let mut positions = Vec::new();
     let mut normals = Vec::new();
     let mut indices = Vec::new();
@@ -42,22 +40,20 @@ pub fn cube(h: Vec3, material: u32) -> PrimitiveDesc {
             indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
         }
     }
-    PrimitiveDesc {
+    Primitive {
         positions,
         normals: Some(normals),
-        uvs: None,
-        indices: Some(indices),
-        material: Some(material),
-        morph_targets: vec![],
-        morph_normals: vec![],
+        triangles: tris(&indices),
+        material,
+        ..Primitive::default()
     }
 }
 
 /// A rectangle in the plane through `centre` spanned by `a` and `b` (half extents),
 /// facing `a × b`.
-pub fn quad(centre: Vec3, a: Vec3, b: Vec3, material: u32) -> PrimitiveDesc {
+pub fn quad(centre: Vec3, a: Vec3, b: Vec3, material: u32) -> Primitive {
     let n = a.cross(b).normalize();
-    PrimitiveDesc {
+    Primitive {
         positions: vec![
             centre - a - b,
             centre + a - b,
@@ -71,52 +67,34 @@ pub fn quad(centre: Vec3, a: Vec3, b: Vec3, material: u32) -> PrimitiveDesc {
             glam::Vec2::new(1.0, 1.0),
             glam::Vec2::new(0.0, 1.0),
         ]),
-        indices: Some(vec![0, 1, 2, 0, 2, 3]),
-        material: Some(material),
-        morph_targets: vec![],
-        morph_normals: vec![],
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+        material,
+        ..Primitive::default()
     }
 }
 
 /// The test scene (1 s of animation, 24 fps recorded in `extras.fps`).
-pub fn builder() -> GltfBuilder {
-    let mut b = GltfBuilder::new();
-    let grey = b.add_material(MaterialDesc {
-        name: Some("floor".into()),
-        base_color: Vec4::new(0.7, 0.7, 0.7, 1.0),
-        roughness: 0.8,
-        ..Default::default()
-    });
-    let mirror = b.add_material(MaterialDesc {
-        name: Some("mirror".into()),
-        base_color: Vec4::new(0.9, 0.9, 0.9, 1.0),
+pub fn scene() -> Scene {
+    let mut b = SceneBuilder::new();
+    let grey = b.add_material(diffuse("floor", Vec4::new(0.7, 0.7, 0.7, 1.0), 0.8));
+    let mirror = b.add_material(Material {
         metallic: 1.0,
-        roughness: 0.0,
-        ..Default::default()
+        ..diffuse("mirror", Vec4::new(0.9, 0.9, 0.9, 1.0), 0.0)
     });
-    let glass = b.add_material(MaterialDesc {
-        name: Some("glass".into()),
-        base_color: Vec4::ONE,
-        roughness: 0.0,
+    let glass = b.add_material(Material {
         transmission: 1.0,
         ior: 1.5,
         double_sided: true,
-        ..Default::default()
+        ..diffuse("glass", Vec4::ONE, 0.0)
     });
-    let red = b.add_material(MaterialDesc {
-        name: Some("red".into()),
-        base_color: Vec4::new(0.8, 0.1, 0.1, 1.0),
-        roughness: 0.4,
-        ..Default::default()
-    });
-    let lamp = b.add_material(MaterialDesc {
-        name: Some("lamp".into()),
+    let red = b.add_material(diffuse("red", Vec4::new(0.8, 0.1, 0.1, 1.0), 0.4));
+    let lamp = b.add_material(Material {
         emissive: Vec3::new(1.0, 0.9, 0.6),
-        ..Default::default()
+        ..diffuse("lamp", Vec4::ONE, 1.0)
     });
-    let statics = b.add_mesh(MeshDesc {
-        name: Some("room".into()),
-        primitives: vec![
+    let statics = b.add_mesh(mesh(
+        "room",
+        vec![
             quad(Vec3::ZERO, Vec3::Z * 5.0, Vec3::X * 5.0, grey),
             quad(
                 Vec3::new(0.0, 1.5, -2.5),
@@ -131,32 +109,11 @@ pub fn builder() -> GltfBuilder {
                 lamp,
             ),
         ],
-        weights: vec![],
-    });
-    let glass_cube = b.add_mesh(MeshDesc {
-        name: Some("glass".into()),
-        primitives: vec![cube(Vec3::splat(0.5), glass)],
-        weights: vec![],
-    });
-    let red_cube = b.add_mesh(MeshDesc {
-        name: Some("mover".into()),
-        primitives: vec![cube(Vec3::new(0.4, 0.4, 0.4), red)],
-        weights: vec![],
-    });
-    let cam = b.add_camera(CameraDesc {
-        name: Some("main".into()),
-        yfov: 0.8,
-        aspect: None,
-        znear: 0.1,
-        zfar: None,
-    });
-    let side = b.add_camera(CameraDesc {
-        name: Some("side".into()),
-        yfov: 1.0,
-        aspect: Some(1.0),
-        znear: 0.1,
-        zfar: None,
-    });
+    ));
+    let glass_cube = b.add_mesh(mesh("glass", vec![cube(Vec3::splat(0.5), glass)]));
+    let red_cube = b.add_mesh(mesh("mover", vec![cube(Vec3::new(0.4, 0.4, 0.4), red)]));
+    let cam = b.add_camera(perspective("main", 0.8, None, 0.1, None));
+    let side = b.add_camera(perspective("side", 1.0, Some(1.0), 0.1, None));
     let point = b.add_light(LightDef {
         name: Some("bulb".into()),
         kind: LightKind::Point,
@@ -171,90 +128,94 @@ pub fn builder() -> GltfBuilder {
         intensity: 1.5,
         range: None,
     });
-    let room = b.add_node(NodeDesc {
+    let room = b.add_node(Node {
         name: Some("room".into()),
         mesh: Some(statics),
         ..Default::default()
     });
-    let glass_node = b.add_node(NodeDesc {
+    let glass_node = b.add_node(Node {
         name: Some("glass".into()),
         mesh: Some(glass_cube),
-        translation: Vec3::new(-1.5, 0.5, 0.0),
+        transform: placed(Vec3::new(-1.5, 0.5, 0.0), Quat::IDENTITY),
         ..Default::default()
     });
-    let mover = b.add_node(NodeDesc {
+    let mover = b.add_node(Node {
         name: Some("mover".into()),
         mesh: Some(red_cube),
-        translation: Vec3::new(1.0, 0.4, 0.5),
+        transform: placed(Vec3::new(1.0, 0.4, 0.5), Quat::IDENTITY),
         ..Default::default()
     });
-    let camera = b.add_node(NodeDesc {
+    let camera = b.add_node(Node {
         name: Some("camera".into()),
         camera: Some(cam),
-        translation: Vec3::new(0.0, 2.0, 6.0),
-        rotation: Quat::from_rotation_x(-(2.0f32 / 6.0).atan()),
+        transform: placed(
+            Vec3::new(0.0, 2.0, 6.0),
+            Quat::from_rotation_x(-(2.0f32 / 6.0).atan()),
+        ),
         ..Default::default()
     });
-    let side_cam = b.add_node(NodeDesc {
+    let side_cam = b.add_node(Node {
         name: Some("side camera".into()),
         camera: Some(side),
-        translation: Vec3::new(6.0, 1.5, 0.0),
-        rotation: Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
+        transform: placed(
+            Vec3::new(6.0, 1.5, 0.0),
+            Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
+        ),
         ..Default::default()
     });
-    let bulb = b.add_node(NodeDesc {
+    let bulb = b.add_node(Node {
         name: Some("bulb".into()),
         light: Some(point),
-        translation: Vec3::new(2.0, 4.0, 3.0),
+        transform: placed(Vec3::new(2.0, 4.0, 3.0), Quat::IDENTITY),
         ..Default::default()
     });
-    let sun_node = b.add_node(NodeDesc {
+    let sun_node = b.add_node(Node {
         name: Some("sun".into()),
         light: Some(sun),
-        rotation: Quat::from_rotation_x(-1.0) * Quat::from_rotation_y(0.5),
+        transform: placed(
+            Vec3::ZERO,
+            Quat::from_rotation_x(-1.0) * Quat::from_rotation_y(0.5),
+        ),
         ..Default::default()
     });
     for n in [room, glass_node, mover, camera, side_cam, bulb, sun_node] {
         b.add_root(n);
     }
-    b.add_animation(AnimationDesc {
+    b.add_animation(Animation {
         name: Some("move".into()),
         channels: vec![
-            ChannelDesc {
-                node: mover,
-                property: Property::Translation,
-                interpolation: Interpolation::Linear,
-                times: vec![0.0, 1.0],
-                values: vec![1.0, 0.4, 0.5, 0.0, 1.2, 1.0],
-            },
-            ChannelDesc {
-                node: mover,
-                property: Property::Rotation,
-                interpolation: Interpolation::Linear,
-                times: vec![0.0, 1.0],
-                values: [
+            linear(
+                mover,
+                Property::Translation,
+                vec![0.0, 1.0],
+                vec![1.0, 0.4, 0.5, 0.0, 1.2, 1.0],
+            ),
+            linear(
+                mover,
+                Property::Rotation,
+                vec![0.0, 1.0],
+                [
                     Quat::IDENTITY.to_array(),
                     Quat::from_rotation_y(1.5).to_array(),
                 ]
                 .concat(),
-            },
-            ChannelDesc {
-                node: camera,
-                property: Property::Translation,
-                interpolation: Interpolation::Linear,
-                times: vec![0.0, 1.0],
-                values: vec![0.0, 2.0, 6.0, 0.8, 2.2, 5.5],
-            },
+            ),
+            linear(
+                camera,
+                Property::Translation,
+                vec![0.0, 1.0],
+                vec![0.0, 2.0, 6.0, 0.8, 2.2, 5.5],
+            ),
         ],
     });
-    b.fps = Some(24.0);
-    b
+    b.scene.fps = Some(24.0);
+    b.finish()
 }
 
 /// Writes the test scene as `dir/scene.glb`.
 pub fn write_scene(dir: &Path) -> PathBuf {
     let p = dir.join("scene.glb");
-    builder().write(&p).unwrap();
+    subfield::import::write_gltf(&scene(), &p).unwrap();
     p
 }
 

@@ -82,13 +82,17 @@ impl Part {
         self.indices.len() / 3
     }
 
-    pub(super) fn primitive(self, material: u32) -> PrimitiveDesc {
-        PrimitiveDesc {
+    pub(super) fn primitive(self, material: u32) -> Primitive {
+        Primitive {
             normals: (!self.normals.is_empty()).then_some(self.normals),
             positions: self.positions,
-            indices: Some(self.indices),
-            material: Some(material),
-            ..PrimitiveDesc::default()
+            triangles: self
+                .indices
+                .chunks_exact(3)
+                .map(|t| [t[0], t[1], t[2]])
+                .collect(),
+            material,
+            ..Primitive::default()
         }
     }
 }
@@ -202,7 +206,7 @@ pub(super) fn torus(segments: usize) -> Part {
 
 /// A framed picture in its local frame: canvas `w × h` centred on the origin facing +Z,
 /// a gold frame 0.12 wide and 0.08 deep behind it against the wall (z = 0).
-pub(super) fn framed(w: f32, h: f32, canvas_material: u32, gold: u32) -> MeshDesc {
+pub(super) fn framed(w: f32, h: f32, canvas_material: u32, gold: u32) -> Mesh {
     let (hw, hh, bar, depth) = (w / 2.0, h / 2.0, 0.12, 0.08);
     let mut frame = Part::default();
     frame.cuboid(
@@ -217,25 +221,41 @@ pub(super) fn framed(w: f32, h: f32, canvas_material: u32, gold: u32) -> MeshDes
     frame.cuboid(Vec3::new(hw, -hh, 0.0), Vec3::new(hw + bar, hh, depth));
     let mut canvas = Part::default();
     canvas.grid(Vec3::new(-hw, -hh, 0.03), Vec3::X * w, Vec3::Y * h, 1, 1);
-    MeshDesc {
+    Mesh {
         name: None,
         primitives: vec![frame.primitive(gold), canvas.primitive(canvas_material)],
         weights: Vec::new(),
     }
 }
 
-pub(super) fn node(name: &str, mesh: u32, translation: Vec3, rotation: Quat) -> NodeDesc {
-    NodeDesc {
-        name: Some(name.to_string()),
-        mesh: Some(mesh),
+/// A rest transform: `translation` and `rotation`, unit scale.
+pub(super) fn placed(translation: Vec3, rotation: Quat) -> NodeTransform {
+    NodeTransform::Trs(Trs {
         translation,
         rotation,
-        ..NodeDesc::default()
+        scale: Vec3::ONE,
+    })
+}
+
+pub(super) fn node(name: &str, mesh: usize, translation: Vec3, rotation: Quat) -> Node {
+    Node {
+        name: Some(name.to_string()),
+        mesh: Some(mesh),
+        transform: placed(translation, rotation),
+        ..Node::default()
     }
 }
 
-pub(super) fn add_root(b: &mut GltfBuilder, n: NodeDesc) -> u32 {
-    let i = b.add_node(n);
-    b.add_root(i);
+/// Adds `n` to the scene's nodes and roots; returns its index.
+pub(super) fn add_root(b: &mut Scene, n: Node) -> usize {
+    b.nodes.push(n);
+    let i = b.nodes.len() - 1;
+    b.roots.push(i);
     i
+}
+
+/// Adds `m` to the scene's meshes; returns its index.
+pub(super) fn add_mesh(b: &mut Scene, m: Mesh) -> usize {
+    b.meshes.push(m);
+    b.meshes.len() - 1
 }

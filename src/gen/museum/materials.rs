@@ -1,4 +1,4 @@
-//! The museum's materials (added to the builder once, referred to by index).
+//! The museum's materials (added to the scene once, referred to by index).
 
 use super::*;
 
@@ -19,16 +19,24 @@ pub(super) struct Materials {
     pub(super) chips: [u32; 4],
 }
 
+fn add_material(b: &mut Scene, m: Material) -> u32 {
+    b.materials.push(m);
+    (b.materials.len() - 1) as u32
+}
+
 impl Materials {
-    pub(super) fn add(b: &mut GltfBuilder) -> Materials {
+    pub(super) fn add(b: &mut Scene) -> Materials {
         let mut mat = |name: &str, rgb: [f32; 3], metallic: f32, roughness: f32| {
-            b.add_material(MaterialDesc {
-                name: Some(name.to_string()),
-                base_color: Vec3::from(rgb).extend(1.0),
-                metallic,
-                roughness,
-                ..MaterialDesc::default()
-            })
+            add_material(
+                b,
+                Material {
+                    name: Some(name.to_string()),
+                    base_color: Vec3::from(rgb).extend(1.0),
+                    metallic,
+                    roughness,
+                    ..Material::default()
+                },
+            )
         };
         let floor_light = mat("floor-marble-light", [0.82, 0.80, 0.74], 0.0, 0.25);
         let floor_dark = mat("floor-marble-dark", [0.07, 0.07, 0.08], 0.0, 0.25);
@@ -54,25 +62,31 @@ impl Materials {
         for (i, c) in palette.iter().enumerate() {
             canvases[i] = mat(&format!("canvas-{i}"), *c, 0.0, 0.8);
         }
-        let glass = b.add_material(MaterialDesc {
-            name: Some("glass".into()),
-            base_color: Vec4::new(0.95, 0.97, 1.0, 1.0),
-            metallic: 0.0,
-            roughness: 0.0,
-            transmission: 1.0,
-            ior: 1.5,
-            ..MaterialDesc::default()
-        });
+        let glass = add_material(
+            b,
+            Material {
+                name: Some("glass".into()),
+                base_color: Vec4::new(0.95, 0.97, 1.0, 1.0),
+                metallic: 0.0,
+                roughness: 0.0,
+                transmission: 1.0,
+                ior: 1.5,
+                ..Material::default()
+            },
+        );
         // Thin triangles seen from both sides.
         let mut chip = |name: &str, rgb: [f32; 3], metallic: f32, roughness: f32| {
-            b.add_material(MaterialDesc {
-                name: Some(name.to_string()),
-                base_color: Vec3::from(rgb).extend(1.0),
-                metallic,
-                roughness,
-                double_sided: true,
-                ..MaterialDesc::default()
-            })
+            add_material(
+                b,
+                Material {
+                    name: Some(name.to_string()),
+                    base_color: Vec3::from(rgb).extend(1.0),
+                    metallic,
+                    roughness,
+                    double_sided: true,
+                    ..Material::default()
+                },
+            )
         };
         let chips = [
             chip("chip-red", [0.85, 0.12, 0.08], 0.0, 0.4),

@@ -1,5 +1,6 @@
 //! The built-in museum: the demo scene of `subfield demo` and `subfield generate museum`,
-//! made in code as glTF, in the manner of BART's *museum* (Lext, Assarsson, Möller).
+//! made in code as a [`Scene`] (and written as glTF), in the manner of BART's *museum*
+//! (Lext, Assarsson, Möller).
 //!
 //! * **Static part**: a 20 × 8 × 20 room (checkered floor, walls, ceiling, a baseboard),
 //!   four pillars, seven framed paintings, a framed wall mirror, pedestals with a chrome
@@ -39,11 +40,11 @@ use std::path::Path;
 use glam::{Quat, Vec2, Vec3, Vec4};
 
 use super::synth::Rng;
-use crate::import::{
-    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, ImportError, MaterialDesc, MeshDesc,
-    NodeDesc, PrimitiveDesc,
+use crate::import::ImportError;
+use crate::scene::{
+    Animation, CameraDef, Channel, Interpolation, LightDef, LightKind, Material, Mesh, MorphTarget,
+    Node, NodeTransform, Primitive, Projection, Property, Scene, Trs,
 };
-use crate::scene::{Interpolation, LightDef, LightKind, Property};
 use geometry::*;
 use layout::*;
 use materials::*;
@@ -165,29 +166,31 @@ pub enum MuseumError {
     Gltf(#[from] ImportError),
 }
 
-/// The museum as a glTF builder (add to it, or write it with [`GltfBuilder::write`] /
-/// [`GltfBuilder::to_glb`]).
-pub fn museum(p: &MuseumParams) -> Result<GltfBuilder, MuseumError> {
+/// The museum as a [`Scene`] (write it with `import::write_gltf` / `import::to_glb`).
+pub fn museum(p: &MuseumParams) -> Result<Scene, MuseumError> {
     p.validate()?;
-    let mut b = GltfBuilder::new();
-    b.fps = Some(p.fps);
+    let mut b = Scene {
+        fps: Some(p.fps),
+        ..Scene::default()
+    };
     let m = Materials::add(&mut b);
     let plan = Plan::for_budget(p.static_tris);
     build_static(&mut b, &m, &plan);
     build_dynamic(&mut b, &m, p);
     build_camera_and_lights(&mut b);
+    b.link_parents();
     Ok(b)
 }
 
 /// The museum as GLB bytes.
 pub fn museum_glb(p: &MuseumParams) -> Result<Vec<u8>, MuseumError> {
-    Ok(museum(p)?.to_glb()?)
+    Ok(crate::import::to_glb(&museum(p)?)?)
 }
 
 /// Writes the museum to `path` atomically (`.gltf`: JSON with an embedded buffer; any
 /// other extension: GLB).
 pub fn write_museum(p: &MuseumParams, path: &Path) -> Result<(), MuseumError> {
-    Ok(museum(p)?.write(path)?)
+    Ok(crate::import::write_gltf(&museum(p)?, path)?)
 }
 
 /// Rotation that turns a node's `-Z` towards `dir` with `+Y` up.
@@ -198,35 +201,37 @@ fn look_along(dir: Vec3) -> Quat {
     Quat::from_mat3(&glam::Mat3::from_cols(r, u, -f)).normalize()
 }
 
-fn build_camera_and_lights(b: &mut GltfBuilder) {
+fn build_camera_and_lights(b: &mut Scene) {
     let eye = Vec3::new(3.5, 4.0, 9.2);
     let target = Vec3::new(0.0, 3.4, 0.0);
-    let camera = b.add_camera(CameraDesc {
+    b.cameras.push(CameraDef {
         name: Some("visitor".into()),
-        yfov: 1.0,
-        // None: the image's own aspect, as the harness assumes at every size.
-        aspect: None,
-        znear: 0.05,
-        zfar: Some(100.0),
+        projection: Projection::Perspective {
+            yfov: 1.0,
+            // None: the image's own aspect, as the harness assumes at every size.
+            aspect: None,
+            znear: 0.05,
+            zfar: Some(100.0),
+        },
     });
+    let camera = b.cameras.len() - 1;
     add_root(
         b,
-        NodeDesc {
+        Node {
             name: Some("camera".into()),
             camera: Some(camera),
-            translation: eye,
-            rotation: look_along(target - eye),
-            ..NodeDesc::default()
+            transform: placed(eye, look_along(target - eye)),
+            ..Node::default()
         },
     );
-    let lamp = b.add_light(LightDef {
+    b.lights.push(LightDef {
         name: Some("lamp".into()),
         kind: LightKind::Point,
         color: Vec3::new(1.0, 0.95, 0.85),
         intensity: 200.0,
         range: None,
     });
-    let spot = b.add_light(LightDef {
+    b.lights.push(LightDef {
         name: Some("spot".into()),
         kind: LightKind::Spot {
             inner_cone_angle: 0.25,
@@ -236,24 +241,25 @@ fn build_camera_and_lights(b: &mut GltfBuilder) {
         intensity: 600.0,
         range: None,
     });
+    let (lamp, spot) = (b.lights.len() - 2, b.lights.len() - 1);
     let lamp_at = Vec3::new(0.0, 7.2, 2.0);
     let spot_at = Vec3::new(-7.5, 7.0, 7.5);
     // The spot is the lamp's child (see the module notes): its translation is relative.
-    let spot_node = b.add_node(NodeDesc {
+    b.nodes.push(Node {
         name: Some("spot".into()),
         light: Some(spot),
-        translation: spot_at - lamp_at,
-        rotation: look_along(CENTRE - spot_at),
-        ..NodeDesc::default()
+        transform: placed(spot_at - lamp_at, look_along(CENTRE - spot_at)),
+        ..Node::default()
     });
+    let spot_node = b.nodes.len() - 1;
     add_root(
         b,
-        NodeDesc {
+        Node {
             name: Some("lamp".into()),
             light: Some(lamp),
-            translation: lamp_at,
+            transform: placed(lamp_at, Quat::IDENTITY),
             children: vec![spot_node],
-            ..NodeDesc::default()
+            ..Node::default()
         },
     );
 }

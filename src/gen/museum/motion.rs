@@ -203,7 +203,7 @@ pub(super) fn dynamic_keys(p: &MuseumParams) -> Vec<Vec<Vec3>> {
     keys
 }
 
-pub(super) fn build_dynamic(b: &mut GltfBuilder, m: &Materials, p: &MuseumParams) {
+pub(super) fn build_dynamic(b: &mut Scene, m: &Materials, p: &MuseumParams) {
     let keys = dynamic_keys(p);
     let n = p.dynamic_tris;
     // Four primitives (paint chips of four colours), contiguous runs of triangles.
@@ -212,22 +212,31 @@ pub(super) fn build_dynamic(b: &mut GltfBuilder, m: &Materials, p: &MuseumParams
     for (c, &material) in m.chips.iter().take(parts).enumerate() {
         let (lo, hi) = (3 * (c * n / parts), 3 * ((c + 1) * n / parts));
         let base = &keys[0][lo..hi];
-        let targets = keys
+        let morph_targets = keys
             .iter()
-            .map(|k| k[lo..hi].iter().zip(base).map(|(a, o)| *a - *o).collect())
+            .map(|k| MorphTarget {
+                positions: k[lo..hi].iter().zip(base).map(|(a, o)| *a - *o).collect(),
+                normals: Vec::new(),
+            })
             .collect();
-        primitives.push(PrimitiveDesc {
+        // Three unshared vertices per triangle.
+        let tris = (base.len() / 3) as u32;
+        primitives.push(Primitive {
             positions: base.to_vec(),
-            material: Some(material),
-            morph_targets: targets,
-            ..PrimitiveDesc::default()
+            triangles: (0..tris).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect(),
+            material,
+            morph_targets,
+            ..Primitive::default()
         });
     }
-    let mesh = b.add_mesh(MeshDesc {
-        name: Some("animart".into()),
-        primitives,
-        weights: vec![0.0; MUSEUM_KEYS],
-    });
+    let mesh = add_mesh(
+        b,
+        Mesh {
+            name: Some("animart".into()),
+            primitives,
+            weights: vec![0.0; MUSEUM_KEYS],
+        },
+    );
     let node = add_root(b, node("animart", mesh, Vec3::ZERO, Quat::IDENTITY));
     // One-hot weights: at key k, target k has weight 1.
     let values = (0..MUSEUM_KEYS * MUSEUM_KEYS)
@@ -239,9 +248,9 @@ pub(super) fn build_dynamic(b: &mut GltfBuilder, m: &Materials, p: &MuseumParams
             }
         })
         .collect();
-    b.add_animation(AnimationDesc {
+    b.animations.push(Animation {
         name: Some("animart".into()),
-        channels: vec![ChannelDesc {
+        channels: vec![Channel {
             node,
             property: Property::Weights,
             interpolation: Interpolation::Linear,

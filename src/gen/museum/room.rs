@@ -2,7 +2,7 @@
 
 use super::*;
 
-pub(super) fn build_static(b: &mut GltfBuilder, m: &Materials, plan: &Plan) {
+pub(super) fn build_static(b: &mut Scene, m: &Materials, plan: &Plan) {
     let (h, top) = (ROOM_HALF, ROOM_HEIGHT);
     let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
 
@@ -43,31 +43,37 @@ pub(super) fn build_static(b: &mut GltfBuilder, m: &Materials, plan: &Plan) {
         let q = quads / 4 + usize::from(k < quads % 4);
         board.band(o, du, height, q, k == 3 && plan.baseboard % 2 == 1);
     }
-    let room = b.add_mesh(MeshDesc {
-        name: Some("room".into()),
-        // A 1 × 1 floor has no dark tile: empty parts are left out.
-        primitives: [
-            (light, m.floor_light),
-            (dark, m.floor_dark),
-            (ceiling, m.ceiling),
-            (walls, m.wall),
-            (board, m.baseboard),
-        ]
-        .into_iter()
-        .filter(|(part, _)| !part.indices.is_empty())
-        .map(|(part, material)| part.primitive(material))
-        .collect(),
-        weights: Vec::new(),
-    });
+    let room = add_mesh(
+        b,
+        Mesh {
+            name: Some("room".into()),
+            // A 1 × 1 floor has no dark tile: empty parts are left out.
+            primitives: [
+                (light, m.floor_light),
+                (dark, m.floor_dark),
+                (ceiling, m.ceiling),
+                (walls, m.wall),
+                (board, m.baseboard),
+            ]
+            .into_iter()
+            .filter(|(part, _)| !part.indices.is_empty())
+            .map(|(part, material)| part.primitive(material))
+            .collect(),
+            weights: Vec::new(),
+        },
+    );
     add_root(b, node("room", room, Vec3::ZERO, Quat::IDENTITY));
 
     // Pillars: one mesh, four nodes.
     let (column, blocks) = pillar(plan.pillar);
-    let pillar_mesh = b.add_mesh(MeshDesc {
-        name: Some("pillar".into()),
-        primitives: vec![column.primitive(m.marble), blocks.primitive(m.marble)],
-        weights: Vec::new(),
-    });
+    let pillar_mesh = add_mesh(
+        b,
+        Mesh {
+            name: Some("pillar".into()),
+            primitives: vec![column.primitive(m.marble), blocks.primitive(m.marble)],
+            weights: Vec::new(),
+        },
+    );
     for (i, p) in PILLARS.iter().enumerate() {
         let at = Vec3::new(p.x, 0.0, p.y);
         add_root(
@@ -141,18 +147,21 @@ pub(super) fn build_static(b: &mut GltfBuilder, m: &Materials, plan: &Plan) {
         let canvas = m.canvases.get(i).copied().unwrap_or(m.mirror);
         let mut mesh = framed(w, hgt, canvas, m.gold);
         mesh.name = Some(name.to_string());
-        let mesh = b.add_mesh(mesh);
+        let mesh = add_mesh(b, mesh);
         add_root(b, node(name, mesh, at, rot));
     }
 
     // Pedestals with a glass sphere, a chrome sphere and a bronze torus.
     let mut block = Part::default();
     block.cuboid(Vec3::new(-0.4, 0.0, -0.4), Vec3::new(0.4, 1.0, 0.4));
-    let pedestal = b.add_mesh(MeshDesc {
-        name: Some("pedestal".into()),
-        primitives: vec![block.primitive(m.wood)],
-        weights: Vec::new(),
-    });
+    let pedestal = add_mesh(
+        b,
+        Mesh {
+            name: Some("pedestal".into()),
+            primitives: vec![block.primitive(m.wood)],
+            weights: Vec::new(),
+        },
+    );
     let stands = [
         Vec3::new(-3.5, 0.0, 4.0),
         Vec3::new(4.2, 0.0, 2.5),
@@ -168,18 +177,24 @@ pub(super) fn build_static(b: &mut GltfBuilder, m: &Materials, plan: &Plan) {
         ("glass-sphere", m.glass, stands[0]),
         ("chrome-sphere", m.chrome, stands[1]),
     ] {
-        let mesh = b.add_mesh(MeshDesc {
-            name: Some(name.into()),
-            primitives: vec![sphere(0.7, plan.sphere).primitive(mat)],
-            weights: Vec::new(),
-        });
+        let mesh = add_mesh(
+            b,
+            Mesh {
+                name: Some(name.into()),
+                primitives: vec![sphere(0.7, plan.sphere).primitive(mat)],
+                weights: Vec::new(),
+            },
+        );
         add_root(b, node(name, mesh, at + Vec3::Y * 1.7, Quat::IDENTITY));
     }
-    let ring = b.add_mesh(MeshDesc {
-        name: Some("torus".into()),
-        primitives: vec![torus(plan.torus).primitive(m.bronze)],
-        weights: Vec::new(),
-    });
+    let ring = add_mesh(
+        b,
+        Mesh {
+            name: Some("torus".into()),
+            primitives: vec![torus(plan.torus).primitive(m.bronze)],
+            weights: Vec::new(),
+        },
+    );
     let stand_up = Quat::from_rotation_y(0.7) * Quat::from_rotation_x(std::f32::consts::FRAC_PI_2);
     add_root(b, node("torus", ring, stands[2] + Vec3::Y * 1.75, stand_up));
 
@@ -188,11 +203,14 @@ pub(super) fn build_static(b: &mut GltfBuilder, m: &Materials, plan: &Plan) {
     bench.cuboid(Vec3::new(-1.2, 0.42, -0.3), Vec3::new(1.2, 0.5, 0.3));
     bench.cuboid(Vec3::new(-1.0, 0.0, -0.25), Vec3::new(-0.9, 0.42, 0.25));
     bench.cuboid(Vec3::new(0.9, 0.0, -0.25), Vec3::new(1.0, 0.42, 0.25));
-    let bench = b.add_mesh(MeshDesc {
-        name: Some("bench".into()),
-        primitives: vec![bench.primitive(m.wood)],
-        weights: Vec::new(),
-    });
+    let bench = add_mesh(
+        b,
+        Mesh {
+            name: Some("bench".into()),
+            primitives: vec![bench.primitive(m.wood)],
+            weights: Vec::new(),
+        },
+    );
     add_root(
         b,
         node("bench-0", bench, Vec3::new(0.0, 0.0, -7.2), Quat::IDENTITY),

@@ -1,18 +1,25 @@
 //! BART AFF (and its subset NFF) import: a streaming parser into an [`AffScene`], direct
 //! evaluation of that scene at any time (splines, visibility, animated triangles), and its
-//! conversion to glTF ([`AffScene::to_gltf`]).
+//! mapping onto the one [`Scene`] model ([`AffScene::to_scene`]).
 //!
-//! `import::load` accepts `.aff` / `.nff` through [`load_scene`]: the file is parsed,
-//! turned into a glTF document in memory and imported like any `.glb`, so `bake`, `render`
-//! and a file written by `subfield convert` see the same scene by construction.
+//! `import::load` accepts `.aff` / `.nff` through [`load_scene`]: the file is parsed and
+//! mapped onto a [`Scene`], which the border check `import::validate` then checks like any
+//! imported scene. `subfield convert` writes that same `Scene` with the glTF writer, and
+//! the model is built as the glTF reader builds it from that file, so `bake`, `render` and
+//! a converted `.glb` see the same scene.
+//!
+//! Includes (`i`) and texture names are files in the scene's folder, under the policy of
+//! glTF URIs (`import::folder`): an absolute path, a `..` above the folder or a symbolic
+//! link out of it is refused with one line naming the name and the folder.
 //!
 //! # Time
-//! AFF frame `i` of `a t0 t1 n` is at `t0 + i·(t1−t0)/(n−1)`. The glTF clock starts at
-//! `t0` (key times are AFF times minus `t0`) and `scenes[0].extras.fps` records
-//! `(n−1)/(t1−t0)`, so glTF time `i / fps` is AFF frame `i`. Without an `a` line (or with
-//! one frame) no clip is written and the scene is posed at `t0` (0 without `a`).
+//! AFF frame `i` of `a t0 t1 n` is at `t0 + i·(t1−t0)/(n−1)`. The model's clock starts at
+//! `t0` (key times are AFF times minus `t0`) and [`Scene::fps`] (the converted file's
+//! `scenes[0].extras.fps`) records `(n−1)/(t1−t0)`, so time `i / fps` is AFF frame `i`.
+//! Without an `a` line (or with one frame) no clip is made and the scene is posed at `t0`
+//! (0 without `a`).
 //!
-//! # What the conversion carries exactly, and what it approximates
+//! # What the mapping carries exactly, and what it approximates
 //! * Static transforms `xs` become node TRS (exact: AFF composes `T·R·S` as glTF does).
 //! * Animated transforms `x name` driven by `k name`: the Kochanek–Bartels translation and
 //!   scale splines and the quaternion rotation spline cannot be carried by glTF's
@@ -30,16 +37,21 @@
 //! * The camera (`v`, animated by `k camera`) becomes a perspective camera node with the
 //!   `v` line's vertical field of view and `w/h` aspect; `hither` is `znear` (values below
 //!   1e-4 become 1, as BART does); yon is infinite.
-//! * Lights: `l` / `la` become `KHR_lights_punctual` point lights of intensity 1 and the
-//!   AFF colour (white when absent). AFF lights do not fall off with distance, glTF point
-//!   lights do (inverse square): an approximation renderers must know about. `la` lights
-//!   named by a `k` block follow its translation track (the light's position).
+//! * Lights: `l` / `la` become point lights (`KHR_lights_punctual` in the converted file)
+//!   of intensity 1 and the AFF colour (white when absent). AFF lights do not fall off with
+//!   distance, glTF point lights do (inverse square): an approximation renderers must know
+//!   about. `la` lights named by a `k` block follow its translation track (the light's
+//!   position).
+//! * Textures: each AFF image becomes an opaque RGBA8 image with the default sampler
+//!   (linear, repeat); the converted file embeds it as PNG.
 //! * Background `b` and ambient `am` have no glTF equivalent: they are kept in
-//!   `scenes[0].extras.aff` (`background`, `ambient`, `t0`, `frames`).
-//! * Materials (`f`, `fm`) map to metallic-roughness (see [`material_desc`]); the exact AFF
-//!   numbers are kept in each material's `extras.aff`.
+//!   [`Scene::extras`] (`scene.aff`: `background`, `ambient`, `t0`, `frames`), which the
+//!   converted file carries as `scenes[0].extras.aff`.
+//! * Materials (`f`, `fm`) map to metallic-roughness (see [`material`]); the exact AFF
+//!   numbers are kept in the material's extras (`extras.aff` in the converted file, see
+//!   [`material_extras`]).
 
-mod gltf;
+mod model;
 mod parse;
 pub mod shapes;
 pub mod spline;
@@ -50,10 +62,9 @@ use std::path::{Path, PathBuf};
 use glam::{DMat4, DQuat, DVec3, Mat4, Vec2, Vec3};
 
 use super::ImportError;
-pub use gltf::material_desc;
+pub use model::{material, material_extras};
 
-use super::GltfBuilder;
-use crate::scene::{Scene, Warning};
+use crate::scene::Scene;
 use spline::{RotKey, VecKey};
 
 /// Largest `n` accepted in `a t0 t1 n` (every animated node is sampled at every frame).
@@ -463,9 +474,10 @@ impl AffScene {
         })
     }
 
-    /// The glTF document of this scene (see the module docs for the mapping).
-    pub fn to_gltf(&self) -> Result<GltfBuilder, ImportError> {
-        gltf::to_gltf(self)
+    /// The scene as the one [`Scene`] model (see the module docs for the mapping), checked
+    /// by `import::validate`; the parser's warnings come with it.
+    pub fn to_scene(&self) -> Result<Scene, ImportError> {
+        model::to_scene(self)
     }
 }
 
@@ -484,12 +496,7 @@ pub fn look_rotation(v: &View) -> DQuat {
     DQuat::from_mat3(&glam::DMat3::from_cols(right, up, -fwd)).normalize()
 }
 
-/// Parses an AFF / NFF file and imports it as a [`Scene`] through an in-memory GLB.
+/// Parses an AFF / NFF file and maps it onto a [`Scene`].
 pub fn load_scene(path: &Path) -> Result<Scene, ImportError> {
-    let aff = AffScene::load(path)?;
-    let glb = aff.to_gltf()?.to_glb()?;
-    let folder = path.parent().unwrap_or(Path::new("."));
-    let mut scene = super::from_gltf_slice(&glb, path, folder)?;
-    scene.warnings.extend(aff.warnings.into_iter().map(Warning));
-    Ok(scene)
+    AffScene::load(path)?.to_scene()
 }

@@ -1,7 +1,8 @@
 //! Buffers and URIs: the GLB binary chunk, `data:` URIs (base64 or percent-encoded) and
-//! files beside the scene, refusing any URI that leaves the scene's folder.
+//! files beside the scene, refusing any URI that leaves the scene's folder (the policy of
+//! `import::folder`).
 
-use std::path::{Component, Path, PathBuf};
+use std::path::Path;
 
 use super::{ImportError, Importer};
 
@@ -69,22 +70,9 @@ impl Importer<'_> {
             }
         }
         let decoded = String::from_utf8(percent_decode(uri)).map_err(|_| refuse())?;
-        // Resolved lexically ("a/../b" is "b" whether or not "a" exists), so the check
-        // and the file opened are the same path.
-        let mut rel = PathBuf::new();
-        for c in Path::new(&decoded).components() {
-            match c {
-                Component::Normal(part) => rel.push(part),
-                Component::CurDir => {}
-                Component::ParentDir => {
-                    if !rel.pop() {
-                        return Err(refuse());
-                    }
-                }
-                Component::RootDir | Component::Prefix(_) => return Err(refuse()),
-            }
-        }
-        let resolved: PathBuf = self.folder.join(rel);
+        // The policy every reference to a file beside the scene follows (import::folder).
+        let resolved = crate::import::folder::resolve_inside(self.folder, Path::new(&decoded))
+            .map_err(|_| refuse())?;
         std::fs::read(&resolved).map_err(|source| ImportError::MissingFile {
             path: self.path.to_path_buf(),
             what: what.to_string(),

@@ -213,7 +213,7 @@ impl Parser {
             name: name.to_string(),
             reason,
         };
-        let file = self.folder.join(name);
+        let file = self.inside(src, line, "texture", name)?;
         let bytes = std::fs::read(&file)
             .map_err(|e| bad(format!("cannot read {}: {e}", file.display())))?;
         let img = image::load_from_memory(&bytes)
@@ -559,6 +559,27 @@ impl Parser {
         Ok(())
     }
 
+    /// The file `name` (an include or a texture) in the scene's folder, under the policy
+    /// of glTF URIs (`import::folder`): nothing outside the folder is opened.
+    fn inside(
+        &self,
+        src: &Src,
+        line: u32,
+        what: &'static str,
+        name: &str,
+    ) -> Result<PathBuf, ImportError> {
+        crate::import::folder::resolve_inside(&self.folder, Path::new(name)).map_err(|why| {
+            ImportError::OutsideFolder {
+                path: src.path.to_path_buf(),
+                line,
+                what,
+                name: name.to_string(),
+                folder: self.folder.clone(),
+                why,
+            }
+        })
+    }
+
     fn include(
         &mut self,
         src: &Src,
@@ -572,7 +593,7 @@ impl Parser {
                 format!("include {name:?}: includes nested more than {MAX_INCLUDE_DEPTH} deep (a cycle?)"),
             ));
         }
-        let file = self.folder.join(name);
+        let file = self.inside(src, line, "include", name)?;
         let bytes = std::fs::read(&file).map_err(|e| {
             src.err(
                 line,

@@ -1,32 +1,37 @@
-//! [`AffScene`] → glTF ([`GltfBuilder`]). The mapping is described in the module docs of
-//! [`crate::import::aff`]; materials in [`material_desc`].
+//! [`AffScene`] → the one [`Scene`] model. The mapping is described in the module docs of
+//! [`crate::import::aff`]; materials in [`material`].
+//!
+//! The scene is built as the glTF reader would build it from the file `subfield convert`
+//! writes (node rotations normalised as the reader does, textures with the default
+//! sampler, non-indexed `tpa` primitives as consecutive triangles), so an `.aff` and its
+//! converted `.glb` import to the same model.
 
 use std::collections::HashMap;
 
 use glam::{DQuat, DVec3, Quat, Vec3, Vec4};
-use serde_json::json;
+use serde_json::{json, Value};
 
 use super::{AffMaterial, AffScene, AffTexture, AffTransform, ImportError, MorphBatch, Tracks};
-use crate::import::{
-    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, ImageDesc, MaterialDesc, MeshDesc,
-    NodeDesc, PrimitiveDesc, TextureDesc,
+use crate::scene::{
+    AlphaMode, Animation, CameraDef, Channel, Image, Interpolation, LightDef, LightKind, Material,
+    Mesh, MorphTarget, Node, NodeTransform, Primitive, Projection, Property, Scene, Texture,
+    TextureRef, Trs, Wrap,
 };
-use crate::scene::{Interpolation, LightDef, LightKind, Property};
 
-/// The glTF material of an AFF material (with an optional base colour texture index):
+/// The model's material of an AFF material (with an optional base colour texture index):
 ///
-/// | glTF | from AFF |
+/// | model (glTF) | from AFF |
 /// |---|---|
-/// | `baseColorFactor` | diffuse colour (`f`: colour·Kd), clamped to [0, 1]; alpha 1. A texture is multiplied by it, as glTF does |
-/// | `metallicFactor` | mirror weight: the largest specular component (`f`: Ks), clamped — a Whitted renderer's reflection coefficient |
-/// | `roughnessFactor` | `(2/(shine+2))^¼` (Phong exponent → Beckmann-like α = √(2/(n+2)), roughness = √α); 1 for shine ≤ 0 |
-/// | `KHR_materials_transmission` | `T`, clamped to [0, 1] |
-/// | `KHR_materials_ior` | `ior` when ≥ 1 (AFF files write 0 for opaque surfaces: the glTF default 1.5 is kept) |
-/// | `doubleSided` | when `T > 0` (AFF: transmissive surfaces are two-sided) |
-/// | `extras.aff` | the exact AFF numbers: ambient, diffuse, specular, shine, T, ior |
+/// | `base_color` (`baseColorFactor`) | diffuse colour (`f`: colour·Kd), clamped to [0, 1]; alpha 1. A texture is multiplied by it, as glTF does |
+/// | `metallic` | mirror weight: the largest specular component (`f`: Ks), clamped — a Whitted renderer's reflection coefficient |
+/// | `roughness` | `(2/(shine+2))^¼` (Phong exponent → Beckmann-like α = √(2/(n+2)), roughness = √α); 1 for shine ≤ 0 |
+/// | `transmission` (`KHR_materials_transmission`) | `T`, clamped to [0, 1] |
+/// | `ior` (`KHR_materials_ior`) | `ior` when ≥ 1 (AFF files write 0 for opaque surfaces: the glTF default 1.5 is kept) |
+/// | `double_sided` | when `T > 0` (AFF: transmissive surfaces are two-sided) |
 ///
-/// AFF's per-material ambient colour has no glTF counterpart (kept in `extras`).
-pub fn material_desc(m: &AffMaterial, texture: Option<u32>) -> MaterialDesc {
+/// The exact AFF numbers (ambient, diffuse, specular, shine, T, ior) are kept by
+/// [`material_extras`]: AFF's per-material ambient colour has no glTF counterpart.
+pub fn material(m: &AffMaterial, texture: Option<u32>) -> Material {
     let clamp01 = |x: f32| {
         if x.is_finite() {
             x.clamp(0.0, 1.0)
@@ -39,7 +44,7 @@ pub fn material_desc(m: &AffMaterial, texture: Option<u32>) -> MaterialDesc {
     } else {
         1.0
     };
-    MaterialDesc {
+    Material {
         name: None,
         base_color: Vec4::new(
             clamp01(m.diffuse.x),
@@ -47,25 +52,36 @@ pub fn material_desc(m: &AffMaterial, texture: Option<u32>) -> MaterialDesc {
             clamp01(m.diffuse.z),
             1.0,
         ),
-        base_color_texture: texture,
+        base_color_texture: texture.map(|texture| TextureRef {
+            texture,
+            tex_coord: 0,
+        }),
         metallic: clamp01(m.specular.max_element()),
         roughness: clamp01(roughness),
+        metallic_roughness_texture: None,
         emissive: Vec3::ZERO,
+        emissive_strength: 1.0,
+        emissive_texture: None,
         transmission: clamp01(m.transmittance),
         ior: if m.ior >= 1.0 { m.ior } else { 1.5 },
         double_sided: m.transmittance > 0.0,
-        extras: Some(json!({ "aff": {
-            "ambient": m.ambient.to_array(),
-            "diffuse": m.diffuse.to_array(),
-            "specular": m.specular.to_array(),
-            "shine": m.shine,
-            "transmittance": m.transmittance,
-            "ior": m.ior,
-        }})),
+        alpha_mode: AlphaMode::Opaque,
     }
 }
 
-/// Frame sampling: AFF times of the frames and their glTF key times (AFF − t0).
+/// The material's `extras` (`extras.aff`: the exact AFF numbers).
+pub fn material_extras(m: &AffMaterial) -> Value {
+    json!({ "aff": {
+        "ambient": m.ambient.to_array(),
+        "diffuse": m.diffuse.to_array(),
+        "specular": m.specular.to_array(),
+        "shine": m.shine,
+        "transmittance": m.transmittance,
+        "ior": m.ior,
+    }})
+}
+
+/// Frame sampling: AFF times of the frames and their model key times (AFF − t0).
 struct Frames {
     t0: f64,
     aff: Vec<f64>,
@@ -74,20 +90,23 @@ struct Frames {
 
 struct Conv<'a> {
     aff: &'a AffScene,
-    b: GltfBuilder,
-    channels: Vec<ChannelDesc>,
+    s: Scene,
+    channels: Vec<Channel>,
     frames: Option<Frames>,
     rest: f64,
     materials: HashMap<(u32, Option<u32>), u32>,
     textures: HashMap<u32, u32>,
 }
 
-pub(super) fn to_gltf(aff: &AffScene) -> Result<GltfBuilder, ImportError> {
+pub(super) fn to_scene(aff: &AffScene) -> Result<Scene, ImportError> {
     let bad = |reason: String| ImportError::Convert {
         path: aff.source.clone(),
         reason,
     };
-    let mut b = GltfBuilder::new();
+    let mut s = Scene {
+        source: aff.source.clone(),
+        ..Scene::default()
+    };
     let frames = match aff.time {
         Some(r) => match r.fps() {
             Some(fps) => {
@@ -99,7 +118,7 @@ pub(super) fn to_gltf(aff: &AffScene) -> Result<GltfBuilder, ImportError> {
                         r.start, r.end, r.frames
                     )));
                 }
-                b.fps = Some(fps as f32);
+                s.fps = Some(fps as f32);
                 Some(Frames {
                     t0: r.start,
                     aff: times,
@@ -110,7 +129,7 @@ pub(super) fn to_gltf(aff: &AffScene) -> Result<GltfBuilder, ImportError> {
         },
         None => None,
     };
-    b.scene_extras.insert(
+    s.extras.scene.insert(
         "aff".into(),
         json!({
             "background": aff.background.to_array(),
@@ -121,7 +140,7 @@ pub(super) fn to_gltf(aff: &AffScene) -> Result<GltfBuilder, ImportError> {
     );
     let mut c = Conv {
         aff,
-        b,
+        s,
         channels: Vec::new(),
         frames,
         rest: aff.rest_time(),
@@ -129,19 +148,30 @@ pub(super) fn to_gltf(aff: &AffScene) -> Result<GltfBuilder, ImportError> {
         textures: HashMap::new(),
     };
     let root = c.node(0)?;
-    c.b.add_root(root);
+    c.s.roots.push(root);
     c.camera();
     c.lights();
     let channels = std::mem::take(&mut c.channels);
     if !channels.is_empty() {
-        c.b.add_animation(AnimationDesc {
+        c.s.animations.push(Animation {
             name: Some("aff".into()),
             channels,
         });
     }
-    Ok(c.b)
+    let mut scene = c.s;
+    scene.warnings = aff
+        .warnings
+        .iter()
+        .cloned()
+        .map(crate::scene::Warning)
+        .collect();
+    crate::import::validate(&scene)?;
+    Ok(scene)
 }
 
+/// A unit `f32` quaternion: rounded, divided by its length, then normalised once more as
+/// the glTF reader normalises the rotation it reads, so the model is the one the converted
+/// file imports to.
 fn f32q(q: DQuat) -> Quat {
     let q = q.as_quat();
     let l = q.length();
@@ -152,54 +182,80 @@ fn f32q(q: DQuat) -> Quat {
     }
 }
 
-/// Encodes an RGB8 image as PNG (fast compression: it is decoded again at once).
-fn png(t: &AffTexture) -> Result<Vec<u8>, String> {
-    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
-    use image::ImageEncoder;
-    let mut out = Vec::new();
-    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Sub)
-        .write_image(&t.rgb8, t.width, t.height, image::ExtendedColorType::Rgb8)
-        .map_err(|e| e.to_string())?;
-    Ok(out)
+/// A node's rest rotation (see [`f32q`]).
+fn rest_rotation(q: DQuat) -> Quat {
+    f32q(q).normalize()
+}
+
+/// An RGB8 image as the model's RGBA8 (opaque).
+fn rgba(t: &AffTexture) -> Image {
+    let rgba8 = t
+        .rgb8
+        .chunks_exact(3)
+        .flat_map(|p| [p[0], p[1], p[2], 255])
+        .collect();
+    Image {
+        name: Some(t.name.clone()),
+        width: t.width,
+        height: t.height,
+        rgba8,
+    }
+}
+
+/// A TRS rest transform.
+fn trs(translation: Vec3, rotation: Quat, scale: Vec3) -> NodeTransform {
+    NodeTransform::Trs(Trs {
+        translation,
+        rotation,
+        scale,
+    })
 }
 
 impl Conv<'_> {
-    fn material(&mut self, material: u32, texture: Option<u32>) -> Result<u32, ImportError> {
+    fn add_node(&mut self, node: Node) -> usize {
+        self.s.nodes.push(node);
+        self.s.nodes.len() - 1
+    }
+
+    fn attach(&mut self, parent: usize, child: usize) {
+        self.s.nodes[parent].children.push(child);
+        self.s.nodes[child].parent = Some(parent);
+    }
+
+    fn material(&mut self, material: u32, texture: Option<u32>) -> u32 {
         if let Some(&m) = self.materials.get(&(material, texture)) {
-            return Ok(m);
+            return m;
         }
-        let tex = match texture {
-            None => None,
-            Some(t) => Some(match self.textures.get(&t) {
-                Some(&g) => g,
-                None => {
-                    let src = &self.aff.textures[t as usize];
-                    let bytes = png(src).map_err(|reason| ImportError::Convert {
-                        path: self.aff.source.clone(),
-                        reason: format!("texture {:?}: {reason}", src.name),
-                    })?;
-                    let image = self.b.add_image(ImageDesc {
-                        name: Some(src.name.clone()),
-                        mime_type: "image/png".into(),
-                        bytes,
-                    });
-                    let g = self.b.add_texture(TextureDesc { image });
-                    self.textures.insert(t, g);
-                    g
-                }
-            }),
-        };
-        let desc = material_desc(&self.aff.materials[material as usize], tex);
-        let m = self.b.add_material(desc);
+        let tex = texture.map(|t| match self.textures.get(&t) {
+            Some(&g) => g,
+            None => {
+                self.s.images.push(rgba(&self.aff.textures[t as usize]));
+                self.s.textures.push(Texture {
+                    image: (self.s.images.len() - 1) as u32,
+                    wrap_s: Wrap::Repeat,
+                    wrap_t: Wrap::Repeat,
+                    nearest: false,
+                });
+                let g = (self.s.textures.len() - 1) as u32;
+                self.textures.insert(t, g);
+                g
+            }
+        });
+        let am = &self.aff.materials[material as usize];
+        self.s.materials.push(self::material(am, tex));
+        let m = (self.s.materials.len() - 1) as u32;
+        let extras = &mut self.s.extras.materials;
+        extras.resize(m as usize, None);
+        extras.push(Some(material_extras(am)));
         self.materials.insert((material, texture), m);
-        Ok(m)
+        m
     }
 
     /// Samples `f` at every frame into a LINEAR channel of `node` (nothing without frames).
-    fn sampled(&mut self, node: u32, property: Property, f: impl Fn(f64) -> Vec<f32>) {
+    fn sampled(&mut self, node: usize, property: Property, f: impl Fn(f64) -> Vec<f32>) {
         let Some(fr) = &self.frames else { return };
         let values: Vec<f32> = fr.aff.iter().flat_map(|&t| f(t)).collect();
-        self.channels.push(ChannelDesc {
+        self.channels.push(Channel {
             node,
             property,
             interpolation: Interpolation::Linear,
@@ -209,7 +265,7 @@ impl Conv<'_> {
     }
 
     /// Rotations at every frame, each in the hemisphere of the previous one.
-    fn sampled_rotation(&mut self, node: u32, f: impl Fn(f64) -> Quat) {
+    fn sampled_rotation(&mut self, node: usize, f: impl Fn(f64) -> Quat) {
         let Some(fr) = &self.frames else { return };
         let mut values = Vec::with_capacity(4 * fr.aff.len());
         let mut prev = Quat::IDENTITY;
@@ -221,7 +277,7 @@ impl Conv<'_> {
             values.extend(q.to_array());
             prev = q;
         }
-        self.channels.push(ChannelDesc {
+        self.channels.push(Channel {
             node,
             property: Property::Rotation,
             interpolation: Interpolation::Linear,
@@ -230,7 +286,7 @@ impl Conv<'_> {
         });
     }
 
-    fn animate_trs(&mut self, node: u32, tr: &Tracks) {
+    fn animate_trs(&mut self, node: usize, tr: &Tracks) {
         let vec3 = |v: Option<DVec3>, rest: DVec3| v.unwrap_or(rest).as_vec3().to_array().to_vec();
         if !tr.translation.is_empty() {
             self.sampled(node, Property::Translation, |t| {
@@ -246,7 +302,7 @@ impl Conv<'_> {
     }
 
     /// STEP scale channel (1 visible, 0 hidden) at the visibility keys.
-    fn animate_visibility(&mut self, node: u32, tr: &Tracks) {
+    fn animate_visibility(&mut self, node: usize, tr: &Tracks) {
         let Some(fr) = &self.frames else { return };
         let scale = |v: bool| if v { [1.0f32; 3] } else { [0.0; 3] };
         let mut times = vec![0.0f32];
@@ -258,7 +314,7 @@ impl Conv<'_> {
                 values.extend(scale(tr.visible_at(k)));
             }
         }
-        self.channels.push(ChannelDesc {
+        self.channels.push(Channel {
             node,
             property: Property::Scale,
             interpolation: Interpolation::Step,
@@ -267,59 +323,55 @@ impl Conv<'_> {
         });
     }
 
-    /// One glTF node per AFF block (two with a visibility track), its batches as one mesh,
-    /// its animated batches as child nodes with morph targets, then its sub-blocks.
-    fn node(&mut self, index: usize) -> Result<u32, ImportError> {
+    /// One node per AFF block (two with a visibility track), its batches as one mesh, its
+    /// animated batches as child nodes with morph targets, then its sub-blocks.
+    fn node(&mut self, index: usize) -> Result<usize, ImportError> {
         let aff = self.aff;
         let an = &aff.nodes[index];
-        let mut desc = NodeDesc::default();
+        let mut node = Node::default();
         let mut tracks = None;
         match &an.transform {
-            AffTransform::Root => desc.name = Some("aff".into()),
+            AffTransform::Root => node.name = Some("aff".into()),
             AffTransform::Static {
                 scale,
                 axis,
                 angle,
                 translation,
             } => {
-                desc.scale = *scale;
-                desc.rotation = f32q(super::spline::key_quat(
+                let rotation = rest_rotation(super::spline::key_quat(
                     axis.as_dvec3(),
                     f64::from(*angle).to_radians(),
                 ));
-                desc.translation = *translation;
+                node.transform = trs(*translation, rotation, *scale);
             }
             AffTransform::Animated(name) => {
-                desc.name = Some(name.clone());
+                node.name = Some(name.clone());
                 if let Some(tr) = aff.tracks.get(name) {
                     let t = self.rest;
-                    desc.translation = tr.translation_at(t).unwrap_or(DVec3::ZERO).as_vec3();
-                    desc.rotation = f32q(tr.rotation_at(t).unwrap_or(DQuat::IDENTITY));
-                    desc.scale = tr.scale_at(t).unwrap_or(DVec3::ONE).as_vec3();
+                    node.transform = trs(
+                        tr.translation_at(t).unwrap_or(DVec3::ZERO).as_vec3(),
+                        rest_rotation(tr.rotation_at(t).unwrap_or(DQuat::IDENTITY)),
+                        tr.scale_at(t).unwrap_or(DVec3::ONE).as_vec3(),
+                    );
                     tracks = Some(tr);
                 }
             }
         }
-        let outer = self.b.add_node(desc);
+        let outer = self.add_node(node);
         if let Some(tr) = tracks {
             self.animate_trs(outer, tr);
         }
         let content = match tracks.filter(|tr| !tr.visibility.is_empty()) {
             None => outer,
             Some(tr) => {
-                let visible = tr.visible_at(self.rest);
-                let inner = self.b.add_node(NodeDesc {
-                    name: Some(format!(
-                        "{}:visibility",
-                        self.b.nodes[outer as usize]
-                            .name
-                            .clone()
-                            .unwrap_or_default()
-                    )),
-                    scale: if visible { Vec3::ONE } else { Vec3::ZERO },
-                    ..NodeDesc::default()
+                let visible = if tr.visible_at(self.rest) { 1.0 } else { 0.0 };
+                let name = self.s.nodes[outer].name.clone().unwrap_or_default();
+                let inner = self.add_node(Node {
+                    name: Some(format!("{name}:visibility")),
+                    transform: trs(Vec3::ZERO, Quat::IDENTITY, Vec3::splat(visible)),
+                    ..Node::default()
                 });
-                self.b.nodes[outer as usize].children.push(inner);
+                self.attach(outer, inner);
                 self.animate_visibility(inner, tr);
                 inner
             }
@@ -327,56 +379,51 @@ impl Conv<'_> {
 
         let mut primitives = Vec::new();
         for batch in an.batches.iter().filter(|b| !b.indices.is_empty()) {
-            primitives.push(PrimitiveDesc {
+            primitives.push(Primitive {
                 positions: batch.positions.clone(),
                 normals: batch.normals.clone(),
                 uvs: batch.uvs.clone(),
-                indices: Some(batch.indices.clone()),
-                material: Some(self.material(batch.material, batch.texture)?),
-                ..PrimitiveDesc::default()
+                triangles: batch
+                    .indices
+                    .chunks_exact(3)
+                    .map(|t| [t[0], t[1], t[2]])
+                    .collect(),
+                material: self.material(batch.material, batch.texture),
+                ..Primitive::default()
             });
         }
         if !primitives.is_empty() {
-            let mesh = self.b.add_mesh(MeshDesc {
+            self.s.meshes.push(Mesh {
                 name: None,
                 primitives,
                 weights: Vec::new(),
             });
-            self.b.nodes[content as usize].mesh = Some(mesh);
+            self.s.nodes[content].mesh = Some(self.s.meshes.len() - 1);
         }
         for mb in an.morphs.iter().filter(|m| m.triangle_count() > 0) {
-            let n = self.morph(mb)?;
-            self.b.nodes[content as usize].children.push(n);
+            let n = self.morph(mb);
+            self.attach(content, n);
         }
         for &child in &an.children {
             let n = self.node(child)?;
-            self.b.nodes[content as usize].children.push(n);
+            self.attach(content, n);
         }
         Ok(outer)
     }
 
     /// A node whose mesh morphs through the keys of `mb`: target `k` is key `k+1` minus
     /// key 0, and weights `e_{j-1}·(1−f) + e_j·f` between keys `j` and `j+1`.
-    fn morph(&mut self, mb: &MorphBatch) -> Result<u32, ImportError> {
+    fn morph(&mut self, mb: &MorphBatch) -> usize {
         let keys = mb.times.len();
         let base = &mb.positions[0];
         let base_n = &mb.normals[0];
-        let targets: Vec<Vec<Vec3>> = (1..keys)
-            .map(|k| {
-                mb.positions[k]
-                    .iter()
-                    .zip(base)
-                    .map(|(p, q)| *p - *q)
-                    .collect()
-            })
-            .collect();
-        let target_normals: Vec<Vec<Vec3>> = (1..keys)
-            .map(|k| {
-                mb.normals[k]
-                    .iter()
-                    .zip(base_n)
-                    .map(|(p, q)| *p - *q)
-                    .collect()
+        let diff = |a: &[Vec3], b: &[Vec3]| -> Vec<Vec3> {
+            a.iter().zip(b).map(|(p, q)| *p - *q).collect()
+        };
+        let morph_targets: Vec<MorphTarget> = (1..keys)
+            .map(|k| MorphTarget {
+                positions: diff(&mb.positions[k], base),
+                normals: diff(&mb.normals[k], base_n),
             })
             .collect();
         let weights_at = |t: f64| -> Vec<f32> {
@@ -390,27 +437,29 @@ impl Conv<'_> {
             }
             w
         };
-        let material = self.material(mb.material, None)?;
-        let mesh = self.b.add_mesh(MeshDesc {
+        let material = self.material(mb.material, None);
+        let n = base.len() as u32;
+        self.s.meshes.push(Mesh {
             name: Some("tpa".into()),
-            primitives: vec![PrimitiveDesc {
+            primitives: vec![Primitive {
                 positions: base.clone(),
                 normals: Some(base_n.clone()),
                 uvs: None,
-                indices: None,
-                material: Some(material),
-                morph_targets: targets,
-                morph_normals: target_normals,
+                // Consecutive vertices form triangles.
+                triangles: (0..n / 3).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect(),
+                material,
+                morph_targets,
+                ..Primitive::default()
             }],
             weights: weights_at(self.rest),
         });
-        let node = self.b.add_node(NodeDesc {
+        let node = self.add_node(Node {
             name: Some("tpa".into()),
-            mesh: Some(mesh),
-            ..NodeDesc::default()
+            mesh: Some(self.s.meshes.len() - 1),
+            ..Node::default()
         });
         if let Some(fr) = &self.frames {
-            // Keys at or before t0 collapse into one key at glTF time 0 (the value at t0);
+            // Keys at or before t0 collapse into one key at time 0 (the value at t0);
             // later keys keep their times (exact: weights are linear between keys).
             let mut times = vec![0.0f32];
             let mut values = weights_at(fr.t0);
@@ -421,7 +470,7 @@ impl Conv<'_> {
                     values.extend(weights_at(k));
                 }
             }
-            self.channels.push(ChannelDesc {
+            self.channels.push(Channel {
                 node,
                 property: Property::Weights,
                 interpolation: Interpolation::Linear,
@@ -429,7 +478,7 @@ impl Conv<'_> {
                 values,
             });
         }
-        Ok(node)
+        node
     }
 
     fn camera(&mut self) {
@@ -437,21 +486,26 @@ impl Conv<'_> {
         let Some(cam) = aff.camera_at(self.rest) else {
             return;
         };
-        let c = self.b.add_camera(CameraDesc {
+        self.s.cameras.push(CameraDef {
             name: Some("camera".into()),
-            yfov: cam.yfov,
-            aspect: cam.aspect,
-            znear: cam.znear,
-            zfar: None,
+            projection: Projection::Perspective {
+                yfov: cam.yfov,
+                aspect: cam.aspect,
+                znear: cam.znear,
+                zfar: None,
+            },
         });
-        let node = self.b.add_node(NodeDesc {
+        let node = self.add_node(Node {
             name: Some("camera".into()),
-            translation: cam.position.as_vec3(),
-            rotation: f32q(cam.rotation),
-            camera: Some(c),
-            ..NodeDesc::default()
+            transform: trs(
+                cam.position.as_vec3(),
+                rest_rotation(cam.rotation),
+                Vec3::ONE,
+            ),
+            camera: Some(self.s.cameras.len() - 1),
+            ..Node::default()
         });
-        self.b.add_root(node);
+        self.s.roots.push(node);
         if let Some(tr) = aff.tracks.get("camera") {
             if !tr.translation.is_empty() {
                 self.sampled(node, Property::Translation, |t| {
@@ -472,7 +526,7 @@ impl Conv<'_> {
     fn lights(&mut self) {
         let aff = self.aff;
         for (i, l) in aff.lights.iter().enumerate() {
-            let light = self.b.add_light(LightDef {
+            self.s.lights.push(LightDef {
                 name: l.name.clone().or_else(|| Some(format!("light {i}"))),
                 kind: LightKind::Point,
                 color: l.color,
@@ -487,13 +541,13 @@ impl Conv<'_> {
             let position = tracks
                 .and_then(|tr| tr.translation_at(self.rest))
                 .map_or(l.position, |p| p.as_vec3());
-            let node = self.b.add_node(NodeDesc {
+            let node = self.add_node(Node {
                 name: l.name.clone(),
-                translation: position,
-                light: Some(light),
-                ..NodeDesc::default()
+                transform: trs(position, Quat::IDENTITY, Vec3::ONE),
+                light: Some(self.s.lights.len() - 1),
+                ..Node::default()
             });
-            self.b.add_root(node);
+            self.s.roots.push(node);
             if let Some(tr) = tracks {
                 self.sampled(node, Property::Translation, |t| {
                     tr.translation_at(t)
