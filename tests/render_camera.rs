@@ -7,14 +7,13 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
+use common::build::{diffuse, linear, mesh, perspective, placed, SceneBuilder};
 use common::farm::{ok, s, stderr, subfield};
 use common::render_scene::{quad, temp_dir};
 use glam::{Quat, Vec3, Vec4};
-use subfield::import::{
-    AnimationDesc, CameraDesc, ChannelDesc, GltfBuilder, MaterialDesc, MeshDesc, NodeDesc,
-};
 use subfield::render::{self, RenderOptions};
-use subfield::scene::{ClipSelection, Interpolation, Property};
+use subfield::scene::{Animation, Node, Scene};
+use subfield::scene::{ClipSelection, Property};
 
 /// Width, height and channels (name → samples as f32) of an EXR frame.
 fn read_exr(path: &Path) -> (usize, usize, Vec<(String, Vec<f32>)>) {
@@ -50,43 +49,32 @@ const YFOV: f32 = 0.6;
 
 /// A camera of aspect ratio `aspect` at the origin looking down -Z at a grey square of
 /// side 2·HALF facing it at distance DIST (no lights: the default light shines on it).
-fn square_scene(aspect: Option<f32>) -> GltfBuilder {
-    let mut b = GltfBuilder::new();
-    let grey = b.add_material(MaterialDesc {
-        name: Some("grey".into()),
-        base_color: Vec4::new(0.6, 0.6, 0.6, 1.0),
-        ..Default::default()
-    });
-    let mesh = b.add_mesh(MeshDesc {
-        name: Some("square".into()),
-        primitives: vec![quad(
+fn square_scene(aspect: Option<f32>) -> Scene {
+    let mut b = SceneBuilder::new();
+    let grey = b.add_material(diffuse("grey", Vec4::new(0.6, 0.6, 0.6, 1.0), 1.0));
+    let m = b.add_mesh(mesh(
+        "square",
+        vec![quad(
             Vec3::new(0.0, 0.0, -DIST),
             Vec3::X * HALF,
             Vec3::Y * HALF,
             grey,
         )],
-        weights: vec![],
-    });
-    let cam = b.add_camera(CameraDesc {
-        name: Some("wide".into()),
-        yfov: YFOV,
-        aspect,
-        znear: 0.1,
-        zfar: None,
-    });
-    let sq = b.add_node(NodeDesc {
+    ));
+    let cam = b.add_camera(perspective("wide", YFOV, aspect, 0.1, None));
+    let sq = b.add_node(Node {
         name: Some("square".into()),
-        mesh: Some(mesh),
+        mesh: Some(m),
         ..Default::default()
     });
-    let c = b.add_node(NodeDesc {
+    let c = b.add_node(Node {
         name: Some("camera".into()),
         camera: Some(cam),
         ..Default::default()
     });
     b.add_root(sq);
     b.add_root(c);
-    b
+    b.finish()
 }
 
 /// The bounding box (width, height) in pixels of the covered pixels (alpha > 0.5).
@@ -112,7 +100,7 @@ fn covered_extent(path: &Path) -> (usize, usize, usize, usize) {
 fn an_off_aspect_camera_keeps_its_square_square() {
     let dir = temp_dir("camera-square");
     let scene = dir.join("wide.glb");
-    square_scene(Some(16.0 / 9.0)).write(&scene).unwrap();
+    subfield::import::write_gltf(&square_scene(Some(16.0 / 9.0)), &scene).unwrap();
     // Pixels tall the square is: yfov is vertical whatever the image's width.
     let expect = |h: usize| h as f32 * (HALF / DIST) / (YFOV / 2.0).tan();
     for (size, warned) in [("640x480", true), ("640x360", false), ("300x400", true)] {
@@ -154,7 +142,7 @@ fn an_off_aspect_camera_keeps_its_square_square() {
     assert!(sw.abs_diff(sh) <= 1, "{sw}x{sh}");
     // A camera without an aspect ratio: 640x480 and no warning at any size.
     let free = dir.join("free.glb");
-    square_scene(None).write(&free).unwrap();
+    subfield::import::write_gltf(&square_scene(None), &free).unwrap();
     let out = dir.join("free.exr");
     let o = ok(&["render", s(&free), "-o", s(&out)]);
     assert!(!stderr(&o).contains("warning:"), "{}", stderr(&o));
@@ -166,7 +154,7 @@ fn an_off_aspect_camera_keeps_its_square_square() {
 fn exposure_scales_the_written_radiance_and_is_a_render_option() {
     let dir = temp_dir("camera-exposure");
     let scene = dir.join("sq.glb");
-    square_scene(None).write(&scene).unwrap();
+    subfield::import::write_gltf(&square_scene(None), &scene).unwrap();
     let base = dir.join("ev0.exr");
     let common = ["--size", "96x64", "--float", "--aov", "depth,albedo"];
     let run = |out: &Path, extra: &[&str]| {
@@ -220,7 +208,7 @@ fn exposure_scales_the_written_radiance_and_is_a_render_option() {
 fn render_writes_a_preview_of_its_first_frame() {
     let dir = temp_dir("camera-preview");
     let scene = dir.join("sq.glb");
-    square_scene(None).write(&scene).unwrap();
+    subfield::import::write_gltf(&square_scene(None), &scene).unwrap();
     let png = dir.join("look/preview.png");
     let o = ok(&[
         "render",
@@ -272,54 +260,46 @@ fn render_writes_a_preview_of_its_first_frame() {
 
 /// Two cubes (nodes 0 and 1) in front of a camera, and clips: each `(name, node, dx)`
 /// moves `node` by `dx` along +X over one second.
-fn clip_scene(clips: &[(&str, u32, f32)]) -> GltfBuilder {
-    let mut b = GltfBuilder::new();
-    let grey = b.add_material(MaterialDesc::default());
+fn clip_scene(clips: &[(&str, u32, f32)]) -> Scene {
+    let mut b = SceneBuilder::new();
+    let grey = b.add_material(diffuse("grey", Vec4::ONE, 1.0));
     let mut nodes = Vec::new();
     for (i, x) in [-1.5f32, 1.5].into_iter().enumerate() {
-        let mesh = b.add_mesh(MeshDesc {
+        let m = b.add_mesh(mesh(
+            &format!("cube{i}"),
+            vec![common::render_scene::cube(Vec3::splat(0.5), grey)],
+        ));
+        let n = b.add_node(Node {
             name: Some(format!("cube{i}")),
-            primitives: vec![common::render_scene::cube(Vec3::splat(0.5), grey)],
-            weights: vec![],
-        });
-        let n = b.add_node(NodeDesc {
-            name: Some(format!("cube{i}")),
-            mesh: Some(mesh),
-            translation: Vec3::new(x, 0.0, 0.0),
+            mesh: Some(m),
+            transform: placed(Vec3::new(x, 0.0, 0.0), Quat::IDENTITY),
             ..Default::default()
         });
         b.add_root(n);
         nodes.push(n);
     }
-    let cam = b.add_camera(CameraDesc {
-        name: Some("cam".into()),
-        yfov: 0.9,
-        aspect: None,
-        znear: 0.1,
-        zfar: None,
-    });
-    let c = b.add_node(NodeDesc {
+    let cam = b.add_camera(perspective("cam", 0.9, None, 0.1, None));
+    let c = b.add_node(Node {
         camera: Some(cam),
-        translation: Vec3::new(0.0, 0.0, 8.0),
-        rotation: Quat::IDENTITY,
+        transform: placed(Vec3::new(0.0, 0.0, 8.0), Quat::IDENTITY),
         ..Default::default()
     });
     b.add_root(c);
     for &(name, node, dx) in clips {
         let x = if node == 0 { -1.5 } else { 1.5 };
-        b.add_animation(AnimationDesc {
+        b.add_animation(Animation {
             name: Some(name.into()),
-            channels: vec![ChannelDesc {
-                node: nodes[node as usize],
-                property: Property::Translation,
-                interpolation: Interpolation::Linear,
-                times: vec![0.0, 1.0],
-                values: vec![x, 0.0, 0.0, x + dx, 0.0, 0.0],
-            }],
+            channels: vec![linear(
+                nodes[node as usize],
+                Property::Translation,
+                vec![0.0, 1.0],
+                vec![x, 0.0, 0.0, x + dx, 0.0, 0.0],
+            )],
         });
     }
-    b.fps = Some(4.0);
-    b
+    let mut scene = b.finish();
+    scene.fps = Some(4.0);
+    scene
 }
 
 fn rgba(path: &Path) -> Vec<Vec<f32>> {
@@ -334,9 +314,11 @@ fn rgba(path: &Path) -> Vec<Vec<f32>> {
 fn clips_on_the_same_target_play_the_first_alone_with_one_warning() {
     let dir = temp_dir("camera-clips");
     let scene_path = dir.join("clash.glb");
-    clip_scene(&[("walk", 0, 1.0), ("run", 0, -1.0), ("wave", 1, 0.5)])
-        .write(&scene_path)
-        .unwrap();
+    subfield::import::write_gltf(
+        &clip_scene(&[("walk", 0, 1.0), ("run", 0, -1.0), ("wave", 1, 0.5)]),
+        &scene_path,
+    )
+    .unwrap();
     let scene = subfield::import::load(&scene_path).unwrap();
     let (sel, warning) = scene.default_clips();
     assert_eq!(sel, ClipSelection::One(0));
@@ -400,9 +382,11 @@ fn clips_on_the_same_target_play_the_first_alone_with_one_warning() {
 fn clips_on_disjoint_targets_play_together() {
     let dir = temp_dir("camera-clips-disjoint");
     let scene_path = dir.join("apart.glb");
-    clip_scene(&[("left", 0, 1.0), ("right", 1, -1.0)])
-        .write(&scene_path)
-        .unwrap();
+    subfield::import::write_gltf(
+        &clip_scene(&[("left", 0, 1.0), ("right", 1, -1.0)]),
+        &scene_path,
+    )
+    .unwrap();
     let scene = subfield::import::load(&scene_path).unwrap();
     assert_eq!(scene.default_clips(), (ClipSelection::All, None));
     let plan = render::plan(

@@ -7,11 +7,14 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
+use common::build::{placed, SceneBuilder};
 use common::render_scene::{quad, temp_dir};
 use glam::{Quat, Vec3, Vec4};
-use subfield::import::{self, GltfBuilder, MaterialDesc, MeshDesc, NodeDesc, PrimitiveDesc};
+use subfield::import;
 use subfield::render::{self, FrameRange, LookAt, PixelType, RenderOptions};
-use subfield::scene::{Image, LightDef, LightKind, Scene, Texture, TextureRef, Wrap};
+use subfield::scene::{
+    Image, LightDef, LightKind, Material, Mesh, Node, Primitive, Scene, Texture, TextureRef, Wrap,
+};
 
 /// Channel name → samples, read with the `exr` crate.
 fn read_exr(path: &Path) -> (usize, Vec<(String, Vec<f32>)>) {
@@ -71,18 +74,27 @@ fn render(
     (Frame { width: w, rgb }, out)
 }
 
-fn load(b: &GltfBuilder, dir: &Path) -> Scene {
+/// A dielectric with the spec's other defaults (what the scenes here start from).
+fn dielectric() -> Material {
+    Material {
+        metallic: 0.0,
+        ..Material::default()
+    }
+}
+
+/// The scene written as GLB and imported back, as a user's file would be.
+fn load(b: SceneBuilder, dir: &Path) -> Scene {
     let path = dir.join("scene.glb");
-    b.write(&path).unwrap();
+    import::write_gltf(&b.finish(), &path).unwrap();
     import::load(&path).unwrap()
 }
 
-fn add_mesh(b: &mut GltfBuilder, primitives: Vec<PrimitiveDesc>) {
-    let mesh = b.add_mesh(MeshDesc {
+fn add_mesh(b: &mut SceneBuilder, primitives: Vec<Primitive>) {
+    let mesh = b.add_mesh(Mesh {
         primitives,
         ..Default::default()
     });
-    let n = b.add_node(NodeDesc {
+    let n = b.add_node(Node {
         mesh: Some(mesh),
         ..Default::default()
     });
@@ -90,7 +102,7 @@ fn add_mesh(b: &mut GltfBuilder, primitives: Vec<PrimitiveDesc>) {
 }
 
 /// A directional light of `lux` shining along `dir`.
-fn add_sun(b: &mut GltfBuilder, dir: Vec3, lux: f32) {
+fn add_sun(b: &mut SceneBuilder, dir: Vec3, lux: f32) {
     let sun = b.add_light(LightDef {
         name: None,
         kind: LightKind::Directional,
@@ -98,9 +110,12 @@ fn add_sun(b: &mut GltfBuilder, dir: Vec3, lux: f32) {
         intensity: lux,
         range: None,
     });
-    let n = b.add_node(NodeDesc {
+    let n = b.add_node(Node {
         light: Some(sun),
-        rotation: Quat::from_rotation_arc(-Vec3::Z, dir.normalize()),
+        transform: placed(
+            Vec3::ZERO,
+            Quat::from_rotation_arc(-Vec3::Z, dir.normalize()),
+        ),
         ..Default::default()
     });
     b.add_root(n);
@@ -119,17 +134,17 @@ fn down_at(x: f32, y: f32, z: f32, yfov_deg: f32) -> LookAt {
 /// vertical bar facing the wall: the wall shows the bar's reflection in the middle of
 /// the image. Returns the centre row's red channel.
 fn reflected_bar(dir: &Path, roughness: f32, spp: u32) -> Vec<f32> {
-    let mut b = GltfBuilder::new();
-    let wall = b.add_material(MaterialDesc {
+    let mut b = SceneBuilder::new();
+    let wall = b.add_material(Material {
         base_color: Vec4::ONE,
         metallic: 1.0,
         roughness,
-        ..Default::default()
+        ..dielectric()
     });
-    let bar = b.add_material(MaterialDesc {
+    let bar = b.add_material(Material {
         base_color: Vec4::new(0.0, 0.0, 0.0, 1.0),
         emissive: Vec3::ONE,
-        ..Default::default()
+        ..dielectric()
     });
     add_mesh(
         &mut b,
@@ -139,7 +154,7 @@ fn reflected_bar(dir: &Path, roughness: f32, spp: u32) -> Vec<f32> {
             quad(Vec3::new(0.0, 0.0, 6.0), Vec3::Y * 4.0, Vec3::X * 0.5, bar),
         ],
     );
-    let scene = load(&b, dir);
+    let scene = load(b, dir);
     let look = LookAt {
         from: Vec3::new(0.0, 0.0, 4.0),
         at: Vec3::ZERO,
@@ -198,16 +213,16 @@ fn a_rough_wall_shows_no_sharp_reflection_and_a_smooth_one_mirrors() {
 /// A white floor, an emissive square 2 above it facing down, and (optionally) an
 /// opaque square halfway between; no other light, no ambient.
 fn lamp_scene(dir: &Path, occluder: bool) -> Scene {
-    let mut b = GltfBuilder::new();
-    let white = b.add_material(MaterialDesc {
+    let mut b = SceneBuilder::new();
+    let white = b.add_material(Material {
         base_color: Vec4::new(0.8, 0.8, 0.8, 1.0),
         roughness: 1.0,
-        ..Default::default()
+        ..dielectric()
     });
-    let lamp = b.add_material(MaterialDesc {
+    let lamp = b.add_material(Material {
         base_color: Vec4::new(0.0, 0.0, 0.0, 1.0),
         emissive: Vec3::ONE,
-        ..Default::default()
+        ..dielectric()
     });
     let mut prims = vec![
         quad(Vec3::ZERO, Vec3::Z * 10.0, Vec3::X * 10.0, white),
@@ -223,7 +238,7 @@ fn lamp_scene(dir: &Path, occluder: bool) -> Scene {
         ));
     }
     add_mesh(&mut b, prims);
-    load(&b, dir)
+    load(b, dir)
 }
 
 /// Irradiance at floor point `(x, 0, 0)` from the unit lamp of [`lamp_scene`]
@@ -391,11 +406,11 @@ fn image(texels: &[[u8; 4]]) -> Image {
 #[test]
 fn a_normal_mapped_plane_follows_the_map() {
     let dir = temp_dir("shading-normal");
-    let mut b = GltfBuilder::new();
-    let grey = b.add_material(MaterialDesc {
+    let mut b = SceneBuilder::new();
+    let grey = b.add_material(Material {
         base_color: Vec4::new(0.5, 0.5, 0.5, 1.0),
         roughness: 1.0,
-        ..Default::default()
+        ..dielectric()
     });
     // Floor facing +Y; u runs along +Z, v along +X (see `quad`).
     add_mesh(
@@ -404,7 +419,7 @@ fn a_normal_mapped_plane_follows_the_map() {
     );
     let to_light = Vec3::new(-1.0, 2.0, 1.0).normalize();
     add_sun(&mut b, -to_light, 2.0);
-    let mut scene = load(&b, &dir);
+    let mut scene = load(b, &dir);
     // Three texels along u: tilted 30° towards +tangent (+Z), towards -tangent, and
     // towards +Y of the map, which glTF puts towards decreasing v (-X here).
     let (s, c) = (0.5f32, 0.75f32.sqrt());
@@ -481,11 +496,11 @@ fn a_normal_mapped_plane_follows_the_map() {
 #[test]
 fn a_checkerboard_to_the_horizon_averages_to_grey_at_one_spp() {
     let dir = temp_dir("shading-checker");
-    let mut b = GltfBuilder::new();
-    let board = b.add_material(MaterialDesc {
+    let mut b = SceneBuilder::new();
+    let board = b.add_material(Material {
         base_color: Vec4::ONE,
         roughness: 1.0,
-        ..Default::default()
+        ..dielectric()
     });
     // A 1000 × 1000 floor, a 2 × 2 checker repeated 500 times each way (texels of
     // one world unit).
@@ -498,7 +513,7 @@ fn a_checkerboard_to_the_horizon_averages_to_grey_at_one_spp() {
     add_mesh(&mut b, vec![floor]);
     // Straight down at π lux: radiance = albedo for a white rough diffuse floor.
     add_sun(&mut b, -Vec3::Y, std::f32::consts::PI);
-    let mut scene = load(&b, &dir);
+    let mut scene = load(b, &dir);
     scene.images.push(Image {
         name: None,
         width: 2,

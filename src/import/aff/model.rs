@@ -62,6 +62,8 @@ pub fn material(m: &AffMaterial, texture: Option<u32>) -> Material {
         emissive: Vec3::ZERO,
         emissive_strength: 1.0,
         emissive_texture: None,
+        normal_texture: None,
+        normal_scale: 1.0,
         transmission: clamp01(m.transmittance),
         ior: if m.ior >= 1.0 { m.ior } else { 1.5 },
         double_sided: m.transmittance > 0.0,

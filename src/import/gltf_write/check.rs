@@ -45,6 +45,7 @@ pub(super) fn check(scene: &Scene) -> Result<(), ImportError> {
             &m.base_color_texture,
             &m.metallic_roughness_texture,
             &m.emissive_texture,
+            &m.normal_texture,
         ];
         if let Some(r) = refs.into_iter().flatten().find(|r| r.tex_coord != 0) {
             return bad(format!(

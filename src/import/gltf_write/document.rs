@@ -133,6 +133,13 @@ fn material_json(m: &Material, extras: Option<&Option<Value>>, used: &mut Used) 
     if let Some(t) = &m.emissive_texture {
         o.insert("emissiveTexture".into(), texture_info(t));
     }
+    if let Some(t) = &m.normal_texture {
+        let mut info = texture_info(t);
+        if m.normal_scale != 1.0 {
+            info["scale"] = json!(m.normal_scale);
+        }
+        o.insert("normalTexture".into(), info);
+    }
     if m.transmission != 0.0 {
         used.insert("KHR_materials_transmission");
         ext.insert(
