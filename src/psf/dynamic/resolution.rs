@@ -33,7 +33,7 @@ const BINS: usize = 32;
 /// finite and inside `bounds` (as [`super::checked_bounds`] gives them).
 pub(super) fn frame_tiles(tris: &[[Vec3; 3]], bounds: &Aabb, max_tiles: u32) -> u32 {
     let side = (bounds.max - bounds.min).max_element();
-    if tris.is_empty() || !(side > 0.0) || !side.is_finite() {
+    if tris.is_empty() || !side.is_finite() || side <= 0.0 {
         return max_tiles;
     }
     let mut hist = [0u32; BINS];
