@@ -163,7 +163,82 @@ fn rays(rng: &mut Rng, n: usize, moving: &[[Vec3; 3]], before: &[[Vec3; 3]]) -> 
     out
 }
 
+/// This frame's moving triangles gathered tightly (issue 23): every triangle in a ball a
+/// few of its widths across (the shared generator's clusters), on a thin spherical
+/// shell, stacked on one another (each spanning the whole grid, ties between equal
+/// copies decided by the triangle number), a ball with a few far outliers (the bounds
+/// wide, the triangles small), or a ball of large triangles beside tiny ones.
+fn clustered_tris(rng: &mut Rng, n: usize) -> (Vec<[Vec3; 3]>, &'static str) {
+    let n = if rng.below(4) == 0 {
+        1 + rng.below(2 * n + 1)
+    } else {
+        n
+    };
+    let mode = rng.below(5);
+    let c = rng.in_box(LO + 1.0, HI - 1.0);
+    let s = rng.range(0.02, 1.0);
+    let mut out = Vec::with_capacity(n);
+    let base = tri_at(rng, c, s);
+    for k in 0..n {
+        let t = match mode {
+            // a ball 2-5 triangle widths across
+            0 => {
+                let r = s * rng.range(1.0, 2.5);
+                let p = c + rng.unit() * r * rng.f32().cbrt();
+                tri_at(rng, p, s)
+            }
+            // a thin shell: triangles tangent-ish to a sphere of a few widths
+            1 => {
+                let r = s * rng.range(1.5, 3.0);
+                let u = rng.unit();
+                let p = c + u * r;
+                let (a, b) = u.any_orthonormal_pair();
+                let w = s * rng.range(0.5, 1.0);
+                [
+                    p + a * w,
+                    p - a * w * 0.5 + b * w,
+                    p - a * w * 0.5 - b * w + u * 1e-4,
+                ]
+            }
+            // stacked: copies of one triangle, some exact, some a hair apart
+            2 => {
+                if rng.below(2) == 0 {
+                    base
+                } else {
+                    base.map(|v| v + rng.unit() * 1e-5)
+                }
+            }
+            // a ball with a few far outliers
+            3 => {
+                if k % 97 == 1 {
+                    let mut p = c;
+                    p[rng.below(3)] += rng.range(20.0, 2000.0);
+                    tri_at(rng, p, s)
+                } else {
+                    let p = c + rng.unit() * s * 2.0 * rng.f32();
+                    tri_at(rng, p, s)
+                }
+            }
+            // a ball of mixed sizes: large triangles among tiny ones
+            _ => {
+                let p = c + rng.unit() * s * 2.0 * rng.f32();
+                let size = if rng.below(3) == 0 { s * 3.0 } else { s * 0.02 };
+                tri_at(rng, p, size)
+            }
+        };
+        out.push(t);
+    }
+    let name = ["ball", "shell", "stacked", "ball+outliers", "mixed sizes"][mode];
+    (out, name)
+}
+
 fn check(c: &Case) -> Result<(), TestCaseError> {
+    check_with(c, frame_tris)
+}
+
+type FrameGen = fn(&mut Rng, usize) -> (Vec<[Vec3; 3]>, &'static str);
+
+fn check_with(c: &Case, frame_tris: FrameGen) -> Result<(), TestCaseError> {
     let mut rng = Rng::new(c.seed);
     let stat = static_scene(&mut rng);
     let psf = Psf::build(&stat, &c.static_params).expect("bake");
@@ -249,6 +324,16 @@ proptest! {
     #[test]
     fn layered_agrees_with_brute_force_over_frames(c in case()) {
         check(&c)?;
+    }
+}
+
+proptest! {
+    // 64 cases x 6 frames x 400 rays of clustered motion, where the layer lists the
+    // triangles in grids coarser than its parameters' (`resolution` in the layer).
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+    #[test]
+    fn clustered_motion_agrees_with_brute_force(c in case()) {
+        check_with(&c, clustered_tris)?;
     }
 }
 

@@ -22,11 +22,13 @@
 //!   the others and using none of them;
 //! * `insert`: the two passes that insert a frame's triangles into one direction;
 //! * `morton`: the triangles' Morton order;
+//! * `resolution`: the tile count of a frame's grids, from the triangles' sizes;
 //! * `layered`: the static PSF and the layer queried together ([`Layered`], [`Prim`]).
 
 mod insert;
 mod layered;
 mod morton;
+mod resolution;
 mod tiles;
 
 #[cfg(test)]
@@ -216,8 +218,11 @@ impl DynamicLayer {
             self.local.clear();
             return Ok(());
         }
-        let (gv, margin, clip, tiles) =
-            (self.generation, self.margin, self.clip, self.params.tiles);
+        // Fewer tiles than the parameters' where the triangles are large beside their
+        // spread (`resolution`): clustered frames would otherwise clip each triangle
+        // into hundreds of tiles.
+        let tiles = resolution::frame_tiles(tris, &bounds, self.params.tiles);
+        let (gv, margin, clip) = (self.generation, self.margin, self.clip);
         let (keys, counts, order, rank) = (
             &mut self.keys,
             &mut self.counts,
