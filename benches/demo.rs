@@ -53,9 +53,18 @@ fn main() {
     };
     let t = Instant::now();
     // On a pool thread, as `subfield demo` and `subfield render` run.
-    let summary = rayon::scope(|_| render_sequence(&scene, &opts, &mut |_| {})).expect("render");
+    // Per-frame figures from the frame events (a summary keeps only their sums).
+    let mut per_frame = Vec::new();
+    rayon::scope(|_| {
+        render_sequence(&scene, &opts, &mut |e| {
+            if let subfield::render::RenderEvent::Frame(r) = e {
+                per_frame.extend(r.stats);
+            }
+        })
+    })
+    .expect("render");
     let wall = t.elapsed().as_secs_f64();
-    let f = &summary.frames;
+    let f = &per_frame;
     let col =
         |g: fn(&subfield::render::FrameStats) -> f64| stats(&f.iter().map(g).collect::<Vec<_>>());
     println!(

@@ -11,7 +11,7 @@ use anyhow::Context;
 use subfield::format::{write_psf, WriteOptions};
 use subfield::gen::museum::{write_museum, MuseumParams};
 use subfield::import;
-use subfield::render::{PreviewOptions, RenderOptions};
+use subfield::render::{OutputPattern, PreviewOptions, RenderOptions};
 use subfield::scene::ClipSelection;
 use subfield::{Psf, PsfParams};
 
@@ -52,6 +52,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let (width, height) = parse::parse_size(&a.size)?;
     super::set_threads(a.threads)?;
     let dir = &a.output;
+    check_outputs(dir)?;
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
 
     let clock = Instant::now();
@@ -77,8 +78,9 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
 
     let mid = match &frames {
         Some(set) => {
-            let list = set.frames()?;
-            list[list.len() / 2]
+            set.check()?;
+            let n = set.iter().count();
+            set.iter().nth(n / 2).unwrap_or_default()
         }
         None => params.frames / 2,
     };
@@ -100,11 +102,42 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         }),
         ..RenderOptions::default()
     };
-    let summary = super::render::drive(&scene, &scene_path, &opts, a.quiet, Vec::new())?;
+    let Some(summary) = super::render::drive(&scene, &scene_path, &opts, a.quiet, Vec::new())?
+    else {
+        return Ok(super::guard::interrupted_exit());
+    };
     if !a.quiet {
         if let Some(p) = &summary.preview {
             eprintln!("preview: {}", p.display());
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Refuses, before anything is written, a folder that holds something other than a
+/// regular file where the demo writes one: its scene, bake, stats, plot, preview, or a
+/// frame (any `frame.####.exr`).
+fn check_outputs(dir: &std::path::Path) -> anyhow::Result<()> {
+    if dir.exists() && !dir.is_dir() {
+        anyhow::bail!("-o {}: is not a folder", dir.display());
+    }
+    for name in [
+        "museum.glb",
+        "museum.psf",
+        "stats.csv",
+        "plot.svg",
+        "preview.png",
+    ] {
+        super::check_target("-o", &dir.join(name))?;
+    }
+    let frames = OutputPattern::parse(&dir.join("frame.####.exr"))?;
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            let frame = e.file_name().to_str().and_then(|n| frames.frame_of(n));
+            if frame.is_some() && !e.file_type().is_ok_and(|t| t.is_file()) {
+                super::check_target("-o", &e.path())?;
+            }
+        }
+    }
+    Ok(())
 }

@@ -83,13 +83,24 @@ pub fn print_stdout(text: &str) -> anyhow::Result<()> {
     }
 }
 
-/// Makes ready to write `path` (`-o`): creates its folder and checks a file can be made
-/// there, before any work; an error names the output.
+/// Refuses to write `path` when something other than a regular file is there (a
+/// folder, FIFO, socket, device, or a link to one or to nothing; see
+/// `subfield::atomic::write_target`); `flag` names the option that gave it.
+pub fn check_target(flag: &str, path: &std::path::Path) -> anyhow::Result<()> {
+    subfield::atomic::write_target(path)
+        .map_err(|e| anyhow::anyhow!("{flag} {}: {e}", path.display()))?;
+    Ok(())
+}
+
+/// Makes ready to write `path` (`-o`): refuses a path that is not a regular file
+/// ([`check_target`]), creates its folder and checks a file can be made there, before
+/// any work; an error names the output.
 pub fn prepare_output(path: &std::path::Path) -> anyhow::Result<()> {
     use anyhow::Context;
     if path.is_dir() || path.as_os_str().to_string_lossy().ends_with('/') {
         anyhow::bail!("-o {}: names a folder, not a file", path.display());
     }
+    check_target("-o", path)?;
     let folder = subfield::atomic::folder_of(path);
     std::fs::create_dir_all(&folder).with_context(|| {
         format!(

@@ -226,6 +226,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
             .map(|path| PreviewOptions { frame: None, path }),
         shading: Default::default(),
         exposure: a.exposure,
+        cancel: Default::default(),
     })
 }
 
@@ -254,8 +255,11 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         a.scene.display(),
         clock.elapsed().as_secs_f64()
     ));
-    let summary = drive(&scene, &a.scene, &opts, a.quiet, preface)
-        .with_context(|| format!("cannot render {}", a.scene.display()))?;
+    let Some(summary) = drive(&scene, &a.scene, &opts, a.quiet, preface)
+        .with_context(|| format!("cannot render {}", a.scene.display()))?
+    else {
+        return Ok(super::guard::interrupted_exit());
+    };
     if !a.quiet {
         match (&summary.preview, &opts.preview) {
             (Some(p), _) => eprintln!("preview: {}", p.display()),
@@ -269,14 +273,19 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Renders with progress and a closing report (shared with `subfield demo`).
+/// Renders with progress and a closing report (shared with `subfield demo`). Ctrl-C
+/// stops the run after the frame in flight: a line says what was written and how to
+/// carry on, and the answer is `None` (the command then exits with 130).
 pub fn drive(
     scene: &Scene,
     label: &Path,
     opts: &RenderOptions,
     quiet: bool,
     preface: Vec<String>,
-) -> anyhow::Result<render::RenderSummary> {
+) -> anyhow::Result<Option<render::RenderSummary>> {
+    let mut opts = opts.clone();
+    opts.cancel = super::guard::stop_on_interrupt();
+    let opts = &opts;
     let mut bar: Option<Progress> = None;
     // Messages wait until every check has passed, so that an error is the only line;
     // `preface` comes first (what was done before the scene was planned).
@@ -289,7 +298,7 @@ pub fn drive(
     // shared machines (`benches/PERF.md`, step 79: the demo's frame 409 → 383 ms). The
     // writer thread it feeds encodes without rayon (`non_parallel`), so a frame waiting
     // for the writer cannot hold up work the writer needs.
-    let summary = rayon::scope(|_| {
+    let result = rayon::scope(|_| {
         render::render_sequence(scene, opts, &mut |e| match e {
             RenderEvent::Planned(p) => {
                 pending.extend(p.warnings.iter().map(|w| format!("warning: {w}")));
@@ -344,20 +353,32 @@ pub fn drive(
                 b.set(done, &extra);
             }
         })
-    })?;
+    });
+    let summary = match result {
+        Err(e @ render::RenderError::Cancelled { .. }) => {
+            if let Some(b) = &bar {
+                b.finish();
+            }
+            // Said even with --quiet: it is the outcome of the run.
+            eprintln!("{e}");
+            return Ok(None);
+        }
+        r => r?,
+    };
     if !quiet {
-        let n = summary.rendered.max(1) as f64;
-        let per = |f: fn(&render::FrameStats) -> f64| summary.frames.iter().map(f).sum::<f64>() / n;
+        let t = &summary.totals;
+        let n = t.frames.max(1) as f64;
+        let per = |ms: f64| ms / n;
         let line = format!(
             "rendered {} ({} skipped as complete) to {} in {:.2} s; per frame: update {:.1} ms, trace {:.1} ms, shade {:.1} ms, write {:.1} ms",
             subfield::plural(summary.rendered as u64, "frame"),
             summary.skipped,
             opts.output.display(),
             summary.wall.as_secs_f64(),
-            per(|s| s.update_ms),
-            per(|s| s.trace_ms),
-            per(|s| s.shade_ms),
-            per(|s| s.write_ms),
+            per(t.update_ms),
+            per(t.trace_ms),
+            per(t.shade_ms),
+            per(t.write_ms),
         );
         match &bar {
             Some(b) => {
@@ -367,5 +388,5 @@ pub fn drive(
             None => eprintln!("{line}"),
         }
     }
-    Ok(summary)
+    Ok(Some(summary))
 }

@@ -200,9 +200,11 @@ fn complete(plan: &RenderPlan, opts: &RenderOptions, frame: u32) -> bool {
     )
 }
 
-/// Plans the work: checks every flag and input, makes the bake when none is given
-/// (unless `dry_run`: then it is made in memory, for its hash), and hashes both files.
-fn prepare(r: &render_cmd::Args, dry_run: bool) -> anyhow::Result<Work> {
+/// Plans the work: checks every flag and input (and that the files it writes, the bake
+/// and with `slurm_script` the job script, are not in the way of something that is not a
+/// regular file), makes the bake when none is given (unless `dry_run`: then it is made in
+/// memory, for its hash), and hashes both files.
+fn prepare(r: &render_cmd::Args, dry_run: bool, slurm_script: bool) -> anyhow::Result<Work> {
     refuse_task_flags(r)?;
     if r.stage_dir.as_ref().is_some_and(|d| d.is_relative()) {
         bail!(
@@ -229,12 +231,19 @@ fn prepare(r: &render_cmd::Args, dry_run: bool) -> anyhow::Result<Work> {
     let missing: Vec<u32> = plan
         .frames
         .iter()
-        .copied()
         .filter(|&f| !complete(&plan, &opts, f))
         .collect();
     let first = plan.pattern.path(plan.range.start);
     let dir = subfield::atomic::folder_of(&first);
     let base = base_name(&opts.output);
+    // The files this command writes, refused before any work when something other than
+    // a regular file is there (the frames are the tasks' to check).
+    if r.baked.is_none() {
+        super::check_target("-o", &dir.join(format!("{base}.psf")))?;
+    }
+    if slurm_script {
+        super::check_target("-o", &dir.join(format!("{base}.slurm.sh")))?;
+    }
 
     let (baked, baked_hash) = match &r.baked {
         Some(b) => {
@@ -320,7 +329,7 @@ fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
             farm::slurm::check_partition(p)?;
         }
     }
-    let w = prepare(r, a.dry_run)?;
+    let w = prepare(r, a.dry_run, !a.dry_run)?;
     if nothing_missing(&w, r.quiet) {
         return Ok(ExitCode::SUCCESS);
     }
@@ -382,7 +391,7 @@ fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::R
         w.plan
             .frames
             .iter()
-            .filter(|&&f| w.plan.pattern.path(f).is_file())
+            .filter(|&f| w.plan.pattern.path(f).is_file())
             .count() as u64
     };
     // squeue is cheap; a coarse poll would add its period to every wait.
@@ -405,7 +414,6 @@ fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::R
         .plan
         .frames
         .iter()
-        .copied()
         .filter(|&f| !complete(&w.plan, &w.opts, f))
         .collect();
     if missing.is_empty() {
@@ -480,7 +488,8 @@ fn openjd(a: OpenJdArgs) -> anyhow::Result<ExitCode> {
             a.template.display()
         );
     }
-    let w = prepare(r, false)?;
+    super::check_target("--template", &a.template)?;
+    let w = prepare(r, false, false)?;
     if nothing_missing(&w, r.quiet) {
         return Ok(ExitCode::SUCCESS);
     }

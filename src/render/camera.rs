@@ -9,6 +9,7 @@
 
 use glam::{Mat3, Quat, Vec3};
 
+use super::errors::OptionError;
 use super::options::{LookAt, RenderOptions, MAX_SIDE};
 use super::RenderError;
 use crate::geometry::Ray;
@@ -61,22 +62,15 @@ impl CameraModel {
     pub fn look_at(l: &LookAt, width: u32, height: u32) -> Result<CameraModel, RenderError> {
         let fwd = l.at - l.from;
         if fwd.length_squared() <= 0.0 || !fwd.is_finite() {
-            return Err(RenderError::Option(
-                "--look-from and --look-at are the same point".into(),
-            ));
+            return Err(OptionError::LookAtSamePoint.into());
         }
         if !(l.yfov_deg > 0.0 && l.yfov_deg < 180.0) {
-            return Err(RenderError::Option(format!(
-                "--yfov {}: must be between 0 and 180 degrees",
-                l.yfov_deg
-            )));
+            return Err(OptionError::Yfov(l.yfov_deg).into());
         }
         let z = -fwd.normalize();
         let x = l.up.cross(z);
         if x.length_squared() <= 1e-12 || !x.is_finite() {
-            return Err(RenderError::Option(
-                "--up is parallel to the viewing direction (or zero)".into(),
-            ));
+            return Err(OptionError::UpParallel.into());
         }
         let x = x.normalize();
         let y = z.cross(x);

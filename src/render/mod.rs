@@ -12,22 +12,26 @@
 //! ```
 //!
 //! Flow: [`plan`] checks every option against the scene without writing anything
-//! (range, shard, pattern, camera, plot format); [`render_sequence`] then opens or bakes
-//! the static part, checks the output folders are writable, and for each frame poses
-//! the scene, updates the dynamic layer, traces and shades (`render::shade`) in parallel and
-//! hands the finished frame to a writer thread over a channel of capacity 1, so one
-//! frame is written while the next is traced and memory stays flat.
+//! (range, shard, pattern, camera, plot format; the frames are a lazy [`FramePlan`], so
+//! nothing grows with their count); [`render_sequence`] then opens or bakes the static
+//! part, checks the outputs (writable folders; no folder, FIFO, socket or device where
+//! a file goes), and for each frame poses the scene, updates the dynamic layer, traces
+//! and shades (`render::shade`) in parallel and hands the finished frame to a writer thread over a channel of capacity 1, so one
+//! frame is written while the next is traced and memory stays flat. `--stats` rows are
+//! streamed as frames are written; [`RenderOptions::cancel`] stops the loop between
+//! frames.
 //!
 //! Files: `planning` (pattern, camera source, frames, the checks before writing, resume
 //! skips), `sequence` (the static part and the frame loop), `writer` (jobs, atomic
 //! writes, folders), `aov` (header matrices, projection, Cryptomatte ids), `wavefront` (one frame traced level by level), `shade` (Whitted shading of a hit, with
 //! glossy reflection and area lights), `lights` (emissive triangles as area lights),
 //! `sampling` (deterministic random numbers, GGX), `mips` (mip-maps, trilinear
-//! lookups), `camera`,
-//! `stats`, and `options` / `output` (the options and the EXR / PNG encoders).
+//! lookups), `camera`, `stats`, `options` / `output` (the options and the EXR / PNG
+//! encoders), and `errors` (the typed option and output errors).
 
 mod aov;
 mod camera;
+mod errors;
 mod lights;
 mod mips;
 mod options;
@@ -51,18 +55,19 @@ pub use camera::{
     size_matches, CameraModel, DEFAULT_WIDTH, MAX_EXPOSURE,
 };
 pub use mips::TextureMips;
+pub use errors::{FramesProblem, OptionError, OutputFile};
 pub use options::{
-    Aovs, FrameRange, FrameSet, FrameSpan, LookAt, PixelType, PreviewOptions, RenderOptions,
-    ShadingOptions, Shard, DEFAULT_CRYPTO_LEVELS, MAX_FRAMES, MAX_SIDE,
+    Aovs, CancelFlag, FrameRange, FrameSet, FrameSpan, LookAt, PixelType, PreviewOptions,
+    RenderOptions, ShadingOptions, Shard, DEFAULT_CRYPTO_LEVELS, MAX_FRAMES, MAX_SIDE,
 };
 pub use output::{
     channel_names, encode_exr, encode_preview, is_complete, linear_to_srgb8, software,
     OPTIONS_ATTRIBUTE,
 };
-pub use planning::{plan, CameraSource, OutputPattern, RenderPlan};
+pub use planning::{plan, CameraSource, FramePlan, OutputPattern, RenderPlan};
 pub use sequence::render_sequence;
 pub use shade::{CryptoBuffers, FrameBuffers, FrameWork, RayCounts, ShadeContext};
-pub use stats::{plot_png, plot_svg, stats_csv, FrameStats};
+pub use stats::{plot_png, plot_svg, stats_csv, FrameStats, FrameTotals, PLOT_BARS};
 pub use wavefront::{render_frame, sample_offset, AovInputs};
 
 use crate::format::FormatError;
@@ -71,10 +76,11 @@ use crate::scene::SceneError;
 
 /// Everything that can stop a render.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum RenderError {
     /// A bad option value (the message names the flag).
-    #[error("{0}")]
-    Option(String),
+    #[error(transparent)]
+    Option(#[from] OptionError),
     #[error("no camera {requested:?} in the scene (give a camera's name or its index in the file's cameras); available: {}", list(.available))]
     UnknownCamera {
         requested: String,
@@ -111,6 +117,35 @@ pub enum RenderError {
         #[source]
         source: image::ImageError,
     },
+    /// An output path (a frame, `--stats`, `--plot`, the preview) exists and is not a
+    /// regular file, or is a link to none: refused before anything is rendered.
+    #[error("{}: {source}", path.display())]
+    NotAFile {
+        path: PathBuf,
+        #[source]
+        source: crate::atomic::NotRegular,
+    },
+    /// Writing one of the run's files failed (a full disk, say); nothing partial is left
+    /// of it, and the frames written before it are complete.
+    #[error("cannot write {file} to {}: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        file: OutputFile,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The run was stopped through [`RenderOptions::cancel`] after the frame in flight:
+    /// every frame file written is complete, and a run with `resume` carries on.
+    #[error("interrupted: {} written by this run ({skipped} complete before it), {left} left; the same command with --resume carries on", crate::plural(*written as u64, "frame"))]
+    Cancelled {
+        /// Frames this run rendered and wrote.
+        written: usize,
+        /// Frames skipped as complete (`resume`).
+        skipped: usize,
+        /// Planned frames neither written nor skipped.
+        left: usize,
+    },
+    /// The writer thread ended without an answer (it cannot, short of a bug).
     #[error("the frame writer stopped unexpectedly")]
     WriterGone,
 }
@@ -170,8 +205,9 @@ pub struct RenderSummary {
     pub plan: RenderPlan,
     pub rendered: usize,
     pub skipped: usize,
-    /// Stats of the rendered frames, by frame number.
-    pub frames: Vec<FrameStats>,
+    /// The rendered frames' times and rays, summed (per-frame figures go to `--stats` as
+    /// each frame is written: a summary stays the same size whatever the frame count).
+    pub totals: FrameTotals,
     /// The preview written, if any.
     pub preview: Option<PathBuf>,
     pub static_seconds: f64,

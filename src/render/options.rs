@@ -2,8 +2,12 @@
 //! values (`A..B`, `WxH`, `I/N`, `X,Y,Z`) are parsed by the CLI (`src/cli/parse.rs`).
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 use glam::Vec3;
+
+use super::errors::{FramesProblem, OptionError};
 
 /// Frames `start..end`: inclusive start, exclusive end.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -12,8 +16,9 @@ pub struct FrameRange {
     pub end: u32,
 }
 
-/// Most frames one render takes: a typo such as `0..4000000000` is refused before any
-/// memory is spent on it.
+/// Most frames one render takes: a typo such as `0..4000000000` is refused at once, in
+/// one line. (A render's memory does not grow with its frame count: the frames are
+/// planned lazily and their statistics streamed; the limit only catches typos.)
 pub const MAX_FRAMES: u64 = 10_000_000;
 
 /// Every `step`-th frame of `start..end` (end exclusive, `step >= 1`): `--frames A..B:S`;
@@ -32,6 +37,25 @@ impl FrameSpan {
             return 0;
         }
         (self.end - self.start - 1) as u64 / self.step as u64 + 1
+    }
+}
+
+impl FrameSpan {
+    /// The span's first frame at or after `from`.
+    fn next_from(&self, from: u32) -> Option<u32> {
+        if self.step == 0 || self.end <= self.start {
+            return None;
+        }
+        let k = from.saturating_sub(self.start).div_ceil(self.step) as u64;
+        let f = self.start as u64 + k * self.step as u64;
+        (f < self.end as u64).then_some(f as u32)
+    }
+
+    /// Whether the span names `frame`.
+    pub fn contains(&self, frame: u32) -> bool {
+        self.step != 0
+            && (self.start..self.end).contains(&frame)
+            && (frame - self.start) % self.step == 0
     }
 }
 
@@ -117,40 +141,57 @@ impl FrameSet {
         self.spans.iter().map(FrameSpan::count).sum()
     }
 
-    /// The frames, ascending, each once; refuses an empty span, a step of 0, an empty set
-    /// and more than [`MAX_FRAMES`] frames (checked before anything is listed).
-    pub fn frames(&self) -> Result<Vec<u32>, super::RenderError> {
-        let bad = |why: String| {
-            Err(super::RenderError::Option(format!(
-                "--frames {self}: {why}"
-            )))
+    /// Checks the set: refuses an empty span, a step of 0, an empty set and more than
+    /// [`MAX_FRAMES`] frames (repeats counted), without listing anything.
+    pub fn check(&self) -> Result<(), OptionError> {
+        let bad = |problem| OptionError::Frames {
+            set: self.to_string(),
+            problem,
         };
         for s in &self.spans {
             if s.step == 0 {
-                return bad(format!("{s}: the step must be at least 1"));
+                return Err(bad(FramesProblem::ZeroStep {
+                    span: s.to_string(),
+                }));
             }
             if s.end <= s.start {
-                return bad(format!(
-                    "{s}: the range is empty (the end is exclusive and must be above the start)"
-                ));
+                return Err(bad(FramesProblem::EmptySpan {
+                    span: s.to_string(),
+                }));
             }
         }
-        let n = self.count();
-        if n == 0 {
-            return bad("no frames".into());
+        match self.count() {
+            0 => Err(bad(FramesProblem::NoFrames)),
+            n if n > MAX_FRAMES => Err(bad(FramesProblem::TooMany { count: n })),
+            _ => Ok(()),
         }
-        if n > MAX_FRAMES {
-            return bad(format!(
-                "{n} frames, more than the {MAX_FRAMES} a render takes (a typo?)"
-            ));
-        }
-        let mut out: Vec<u32> = Vec::with_capacity(n as usize);
-        for s in &self.spans {
-            out.extend((s.start..s.end).step_by(s.step as usize));
-        }
-        out.sort_unstable();
-        out.dedup();
-        Ok(out)
+    }
+
+    /// Whether the set names `frame`.
+    pub fn contains(&self, frame: u32) -> bool {
+        self.spans.iter().any(|s| s.contains(frame))
+    }
+
+    /// The set's first frame at or after `from`.
+    pub fn next_from(&self, from: u32) -> Option<u32> {
+        self.spans.iter().filter_map(|s| s.next_from(from)).min()
+    }
+
+    /// The frames, ascending, each once, listed lazily (nothing is allocated: a set of
+    /// ten million frames costs what one costs).
+    pub fn iter(&self) -> impl Iterator<Item = u32> + '_ {
+        let mut next = self.next_from(0);
+        std::iter::from_fn(move || {
+            let f = next?;
+            next = f.checked_add(1).and_then(|n| self.next_from(n));
+            Some(f)
+        })
+    }
+
+    /// The frames, ascending, each once, as a list, after [`FrameSet::check`].
+    pub fn frames(&self) -> Result<Vec<u32>, super::RenderError> {
+        self.check()?;
+        Ok(self.iter().collect())
     }
 }
 
@@ -317,6 +358,34 @@ impl Default for ShadingOptions {
     }
 }
 
+/// A flag that stops a render after the frame in flight when set (from another thread or
+/// a signal handler): [`render_sequence`](super::render_sequence) then answers
+/// [`RenderError::Cancelled`](super::RenderError::Cancelled). Two flags are equal when
+/// they are the same flag.
+#[derive(Clone, Debug, Default)]
+pub struct CancelFlag(Option<Arc<AtomicBool>>);
+
+impl CancelFlag {
+    /// A render stopped when `flag` becomes true.
+    pub fn new(flag: Arc<AtomicBool>) -> CancelFlag {
+        CancelFlag(Some(flag))
+    }
+
+    /// Whether the render is to stop.
+    pub fn is_set(&self) -> bool {
+        self.0.as_ref().is_some_and(|f| f.load(Ordering::Relaxed))
+    }
+}
+
+impl PartialEq for CancelFlag {
+    fn eq(&self, other: &Self) -> bool {
+        match (&self.0, &other.0) {
+            (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+            (a, b) => a.is_none() && b.is_none(),
+        }
+    }
+}
+
 /// Everything `render_sequence` needs besides the scene. `Default` gives the command
 /// line's defaults (640×480, 1 spp, depth 4, half floats) and an empty output pattern.
 #[derive(Clone, Debug, PartialEq)]
@@ -353,6 +422,8 @@ pub struct RenderOptions {
     /// `--exposure EV`: the RGB written (EXR and preview) is the radiance × 2^EV; alpha
     /// and the AOVs are unchanged. 0 leaves the pixels as traced.
     pub exposure: f32,
+    /// Stops the run after the frame in flight (Ctrl-C); not an option of the pixels.
+    pub cancel: CancelFlag,
 }
 
 impl Default for RenderOptions {
@@ -378,6 +449,7 @@ impl Default for RenderOptions {
             preview: None,
             shading: ShadingOptions::default(),
             exposure: 0.0,
+            cancel: CancelFlag::default(),
         }
     }
 }
@@ -442,3 +514,80 @@ impl RenderOptions {
 
 /// Largest image side accepted (keeps `W × H × spp` far from overflow).
 pub const MAX_SIDE: u32 = 32768;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn span(start: u32, end: u32, step: u32) -> FrameSpan {
+        FrameSpan { start, end, step }
+    }
+
+    /// The lazy listing against the obvious one (every frame of every span, sorted,
+    /// each once), on overlapping spans with steps and at the top of the range.
+    #[test]
+    fn lazy_frames_are_the_sorted_union() {
+        let sets = [
+            vec![span(0, 10, 1)],
+            vec![span(0, 800, 100), span(50, 60, 3), span(5, 6, 1)],
+            vec![
+                span(10, 30, 4),
+                span(12, 31, 6),
+                span(0, 1, 1),
+                span(29, 40, 1),
+            ],
+            vec![
+                span(u32::MAX - 5, u32::MAX, 2),
+                span(u32::MAX - 1, u32::MAX, 1),
+            ],
+        ];
+        for spans in sets {
+            let set = FrameSet::new(spans.clone());
+            let mut want: Vec<u32> = spans
+                .iter()
+                .flat_map(|s| (s.start..s.end).step_by(s.step as usize))
+                .collect();
+            want.sort_unstable();
+            want.dedup();
+            assert_eq!(set.iter().collect::<Vec<_>>(), want, "{set}");
+            assert_eq!(set.frames().unwrap(), want);
+            for f in 0..1000 {
+                assert_eq!(set.contains(f), want.contains(&f), "{set} {f}");
+            }
+        }
+    }
+
+    #[test]
+    fn huge_sets_are_refused_before_anything_is_listed() {
+        let set = FrameSet::new(vec![span(0, 4_000_000_000, 1)]);
+        assert_eq!(
+            set.check(),
+            Err(OptionError::Frames {
+                set: "0..4000000000".into(),
+                problem: FramesProblem::TooMany {
+                    count: 4_000_000_000
+                }
+            })
+        );
+        let set = FrameSet::new(vec![span(3, 3, 1)]);
+        assert!(matches!(
+            set.check(),
+            Err(OptionError::Frames {
+                problem: FramesProblem::EmptySpan { .. },
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn cancel_flags_are_equal_when_they_are_the_same_flag() {
+        let a = Arc::new(AtomicBool::new(false));
+        let (x, y) = (CancelFlag::new(a.clone()), CancelFlag::new(a.clone()));
+        assert_eq!(x, y);
+        assert_ne!(x, CancelFlag::new(Arc::new(AtomicBool::new(false))));
+        assert_eq!(CancelFlag::default(), CancelFlag::default());
+        assert!(!x.is_set() && !CancelFlag::default().is_set());
+        a.store(true, Ordering::Relaxed);
+        assert!(x.is_set());
+    }
+}

@@ -13,7 +13,6 @@ use exr::prelude::{
 use super::aov::{crypto_key, fps_rational, FrameHeader};
 use super::options::{Aovs, PixelType};
 use super::shade::FrameBuffers;
-use super::RenderError;
 
 /// The header attribute holding [`RenderOptions::options_string`](super::RenderOptions).
 pub const OPTIONS_ATTRIBUTE: &str = "subfield/options";
@@ -297,14 +296,6 @@ pub fn is_complete(
         })
 }
 
-/// Writes `bytes` to `path` atomically (see [`crate::atomic::write_atomically`]).
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), RenderError> {
-    crate::atomic::write_atomically(path, bytes).map_err(|source| RenderError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
-}
-
 /// Linear radiance → 8-bit sRGB, clamped (what an EXR viewer shows at exposure 0).
 pub fn linear_to_srgb8(c: f32) -> u8 {
     let c = if c.is_finite() {
@@ -404,7 +395,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("subfield-exr-unit-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("f.exr");
-        write_atomically(&p, &a).unwrap();
+        crate::atomic::write_atomically(&p, &a).unwrap();
         let o = "spp=1";
         assert!(is_complete(&p, 5, 3, aovs, PixelType::Half, o));
         assert!(!is_complete(&p, 5, 3, aovs, PixelType::Half, "spp=2"));
@@ -429,7 +420,7 @@ mod tests {
             assert_eq!(c.quantize_linearly, linear, "{name}");
         }
         assert_eq!(layer.attributes.frames_per_second, Some((24, 1)));
-        write_atomically(&p, &a[..a.len() - 7]).unwrap();
+        crate::atomic::write_atomically(&p, &a[..a.len() - 7]).unwrap();
         assert!(!is_complete(&p, 5, 3, aovs, PixelType::Half, o));
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -7,10 +7,11 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 
 use super::camera::{animation_bounds, aspect_warning, CameraModel, MAX_EXPOSURE};
-use super::options::{FrameRange, FrameSet, RenderOptions, MAX_FRAMES, MAX_SIDE};
+use super::errors::OptionError;
+use super::options::{FrameRange, FrameSet, RenderOptions, Shard, MAX_SIDE};
 use super::output::is_complete;
 use super::stats;
-use super::writer::check_writable;
+use super::writer::{check_target, check_writable};
 use super::RenderError;
 use crate::scene::{ClipSelection, Scene, Split, SplitSummary};
 
@@ -25,9 +26,7 @@ pub struct OutputPattern {
 impl OutputPattern {
     pub fn parse(pattern: &Path) -> Result<OutputPattern, RenderError> {
         if pattern.as_os_str().is_empty() {
-            return Err(RenderError::Option(
-                "-o: the output pattern is empty".into(),
-            ));
+            return Err(OptionError::EmptyPattern.into());
         }
         let Some(s) = pattern.to_str() else {
             // Not UTF-8: no '#' can be found reliably; take it as a fixed name.
@@ -43,27 +42,31 @@ impl OutputPattern {
             .count()
             + usize::from(s.starts_with('#'));
         if runs > 1 {
-            return Err(RenderError::Option(format!(
-                "-o {s:?}: the pattern has {runs} runs of '#'; it needs exactly one (or none for a single frame)"
-            )));
+            return Err(OptionError::PatternRuns {
+                pattern: s.to_string(),
+                runs,
+            }
+            .into());
         }
         let parts = s.find('#').map(|a| {
             let b = s[a..].find(|c| c != '#').map_or(s.len(), |k| a + k);
             (s[..a].to_string(), b - a, s[b..].to_string())
         });
         if s.ends_with('/') || pattern.file_name().is_none() {
-            return Err(RenderError::Option(format!(
-                "-o {s:?}: names a folder, not a file"
-            )));
+            return Err(OptionError::PatternIsFolder {
+                pattern: s.to_string(),
+            }
+            .into());
         }
         let exr = pattern
             .extension()
             .and_then(|e| e.to_str())
             .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
         if !exr {
-            return Err(RenderError::Option(format!(
-                "-o {s:?}: frames are OpenEXR files; the pattern must end in .exr"
-            )));
+            return Err(OptionError::PatternNotExr {
+                pattern: s.to_string(),
+            }
+            .into());
         }
         Ok(OutputPattern {
             parts,
@@ -74,6 +77,23 @@ impl OutputPattern {
     /// Whether the pattern numbers its frames.
     pub fn is_numbered(&self) -> bool {
         self.parts.is_some()
+    }
+
+    /// The frame whose file is named `name` in the frames' folder, when the run of `#`
+    /// is in the file name (not in a folder of the pattern): `f.0012.exr` → 12 for
+    /// `out/f.####.exr`. Exact: `f.012.exr` names no frame of that pattern.
+    pub fn frame_of(&self, name: &str) -> Option<u32> {
+        let (a, n, b) = self.parts.as_ref()?;
+        if b.contains(std::path::is_separator) {
+            return None;
+        }
+        let prefix = a.rsplit(std::path::is_separator).next().unwrap_or(a);
+        let digits = name.strip_prefix(prefix)?.strip_suffix(b.as_str())?;
+        if digits.is_empty() || !digits.bytes().all(|c| c.is_ascii_digit()) {
+            return None;
+        }
+        let f: u32 = digits.parse().ok()?;
+        (format!("{f:0n$}") == digits).then_some(f)
     }
 
     /// The file of `frame`.
@@ -94,6 +114,68 @@ pub enum CameraSource {
     Fixed(CameraModel),
 }
 
+/// The frames a run renders: the frames asked for ([`FrameSet`]) that its shard takes,
+/// ascending, each once. Listed lazily: planning, progress and the frame loop hold a
+/// frame number at a time, whatever the count.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FramePlan {
+    set: FrameSet,
+    shard: Option<Shard>,
+    len: usize,
+    first: Option<u32>,
+    last: Option<u32>,
+}
+
+impl FramePlan {
+    /// The frames of `set` (checked already) that `shard` takes.
+    fn new(set: FrameSet, shard: Option<Shard>) -> FramePlan {
+        let mut p = FramePlan {
+            set,
+            shard,
+            len: 0,
+            first: None,
+            last: None,
+        };
+        let (mut len, mut first, mut last) = (0, None, None);
+        for f in p.iter() {
+            len += 1;
+            first.get_or_insert(f);
+            last = Some(f);
+        }
+        (p.len, p.first, p.last) = (len, first, last);
+        p
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    pub fn first(&self) -> Option<u32> {
+        self.first
+    }
+
+    pub fn last(&self) -> Option<u32> {
+        self.last
+    }
+
+    /// Whether this run renders `frame`.
+    pub fn contains(&self, frame: u32) -> bool {
+        self.set.contains(frame) && self.shard.is_none_or(|s| frame % s.count == s.index)
+    }
+
+    /// The frames, ascending.
+    pub fn iter(&self) -> impl Iterator<Item = u32> + '_ {
+        let shard = self.shard;
+        self.set
+            .iter()
+            .filter(move |f| shard.is_none_or(|s| f % s.count == s.index))
+    }
+}
+
 /// A checked render: which frames, at what times, from which camera.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderPlan {
@@ -104,7 +186,7 @@ pub struct RenderPlan {
     /// Their span: the first frame to one past the last, before sharding.
     pub range: FrameRange,
     /// The frames this run renders (after `--shard`), ascending, each once.
-    pub frames: Vec<u32>,
+    pub frames: FramePlan,
     /// Warnings about the plan (clips left out by the default selection, a `--size` off
     /// the camera's aspect ratio, `--frames` past the end of the animation), one line
     /// each, without the `warning: ` prefix.
@@ -134,40 +216,26 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
     };
     let fps = match opts.fps {
         Some(f) if f.is_finite() && f > 0.0 => f,
-        Some(f) => {
-            return Err(RenderError::Option(format!(
-                "--fps {f}: must be a positive number"
-            )))
-        }
+        Some(f) => return Err(OptionError::Fps(f).into()),
         None => scene
             .fps
             .filter(|f| f.is_finite() && *f > 0.0)
             .unwrap_or(24.0),
     };
-    for (v, what) in [(opts.width, "width"), (opts.height, "height")] {
-        if !(1..=MAX_SIDE).contains(&v) {
-            return Err(RenderError::Option(format!(
-                "--size: the {what} {v} is not in 1..={MAX_SIDE}"
-            )));
-        }
+    if !(1..=MAX_SIDE).contains(&opts.width) {
+        return Err(OptionError::Width(opts.width).into());
+    }
+    if !(1..=MAX_SIDE).contains(&opts.height) {
+        return Err(OptionError::Height(opts.height).into());
     }
     if !(1..=65536).contains(&opts.spp) {
-        return Err(RenderError::Option(format!(
-            "--spp {}: must be in 1..=65536",
-            opts.spp
-        )));
+        return Err(OptionError::Spp(opts.spp).into());
     }
     if !(opts.exposure.is_finite() && opts.exposure.abs() <= MAX_EXPOSURE) {
-        return Err(RenderError::Option(format!(
-            "--exposure {}: must be a number of stops between -{MAX_EXPOSURE} and {MAX_EXPOSURE}",
-            opts.exposure
-        )));
+        return Err(OptionError::Exposure(opts.exposure).into());
     }
     if opts.max_depth > 64 {
-        return Err(RenderError::Option(format!(
-            "--max-depth {}: at most 64",
-            opts.max_depth
-        )));
+        return Err(OptionError::MaxDepth(opts.max_depth).into());
     }
     // The last frame at or before the end of the animation; `None` without animation.
     let duration = scene.duration(selection) as f64;
@@ -187,17 +255,35 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
             end: last.unwrap_or(0) + 1,
         }),
     };
-    let all = set.frames().map_err(|e| match opts.frames {
+    set.check().map_err(|e| match opts.frames {
         Some(_) => e,
-        None => RenderError::Option(format!(
-            "the animation runs {} frames at {fps} fps, more than the {MAX_FRAMES} a render takes: give --frames",
-            last.unwrap_or(0) as u64 + 1
-        )),
+        None => OptionError::AnimationTooLong {
+            frames: last.unwrap_or(0) as u64 + 1,
+            fps,
+        },
     })?;
-    let (first, final_) = (all[0], all[all.len() - 1]);
+    if let Some(s) = opts.shard {
+        if s.count == 0 || s.index >= s.count {
+            return Err(OptionError::Shard {
+                index: s.index,
+                count: s.count,
+            }
+            .into());
+        }
+    }
+    // The whole set, then this shard's part of it: counted, never listed.
+    let all = FramePlan::new(set.clone(), None);
+    let (Some(first), Some(final_)) = (all.first(), all.last()) else {
+        // `check` refuses an empty set.
+        return Err(OptionError::Frames {
+            set: set.to_string(),
+            problem: super::errors::FramesProblem::NoFrames,
+        }
+        .into());
+    };
     let range = FrameRange {
         start: first,
-        end: final_ + 1,
+        end: final_.saturating_add(1),
     };
     if let (Some(_), Some(last)) = (&opts.frames, last) {
         if final_ > last {
@@ -208,26 +294,22 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
     }
     let pattern = OutputPattern::parse(&opts.output)?;
     if !pattern.is_numbered() && all.len() != 1 {
-        return Err(RenderError::Option(format!(
-            "-o {}: {} frames ({set}) need a '#' in the pattern for the frame number",
-            opts.output.display(),
-            all.len(),
-        )));
-    }
-    let frames: Vec<u32> = match opts.shard {
-        Some(s) if s.count == 0 || s.index >= s.count => {
-            return Err(RenderError::Option(format!(
-                "--shard {}/{}: needs N >= 1 and 0 <= I < N",
-                s.index, s.count
-            )))
+        return Err(OptionError::PatternNotNumbered {
+            pattern: opts.output.clone(),
+            frames: all.len(),
+            set: set.to_string(),
         }
-        Some(s) => all.into_iter().filter(|k| k % s.count == s.index).collect(),
+        .into());
+    }
+    let frames = match opts.shard {
+        Some(_) => FramePlan::new(set.clone(), opts.shard),
         None => all,
     };
     if let (Some(name), Some(_)) = (&opts.camera, &opts.look_at) {
-        return Err(RenderError::Option(format!(
-            "--camera {name:?} and --look-from both choose the camera; give one of them"
-        )));
+        return Err(OptionError::CameraAndLookFrom {
+            camera: name.clone(),
+        }
+        .into());
     }
     let camera = if let Some(l) = &opts.look_at {
         CameraSource::Fixed(CameraModel::look_at(l, opts.width, opts.height)?)
@@ -258,10 +340,10 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
             .and_then(|e| e.to_str())
             .is_some_and(|e| e.eq_ignore_ascii_case("png"));
         if !png {
-            return Err(RenderError::Option(format!(
-                "--preview {}: the preview is a PNG file; the name must end in .png",
-                p.path.display()
-            )));
+            return Err(OptionError::PreviewExtension {
+                path: p.path.clone(),
+            }
+            .into());
         }
     }
     Ok(RenderPlan {
@@ -289,22 +371,56 @@ pub(super) fn static_dynamic_split(scene: &Scene, sel: ClipSelection) -> Split {
 }
 
 /// Checks every file the run writes can be made (frames, stats, plot, preview), the last
-/// of the checks before a frame is rendered, and removes the temporaries a killed run left
-/// beside this run's frames.
+/// of the checks before a frame is rendered: none of them may be a folder, FIFO, socket,
+/// device or a link to one (every frame's path is checked, by one listing of the
+/// frames' folder when the frame number is in the file name); and removes the
+/// temporaries a killed run left beside this run's frames.
 pub(super) fn check_outputs(plan: &RenderPlan, opts: &RenderOptions) -> Result<(), RenderError> {
-    if let Some(&first) = plan.frames.first() {
+    for p in [&opts.stats, &opts.plot].into_iter().flatten() {
+        check_target(p)?;
+    }
+    if let Some(p) = &opts.preview {
+        check_target(&p.path)?;
+    }
+    if let Some(first) = plan.frames.first() {
         let first = plan.pattern.path(first);
         check_writable(&first)?;
-        // Temporaries a killed run left beside this run's frames go; those of a live
-        // process (a concurrent shard) stay. Best effort: a folder that cannot be
-        // listed has failed the check above already.
-        let names: std::collections::HashSet<String> = plan
-            .frames
-            .iter()
-            .filter_map(|&f| Some(plan.pattern.path(f).file_name()?.to_str()?.to_owned()))
-            .collect();
         let dir = crate::atomic::folder_of(&first);
-        let _ = crate::atomic::remove_stale_temporaries(&dir, |t| names.contains(t));
+        let first_name = first
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default();
+        // Whether the frame number is in the file name (else in a folder, or nowhere:
+        // one file name for every frame).
+        let by_name = plan.pattern.frame_of(first_name).is_some();
+        let ours = |name: &str| -> bool {
+            if by_name {
+                plan.pattern
+                    .frame_of(name)
+                    .is_some_and(|f| plan.frames.contains(f))
+            } else {
+                name == first_name
+            }
+        };
+        if by_name {
+            // One listing, whatever the frame count. A folder that cannot be listed
+            // has failed the check above already.
+            if let Ok(entries) = std::fs::read_dir(&dir) {
+                for e in entries.flatten() {
+                    let regular = e.file_type().is_ok_and(|t| t.is_file());
+                    if !regular && e.file_name().to_str().is_some_and(ours) {
+                        check_target(&e.path())?;
+                    }
+                }
+            }
+        } else {
+            for f in plan.frames.iter() {
+                check_target(&plan.pattern.path(f))?;
+            }
+        }
+        // Temporaries a killed run left beside this run's frames go; those of a live
+        // process (a concurrent shard) stay. Best effort.
+        let _ = crate::atomic::remove_stale_temporaries(&dir, ours);
     }
     for p in [&opts.stats, &opts.plot].into_iter().flatten() {
         check_writable(p)?;
@@ -332,6 +448,34 @@ pub(super) fn skips(opts: &RenderOptions, path: &Path, options: &str) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::render::FrameSpan;
+
+    #[test]
+    fn frame_plans_count_and_shard_without_listing() {
+        let set = FrameSet::new(vec![
+            FrameSpan {
+                start: 0,
+                end: 10,
+                step: 1,
+            },
+            FrameSpan {
+                start: 5,
+                end: 30,
+                step: 5,
+            },
+        ]);
+        let all = FramePlan::new(set.clone(), None);
+        let want: Vec<u32> = vec![0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 15, 20, 25];
+        assert_eq!(all.iter().collect::<Vec<_>>(), want);
+        assert_eq!(
+            (all.len(), all.first(), all.last()),
+            (14, Some(0), Some(25))
+        );
+        let shard = FramePlan::new(set, Some(Shard { index: 1, count: 5 }));
+        assert_eq!(shard.iter().collect::<Vec<_>>(), [1, 6]);
+        assert_eq!(shard.len(), 2);
+        assert!(shard.contains(6) && !shard.contains(5) && !shard.contains(11));
+    }
 
     #[test]
     fn patterns() {
@@ -345,6 +489,21 @@ mod tests {
         assert!(!p.is_numbered());
         assert_eq!(p.path(9), PathBuf::from("still.exr"));
         assert!(OutputPattern::parse(Path::new("out/F.####.EXR")).is_ok());
+        let p = OutputPattern::parse(Path::new("out/f.####.exr")).unwrap();
+        assert_eq!(p.frame_of("f.0012.exr"), Some(12));
+        assert_eq!(p.frame_of("f.123456.exr"), Some(123456));
+        for other in [
+            "f.012.exr",
+            "f.00012.exr",
+            "f.12.exr",
+            "g.0012.exr",
+            "f.00a2.exr",
+            "f..exr",
+        ] {
+            assert_eq!(p.frame_of(other), None, "{other}");
+        }
+        let p = OutputPattern::parse(Path::new("out/####/f.exr")).unwrap();
+        assert_eq!(p.frame_of("f.exr"), None);
         for bad in [
             "a#b#.exr",
             "#x#",

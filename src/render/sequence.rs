@@ -12,14 +12,15 @@ use glam::Vec3;
 use super::aov::{CryptoNames, FrameHeader};
 use super::camera::{apply_exposure, CameraModel};
 use super::mips::TextureMips;
+use super::errors::OutputFile;
 use super::options::RenderOptions;
-use super::output;
 use super::planning::{check_outputs, plan, skips, static_dynamic_split, CameraSource, RenderPlan};
 use super::shade::{FrameBuffers, ShadeContext};
-use super::stats::{self, stats_csv, FrameStats};
+use super::stats::{self, FrameStats, FrameTotals, PlotBars};
 use super::wavefront::{render_frame, AovInputs};
-use super::writer::{write_job, Job};
+use super::writer::{write_file, write_job, Job};
 use super::{FrameReport, RenderError, RenderEvent, RenderSummary};
+use crate::atomic::AtomicFile;
 use crate::format::{self, OpenOptions};
 use crate::psf::{DynamicLayer, Psf, PsfParams};
 use crate::scene::{ClipSelection, Scene, Split, TriangleSoup};
@@ -69,22 +70,34 @@ pub fn render_sequence(
             .cryptomatte
             .then(|| std::sync::Arc::new(CryptoNames::new(scene))),
     };
+    // The stats file is streamed, a row as each frame is written (frames are written in
+    // ascending order), into a temporary that becomes the file at the end.
+    let stats_file = match &opts.stats {
+        Some(p) => Some((StatsFile::create(p)?, p.clone())),
+        None => None,
+    };
     let Done {
-        mut stats_out,
+        totals,
+        stats_file,
+        plot,
         skipped,
         preview_written,
-    } = frames.run(on_event)?;
-    stats_out.sort_by_key(|s| s.frame);
-    if let Some(p) = &opts.stats {
-        output::write_atomically(p, stats_csv(&stats_out).as_bytes())?;
+    } = frames.run(stats_file, on_event)?;
+    if let Some((f, p)) = stats_file {
+        f.file.commit().map_err(|source| RenderError::Write {
+            path: p,
+            file: OutputFile::Stats,
+            source,
+        })?;
     }
     if let Some(p) = &opts.plot {
-        output::write_atomically(p, &stats::plot_bytes(p, &stats_out)?)?;
+        let (bars, per_bar) = plot.means();
+        write_file(p, OutputFile::Plot, &stats::plot_bytes(p, &bars, per_bar)?)?;
     }
     Ok(RenderSummary {
-        rendered: stats_out.len(),
+        rendered: totals.frames,
         skipped,
-        frames: stats_out,
+        totals,
         preview: preview_written,
         static_seconds,
         wall: wall.elapsed(),
@@ -130,10 +143,30 @@ struct Frames<'a> {
     crypto: Option<std::sync::Arc<CryptoNames>>,
 }
 
-/// What the frame loop leaves: the written frames' stats (in the order written), the
-/// frames skipped, the preview written.
+/// `--stats` on its way: the header and a row per written frame, in a temporary.
+struct StatsFile {
+    file: AtomicFile,
+}
+
+impl StatsFile {
+    fn create(path: &std::path::Path) -> Result<StatsFile, RenderError> {
+        let err = |source| RenderError::Write {
+            path: path.to_path_buf(),
+            file: OutputFile::Stats,
+            source,
+        };
+        let mut file = AtomicFile::create(path).map_err(err)?;
+        file.write_all(stats::CSV_HEADER.as_bytes()).map_err(err)?;
+        Ok(StatsFile { file })
+    }
+}
+
+/// What the frame loop leaves: the written frames' figures summed, the stats file with
+/// their rows and the plot's bars, the frames skipped, the preview written.
 struct Done {
-    stats_out: Vec<FrameStats>,
+    totals: FrameTotals,
+    stats_file: Option<(StatsFile, PathBuf)>,
+    plot: PlotBars,
     skipped: usize,
     preview_written: Option<PathBuf>,
 }
@@ -141,7 +174,9 @@ struct Done {
 /// The frame loop's account of the frames written, and the first error.
 struct Written {
     total: usize,
-    stats_out: Vec<FrameStats>,
+    totals: FrameTotals,
+    stats_file: Option<(StatsFile, PathBuf)>,
+    plot: PlotBars,
     preview_written: Option<PathBuf>,
     first_error: Option<RenderError>,
 }
@@ -157,7 +192,17 @@ impl Written {
             Ok((job, ms)) => {
                 let mut st = job.stats;
                 st.write_ms = ms;
-                self.stats_out.push(st);
+                self.totals.add(&st);
+                self.plot.push(&st);
+                if let Some((f, p)) = &mut self.stats_file {
+                    if let Err(source) = f.file.write_all(stats::csv_row(&st).as_bytes()) {
+                        self.first_error.get_or_insert(RenderError::Write {
+                            path: p.clone(),
+                            file: OutputFile::Stats,
+                            source,
+                        });
+                    }
+                }
                 if job.preview.is_some() {
                     self.preview_written = job.preview.clone();
                 }
@@ -198,7 +243,11 @@ impl Frames<'_> {
     /// Every planned frame rendered (or skipped when resumed) and handed to a writer
     /// thread; stops at the first error, once the writer has answered for the frames
     /// sent.
-    fn run(&self, on_event: &mut dyn FnMut(RenderEvent<'_>)) -> Result<Done, RenderError> {
+    fn run(
+        &self,
+        stats_file: Option<(StatsFile, PathBuf)>,
+        on_event: &mut dyn FnMut(RenderEvent<'_>),
+    ) -> Result<Done, RenderError> {
         let (opts, plan) = (self.opts, self.plan);
         let preview_frame = opts.preview.as_ref().map(|p| {
             (
@@ -211,11 +260,18 @@ impl Frames<'_> {
         let total = plan.frames.len();
         let mut written = Written {
             total,
-            stats_out: Vec::with_capacity(total),
+            totals: FrameTotals::default(),
+            stats_file,
+            plot: PlotBars::default(),
             preview_written: None,
             first_error: None,
         };
         let mut skipped = 0usize;
+        // Frames handed to the writer or skipped, and whether the loop stopped for the
+        // cancel flag or because the writer was gone.
+        let mut done = 0usize;
+        let mut cancelled = false;
+        let mut writer_gone = false;
 
         std::thread::scope(|sc| {
             let (tx, rx) = mpsc::sync_channel::<Job>(1);
@@ -235,13 +291,19 @@ impl Frames<'_> {
             let mut dyn_soup = TriangleSoup::new();
             let mut next_soup = TriangleSoup::new();
             let mut preview_pending = preview_frame;
-            for (index, &frame) in plan.frames.iter().enumerate() {
+            for (index, frame) in plan.frames.iter().enumerate() {
                 while let Ok(r) = done_rx.try_recv() {
                     written.finish(r, on_event);
                 }
                 if written.first_error.is_some() {
                     break;
                 }
+                // Stop between frames: the one in flight is written, nothing else started.
+                if opts.cancel.is_set() {
+                    cancelled = true;
+                    break;
+                }
+                done += 1;
                 let path = plan.pattern.path(frame);
                 if skips(opts, &path, &self.options) {
                     skipped += 1;
@@ -267,7 +329,8 @@ impl Frames<'_> {
                             preview: take_preview(&mut preview_pending, frame),
                         };
                         if tx.send(job).is_err() {
-                            written.first_error.get_or_insert(RenderError::WriterGone);
+                            // The writer stopped: its error is on `done_rx`.
+                            writer_gone = true;
                             break;
                         }
                     }
@@ -285,8 +348,20 @@ impl Frames<'_> {
         if let Some(e) = written.first_error {
             return Err(e);
         }
+        if writer_gone {
+            return Err(RenderError::WriterGone);
+        }
+        if cancelled {
+            return Err(RenderError::Cancelled {
+                written: written.totals.frames,
+                skipped,
+                left: total - done,
+            });
+        }
         Ok(Done {
-            stats_out: written.stats_out,
+            totals: written.totals,
+            stats_file: written.stats_file,
+            plot: written.plot,
             skipped,
             preview_written: written.preview_written,
         })

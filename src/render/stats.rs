@@ -4,6 +4,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use super::errors::OptionError;
 use super::shade::RayCounts;
 use super::RenderError;
 
@@ -24,27 +25,136 @@ pub struct FrameStats {
     pub rays: RayCounts,
 }
 
-/// The CSV text: a header, then one row per frame.
+/// The CSV's first line.
+pub(crate) const CSV_HEADER: &str =
+    "frame,time,update_ms,trace_ms,shade_ms,write_ms,primary_rays,shadow_rays,secondary_rays\n";
+
+/// One CSV row (with its line end).
+pub(crate) fn csv_row(f: &FrameStats) -> String {
+    format!(
+        "{},{:.6},{:.3},{:.3},{:.3},{:.3},{},{},{}\n",
+        f.frame,
+        f.time,
+        f.update_ms,
+        f.trace_ms,
+        f.shade_ms,
+        f.write_ms,
+        f.rays.primary,
+        f.rays.shadow,
+        f.rays.secondary
+    )
+}
+
+/// The CSV text: a header, then one row per frame (a render streams the same rows to its
+/// file as frames are written).
 pub fn stats_csv(frames: &[FrameStats]) -> String {
-    let mut s = String::from(
-        "frame,time,update_ms,trace_ms,shade_ms,write_ms,primary_rays,shadow_rays,secondary_rays\n",
-    );
+    let mut s = String::from(CSV_HEADER);
     for f in frames {
-        let _ = writeln!(
-            s,
-            "{},{:.6},{:.3},{:.3},{:.3},{:.3},{},{},{}",
-            f.frame,
-            f.time,
-            f.update_ms,
-            f.trace_ms,
-            f.shade_ms,
-            f.write_ms,
-            f.rays.primary,
-            f.rays.shadow,
-            f.rays.secondary
-        );
+        s.push_str(&csv_row(f));
     }
     s
+}
+
+/// The rendered frames' figures summed: what a run's report needs, the same size
+/// whatever the frame count.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameTotals {
+    pub frames: usize,
+    pub update_ms: f64,
+    pub trace_ms: f64,
+    pub shade_ms: f64,
+    pub write_ms: f64,
+    pub rays: RayCounts,
+}
+
+impl FrameTotals {
+    pub fn add(&mut self, f: &FrameStats) {
+        self.frames += 1;
+        self.update_ms += f.update_ms;
+        self.trace_ms += f.trace_ms;
+        self.shade_ms += f.shade_ms;
+        self.write_ms += f.write_ms;
+        self.rays.primary += f.rays.primary;
+        self.rays.shadow += f.rays.shadow;
+        self.rays.secondary += f.rays.secondary;
+    }
+}
+
+/// Most bars a `--plot` draws (its plot area is 600 pixels wide). A longer run's bars
+/// each show the mean of a run of consecutive rendered frames (a power of two of them).
+pub const PLOT_BARS: usize = 512;
+
+/// The bars of a `--plot`, gathered as frames are written, never more than
+/// [`PLOT_BARS`]: when full, neighbours merge in pairs and each bar takes twice as many
+/// frames from then on. A bar is the mean of its frames, labelled by the first.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct PlotBars {
+    /// Sums per bar (`frame`: the bar's first frame), and the frames in each.
+    bars: Vec<(FrameStats, u64)>,
+    /// Frames a bar takes.
+    width: u64,
+}
+
+impl PlotBars {
+    pub(crate) fn push(&mut self, f: &FrameStats) {
+        let width = self.width.max(1);
+        match self.bars.last_mut() {
+            Some((sum, n)) if *n < width => {
+                sum.update_ms += f.update_ms;
+                sum.trace_ms += f.trace_ms;
+                sum.shade_ms += f.shade_ms;
+                sum.write_ms += f.write_ms;
+                *n += 1;
+            }
+            _ => {
+                if self.bars.len() == PLOT_BARS {
+                    self.halve();
+                    return self.push(f);
+                }
+                self.bars.push((*f, 1));
+            }
+        }
+        self.width = width;
+    }
+
+    fn halve(&mut self) {
+        let merged = self
+            .bars
+            .chunks(2)
+            .map(|c| {
+                let mut s = c[0];
+                for (o, n) in &c[1..] {
+                    s.0.update_ms += o.update_ms;
+                    s.0.trace_ms += o.trace_ms;
+                    s.0.shade_ms += o.shade_ms;
+                    s.0.write_ms += o.write_ms;
+                    s.1 += n;
+                }
+                s
+            })
+            .collect();
+        self.bars = merged;
+        self.width = self.width.max(1) * 2;
+    }
+
+    /// The bars as frames (means), and how many frames a full bar takes.
+    pub(crate) fn means(&self) -> (Vec<FrameStats>, u64) {
+        let bars = self
+            .bars
+            .iter()
+            .map(|(s, n)| {
+                let k = *n as f64;
+                FrameStats {
+                    update_ms: s.update_ms / k,
+                    trace_ms: s.trace_ms / k,
+                    shade_ms: s.shade_ms / k,
+                    write_ms: s.write_ms / k,
+                    ..*s
+                }
+            })
+            .collect();
+        (bars, self.width.max(1))
+    }
 }
 
 const SERIES: [(&str, [u8; 3]); 4] = [
@@ -132,6 +242,10 @@ impl Layout {
 
 /// The SVG text of the stacked bar chart.
 pub fn plot_svg(frames: &[FrameStats]) -> String {
+    svg_titled(frames, PLOT_TITLE)
+}
+
+fn svg_titled(frames: &[FrameStats], title: &str) -> String {
     let l = Layout::new(frames);
     let mut s = String::new();
     let _ = writeln!(
@@ -143,7 +257,7 @@ pub fn plot_svg(frames: &[FrameStats]) -> String {
     let _ = writeln!(s, r#"<rect width="100%" height="100%" fill="white"/>"#);
     let _ = writeln!(
         s,
-        r#"<text x="{}" y="18" text-anchor="middle" font-size="14">{PLOT_TITLE}</text>"#,
+        r#"<text x="{}" y="18" text-anchor="middle" font-size="14">{title}</text>"#,
         l.left + l.plot_w() / 2.0
     );
     // Y grid and labels.
@@ -257,6 +371,10 @@ fn text_width(text: &str) -> f64 {
 
 /// The PNG bytes of the same chart (labels in an 8×8 pixel font).
 pub fn plot_png(frames: &[FrameStats]) -> Result<Vec<u8>, image::ImageError> {
+    png_titled(frames, PLOT_TITLE)
+}
+
+fn png_titled(frames: &[FrameStats], title: &str) -> Result<Vec<u8>, image::ImageError> {
     let l = Layout::new(frames);
     let (w, h) = (l.w as u32, l.h as u32);
     let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
@@ -305,7 +423,6 @@ pub fn plot_png(frames: &[FrameStats]) -> Result<Vec<u8>, image::ImageError> {
         false,
     ));
     labels.push((8.0, l.top + l.plot_h() / 2.0, "ms".into(), false));
-    let title = PLOT_TITLE;
     labels.push((
         l.left + l.plot_w() / 2.0 - text_width(title) / 2.0,
         10.0,
@@ -337,11 +454,19 @@ pub fn plot_png(frames: &[FrameStats]) -> Result<Vec<u8>, image::ImageError> {
     Ok(out)
 }
 
-/// Plot format from the file's extension.
-pub fn plot_bytes(path: &Path, frames: &[FrameStats]) -> Result<Vec<u8>, RenderError> {
+/// Plot format from the file's extension; `per_bar` frames (at most) make each bar.
+pub(crate) fn plot_bytes(
+    path: &Path,
+    frames: &[FrameStats],
+    per_bar: u64,
+) -> Result<Vec<u8>, RenderError> {
+    let title = match per_bar {
+        0 | 1 => PLOT_TITLE.to_string(),
+        n => format!("{PLOT_TITLE}; each bar the mean of {n} frames (the last of fewer)"),
+    };
     match plot_kind(path)? {
-        PlotKind::Svg => Ok(plot_svg(frames).into_bytes()),
-        PlotKind::Png => plot_png(frames).map_err(|source| RenderError::Png {
+        PlotKind::Svg => Ok(svg_titled(frames, &title).into_bytes()),
+        PlotKind::Png => png_titled(frames, &title).map_err(|source| RenderError::Png {
             path: path.to_path_buf(),
             source,
         }),
@@ -362,10 +487,10 @@ pub(crate) fn plot_kind(path: &Path) -> Result<PlotKind, RenderError> {
     {
         Some("svg") => Ok(PlotKind::Svg),
         Some("png") => Ok(PlotKind::Png),
-        _ => Err(RenderError::Option(format!(
-            "--plot {}: the file must end in .svg or .png",
-            path.display()
-        ))),
+        _ => Err(OptionError::PlotExtension {
+            path: path.to_path_buf(),
+        }
+        .into()),
     }
 }
 
@@ -397,6 +522,38 @@ mod tests {
         let lines: Vec<&str> = csv.lines().collect();
         assert_eq!(lines.len(), 4);
         assert_eq!(lines[2], "1,0.041667,1.000,11.000,5.000,2.500,100,50,7");
+    }
+
+    /// However many frames, the plot keeps at most PLOT_BARS bars, each the mean of
+    /// consecutive frames, and their means weigh every frame once.
+    #[test]
+    fn plot_bars_stay_bounded_and_average_neighbours() {
+        let mut bars = PlotBars::default();
+        let n = 5 * PLOT_BARS as u32 + 3;
+        for i in 0..n {
+            bars.push(&FrameStats {
+                frame: i,
+                trace_ms: i as f64,
+                ..Default::default()
+            });
+            assert!(bars.bars.len() <= PLOT_BARS);
+        }
+        let (means, per_bar) = bars.means();
+        assert_eq!(per_bar, 8);
+        assert_eq!(means.len(), (n as usize).div_ceil(8));
+        // Bar k holds frames 8k..8k+8: its first frame and their mean.
+        assert_eq!(means[3].frame, 24);
+        assert_eq!(means[3].trace_ms, (24..32).sum::<u32>() as f64 / 8.0);
+        let last = means.last().unwrap();
+        assert_eq!(last.frame, n - n % 8);
+        let total: u64 = bars.bars.iter().map(|(_, k)| k).sum();
+        assert_eq!(total, n as u64);
+        // Few frames: one bar each, as before.
+        let mut few = PlotBars::default();
+        for f in frames() {
+            few.push(&f);
+        }
+        assert_eq!(few.means(), (frames(), 1));
     }
 
     #[test]

@@ -5,8 +5,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::aov::FrameHeader;
+use super::errors::OutputFile;
 use super::options::RenderOptions;
-use super::output::{self, encode_exr, encode_preview};
+use super::output::{encode_exr, encode_preview};
 use super::shade::FrameBuffers;
 use super::stats::FrameStats;
 use super::RenderError;
@@ -43,8 +44,22 @@ fn create_parent(path: &Path) -> Result<(), RenderError> {
     Ok(())
 }
 
-/// Creates `path`'s folder and checks a file can be made there (the probe is removed).
+/// Refuses `path` when it is not a regular file, nor nothing, nor a link to a regular
+/// file (see [`crate::atomic::write_target`]).
+pub(super) fn check_target(path: &Path) -> Result<(), RenderError> {
+    crate::atomic::write_target(path)
+        .map(drop)
+        .map_err(|source| RenderError::NotAFile {
+            path: path.to_path_buf(),
+            source,
+        })
+}
+
+/// Checks `path` can be written: refused when it is not a regular file
+/// ([`check_target`]); else its folder is created and a file made there (the probe is
+/// removed).
 pub(super) fn check_writable(path: &Path) -> Result<(), RenderError> {
+    check_target(path)?;
     create_parent(path)?;
     let folder = crate::atomic::folder_of(path);
     let probe = folder.join(format!(".subfield-probe-{}", std::process::id()));
@@ -56,6 +71,15 @@ pub(super) fn check_writable(path: &Path) -> Result<(), RenderError> {
     Ok(())
 }
 
+/// Writes `bytes` to `path` atomically; an error names the file and what it is.
+pub(super) fn write_file(path: &Path, file: OutputFile, bytes: &[u8]) -> Result<(), RenderError> {
+    crate::atomic::write_atomically(path, bytes).map_err(|source| RenderError::Write {
+        path: path.to_path_buf(),
+        file,
+        source,
+    })
+}
+
 pub(super) fn write_job(job: &Job, opts: &RenderOptions) -> Result<f64, RenderError> {
     let clock = Instant::now();
     create_parent(&job.path)?;
@@ -65,13 +89,13 @@ pub(super) fn write_job(job: &Job, opts: &RenderOptions) -> Result<f64, RenderEr
             source,
         }
     })?;
-    output::write_atomically(&job.path, &bytes)?;
+    write_file(&job.path, OutputFile::Frame(job.stats.frame), &bytes)?;
     if let Some(p) = &job.preview {
         let png = encode_preview(&job.frame).map_err(|source| RenderError::Png {
             path: p.clone(),
             source,
         })?;
-        output::write_atomically(p, &png)?;
+        write_file(p, OutputFile::Preview, &png)?;
     }
     Ok(clock.elapsed().as_secs_f64() * 1e3)
 }
