@@ -28,6 +28,7 @@ mod camera;
 mod options;
 mod output;
 mod planning;
+mod sample;
 mod sequence;
 mod shade;
 mod stats;
@@ -50,6 +51,7 @@ pub use output::{
     OPTIONS_ATTRIBUTE,
 };
 pub use planning::{plan, CameraSource, OutputPattern, RenderPlan};
+pub use sample::tuning_rays;
 pub use sequence::render_sequence;
 pub use shade::{CryptoBuffers, FrameBuffers, FrameWork, RayCounts, ShadeContext};
 pub use stats::{plot_png, plot_svg, stats_csv, FrameStats};

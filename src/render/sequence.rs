@@ -106,7 +106,7 @@ fn static_part(static_soup: &TriangleSoup, opts: &RenderOptions) -> Result<Psf, 
         }
         None => Psf::build(
             &static_soup.positions,
-            &PsfParams::for_triangles(static_soup.len()),
+            &PsfParams::for_static(static_soup.len()),
         )?,
     })
 }
