@@ -96,9 +96,10 @@ impl PsfParams {
     /// triangles level 1 (7 subfields, not 109) and 16 tiles. A small scene needs few
     /// directions: on BoxAnimated (192 triangles) level 1 with 16 tiles does less
     /// counted work on its tuning sample than level 3 with 8 (`examples/tune_weights`,
-    /// weighted as `psf::tune::cost`: 1.05M against 1.59M) in a file 13 times smaller
-    /// (77 KB against 1.0 MB), and on CornellBox (36 triangles) 12.9M against 13.5M
-    /// (level 3, 4 tiles). The moving triangles' layer keeps `for_triangles`.
+    /// weighted as `psf::tune::cost`: 1.05M against 1.59M) in a file 10 times smaller
+    /// (100 KB against 1.0 MB, zstd), and on CornellBox (36 triangles) 12.9M against
+    /// 13.5M (level 3, 4 tiles) in 46 KB against 184 KB. The moving triangles' layer
+    /// keeps `for_triangles`.
     pub fn for_static(n: usize) -> PsfParams {
         if n < Self::SMALL {
             PsfParams {

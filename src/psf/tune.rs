@@ -31,13 +31,19 @@ use glam::Vec3;
 /// about 20 ns a tile, 30 ns a candidate and 3 ns an entry scanned reproduce the
 /// single-thread trace times within some 10% beside a per-ray constant (which does not
 /// change the choice). The example's unconstrained least-squares fit was unstable on
-/// that loaded 2-core machine (tiles and scanned entries grow together, eight lanes a
-/// flat tile) and gave a negative weight, so these are rounded by hand from its rows.
+/// that loaded 2-core machine (tiles and scanned entries grow together) and gave a
+/// negative weight, so these are rounded by hand from its rows.
 pub const COST_TILE: u64 = 20;
 /// Weight of a candidate tested (the watertight triangle test).
 pub const COST_CANDIDATE: u64 = 30;
-/// Weight of an entry scanned (its depth range compared with the ray's window).
+/// Weight of a BSP entry scanned (its depth range compared with the ray's window).
 pub const COST_SCAN: u64 = 3;
+/// Weight of a flat tile's block scanned: its eight lanes filtered by depth in two
+/// 4-wide compares, about what one BSP entry costs. A first version weighed the eight
+/// lanes as eight entries; it then chose no flat tiles at all on every scene, and the
+/// renders it baked traced 8–25% slower than the default's (flat tiles were 7–8% faster
+/// by measurement, `benches/PERF.md` step 48).
+pub const COST_BLOCK: u64 = 3;
 
 /// Trials within this fraction of the least cost count as ties, which the smaller file
 /// wins.
