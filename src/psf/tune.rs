@@ -50,11 +50,14 @@ pub const COST_BLOCK: u64 = 3;
 pub const TIE: f64 = 0.01;
 
 /// The cost of traced work: [`COST_TILE`] per tile visited, [`COST_CANDIDATE`] per
-/// candidate tested and [`COST_SCAN`] per entry scanned.
+/// candidate tested, [`COST_SCAN`] per BSP entry scanned and [`COST_BLOCK`] per flat
+/// tile's block.
 pub fn cost(s: &RayStats) -> u64 {
+    let lanes = s.blocks_scanned * super::bsp::LANES as u64;
     COST_TILE * s.tiles_visited
         + COST_CANDIDATE * s.candidates_tested
-        + COST_SCAN * s.entries_scanned
+        + COST_SCAN * s.entries_scanned.saturating_sub(lanes)
+        + COST_BLOCK * s.blocks_scanned
 }
 
 /// The largest arrays (raw bytes, as [`Psf::raw_bytes`] counts them) a trial may have:
