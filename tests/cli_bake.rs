@@ -97,7 +97,7 @@ fn bake_then_inspect_then_trace() {
         },
     )
     .unwrap();
-    let params = PsfParams::for_triangles(soup.len());
+    let params = PsfParams::for_static(soup.len());
     assert_eq!(*baked.psf.params(), params);
     let mem = Psf::build(&soup.positions, &params).unwrap();
     let mut rng = Rng::new(11);
@@ -308,5 +308,220 @@ fn writers_create_folders_and_check_outputs_first() {
             err.starts_with("error: ") && err.contains("a_file"),
             "{args:?}: {err}"
         );
+    }
+}
+
+/// A scene for `--quality high`: a few hundred triangles, bunched at one end of a long
+/// box (where a grid sized for the whole box serves the default poorly), a camera
+/// looking at them and a point light.
+fn write_tuning_scene(path: &Path) {
+    use common::build::perspective;
+    use subfield::scene::{LightDef, LightKind, Material};
+    let mut b = SceneBuilder::new();
+    let mut rng = Rng::new(7);
+    let mut tris = synth::soup(&mut rng, 400, Vec3::splat(-1.0), Vec3::splat(1.0), 0.15);
+    // The long box's floor: two triangles from x = -1 to x = 30.
+    let (a, c) = (Vec3::new(-1.0, -1.2, -1.0), Vec3::new(30.0, -1.2, 1.0));
+    tris.push([a, Vec3::new(c.x, a.y, a.z), c]);
+    tris.push([a, c, Vec3::new(a.x, a.y, c.z)]);
+    let material = b.add_material(Material::default());
+    let mesh = b.add_mesh(Mesh {
+        primitives: vec![soup_prim(tris.into_iter().flatten().collect(), material)],
+        ..Default::default()
+    });
+    let n_mesh = b.add_node(Node {
+        mesh: Some(mesh),
+        ..Default::default()
+    });
+    let cam = b.add_camera(perspective("view", 0.8, Some(4.0 / 3.0), 0.01, None));
+    let n_cam = b.add_node(Node {
+        camera: Some(cam),
+        transform: placed(Vec3::new(0.3, 0.2, 4.0), Quat::IDENTITY),
+        ..Default::default()
+    });
+    let light = b.add_light(LightDef {
+        name: Some("lamp".into()),
+        kind: LightKind::Point,
+        color: Vec3::ONE,
+        intensity: 10.0,
+        range: None,
+    });
+    let n_light = b.add_node(Node {
+        light: Some(light),
+        transform: placed(Vec3::new(1.0, 3.0, 2.0), Quat::IDENTITY),
+        ..Default::default()
+    });
+    for n in [n_mesh, n_cam, n_light] {
+        b.add_root(n);
+    }
+    import::write_gltf(&b.finish(), path).unwrap();
+}
+
+fn bake_high(scene: &Path, out: &Path, threads: &str) -> Output {
+    subfield(&[
+        "bake",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--quality",
+        "high",
+        "--threads",
+        threads,
+    ])
+}
+
+#[test]
+fn quality_high_is_byte_identical_across_threads_and_its_record_round_trips() {
+    let dir = temp_dir("quality");
+    let scene_path = dir.join("scene.glb");
+    write_tuning_scene(&scene_path);
+    let (one, two) = (dir.join("one.psf"), dir.join("two.psf"));
+    let r1 = bake_high(&scene_path, &one, "1");
+    let err = String::from_utf8_lossy(&r1.stderr);
+    assert!(r1.status.success(), "{err}");
+    // Progress on stderr: the sample, the trials, the choice.
+    for needle in ["sample rays", "trial  1:", "tuning: tiles", "chose level"] {
+        assert!(err.contains(needle), "{needle}: {err}");
+    }
+    let r2 = bake_high(&scene_path, &two, "2");
+    assert!(
+        r2.status.success(),
+        "{}",
+        String::from_utf8_lossy(&r2.stderr)
+    );
+    let bytes = std::fs::read(&one).unwrap();
+    assert!(
+        bytes == std::fs::read(&two).unwrap(),
+        "thread count changed the bytes"
+    );
+    // The same content hash on stdout.
+    assert_eq!(r1.stdout, r2.stdout);
+
+    // What the file records is what the bake chose and measured: the header's bake
+    // record, the tracer's parameters, and `inspect --json` agree.
+    let baked = open_psf(&one, &OpenOptions::default()).unwrap();
+    let rec = baked.header.bake;
+    assert_eq!(rec.quality, subfield::psf::Quality::High);
+    let tuned = *baked.psf.tuning().expect("a tuned file records its tuning");
+    assert!(tuned.trials > 1 && tuned.sample_rays > 0, "{tuned:?}");
+    assert!(tuned.cost <= tuned.default_cost, "{tuned:?}");
+    assert_eq!(rec.bsp(), *baked.psf.bsp_params());
+    let r = subfield(&["inspect", one.to_str().unwrap(), "--json"]);
+    assert!(r.status.success());
+    let json: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let b = &json["header"]["bake"];
+    assert_eq!(b["quality"], "high");
+    assert_eq!(b["leaf"].as_u64(), Some(rec.leaf as u64));
+    assert_eq!(b["flat_max"].as_u64(), Some(rec.flat_max as u64));
+    assert_eq!(b["trials"].as_u64(), Some(tuned.trials as u64));
+    assert_eq!(b["sample_rays"].as_u64(), Some(tuned.sample_rays));
+    assert_eq!(b["cost"].as_u64(), Some(tuned.cost));
+    assert_eq!(b["default_cost"].as_u64(), Some(tuned.default_cost));
+    assert_eq!(
+        json["header"]["level"].as_u64(),
+        Some(baked.psf.params().level as u64)
+    );
+    assert_eq!(
+        json["header"]["tiles"].as_u64(),
+        Some(baked.psf.params().tiles as u64)
+    );
+    // The summary says so too.
+    let r = subfield(&["inspect", one.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&r.stdout);
+    assert!(text.contains("bake: quality high"), "{text}");
+
+    // A default bake records a default bake.
+    let plain = dir.join("plain.psf");
+    let r = subfield(&[
+        "bake",
+        scene_path.to_str().unwrap(),
+        "-o",
+        plain.to_str().unwrap(),
+        "-q",
+    ]);
+    assert!(r.status.success());
+    let d = open_psf(&plain, &OpenOptions::default()).unwrap();
+    assert_eq!(d.header.bake, subfield::format::BakeRecord::default_bake());
+    assert!(d.psf.tuning().is_none());
+
+    // The tuned file traces as the default one does (exactness does not depend on the
+    // parameters).
+    let mut rng = Rng::new(5);
+    for _ in 0..2_000 {
+        let r = Ray::new(rng.in_box(Vec3::splat(-3.0), Vec3::splat(3.0)), rng.unit());
+        assert_eq!(baked.psf.intersect(&r), d.psf.intersect(&r));
+    }
+}
+
+#[test]
+fn quality_high_costs_no_more_than_the_default_on_its_sample() {
+    let dir = temp_dir("quality-cost");
+    let scene_path = dir.join("scene.glb");
+    write_tuning_scene(&scene_path);
+    let scene = import::load(&scene_path).unwrap();
+    let split = scene.split(ClipSelection::All);
+    let tris = scene.static_triangles(&split).positions;
+    let auto = PsfParams::for_static(tris.len());
+    let default = Psf::build(&tris, &auto).unwrap();
+    let rays = subfield::render::tuning_rays(&scene, &default);
+    assert!(rays.closest.len() >= 1 << 16 && !rays.any.is_empty());
+    let (psf, tuning) = subfield::psf::tune(&tris, &rays, &|_| {}).unwrap();
+    // The costs are what measuring gives, independently of the search: the default's,
+    // and the chosen bake's.
+    use subfield::psf::tune::{cost, measure};
+    let default_cost = cost(&measure(&default, &rays));
+    assert_eq!(tuning.record.default_cost, default_cost);
+    assert_eq!(tuning.record.cost, cost(&measure(&psf, &rays)));
+    assert_eq!(
+        (*psf.params(), *psf.bsp_params()),
+        (tuning.chosen.params, tuning.chosen.bsp)
+    );
+    // No costlier than the default, and no trial kept is much cheaper than the choice.
+    assert!(tuning.record.cost <= default_cost, "{:?}", tuning.record);
+    let least = tuning.trials.iter().map(|t| t.cost).min().unwrap();
+    assert!(tuning.record.cost as f64 <= least as f64 * 1.01 + 1.0);
+    // On this scene (most triangles in a corner of a long box) the default's grid is
+    // poor, and the tuned bake does measurably less work.
+    assert!(
+        (tuning.record.cost as f64) < 0.95 * default_cost as f64,
+        "{:?}",
+        tuning.record
+    );
+    // Same input, same choice.
+    let (_, again) = subfield::psf::tune(&tris, &rays, &|_| {}).unwrap();
+    assert_eq!(again.record, tuning.record);
+    assert_eq!(again.chosen, tuning.chosen);
+}
+
+#[test]
+fn a_bad_quality_is_one_clear_line_and_no_file() {
+    let dir = temp_dir("quality-bad");
+    let scene_path = dir.join("scene.glb");
+    write_tuning_scene(&scene_path);
+    let out = dir.join("out.psf");
+    let s = scene_path.to_str().unwrap();
+    let o = out.to_str().unwrap();
+    for (args, needles) in [
+        (
+            vec!["bake", s, "-o", o, "--quality", "ultra"],
+            vec!["ultra", "default or high"],
+        ),
+        (
+            vec!["bake", s, "-o", o, "--quality", "high", "--tiles", "8"],
+            vec!["--quality high", "--tiles"],
+        ),
+        (
+            vec!["bake", s, "-o", o, "--quality", "high", "--levels", "2"],
+            vec!["--quality high", "--levels"],
+        ),
+    ] {
+        let r = subfield(&args);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert!(!r.status.success(), "{args:?} succeeded");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        for n in needles {
+            assert!(err.contains(n), "{args:?}: {n}: {err}");
+        }
+        assert!(!out.exists(), "{args:?} wrote a file");
     }
 }

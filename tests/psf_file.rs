@@ -327,12 +327,15 @@ fn a_flipped_byte_in_header_table_or_padding_is_caught() {
             (
                 FormatError::Version {
                     found,
-                    supported: 2,
+                    supported: 3,
                 },
                 8..=11,
             ) => {
-                assert_eq!(*found, 2 ^ (1 << (8 * (at - 8))))
+                assert_eq!(*found, 3 ^ (1 << (8 * (at - 8))))
             }
+            // 3 with its low bit flipped is 2, a version this build reads: the header
+            // checksum catches it.
+            (FormatError::Checksum { section, .. }, 8) => assert_eq!(section, "header"),
             (FormatError::NotSupported { what }, 12..=15) => assert!(what.contains("byte-order")),
             (FormatError::Checksum { section, .. }, 16..) => assert_eq!(section, "header"),
             _ => panic!("header byte {at}: {err}"),
@@ -427,12 +430,12 @@ fn wrong_magic_version_or_byte_order() {
     ));
 
     // A newer file, and a version 1 file (before flat tiles): both refused by name.
-    for v in [3u32, 1] {
+    for v in [4u32, 1] {
         let mut other = good.clone();
         other[8..12].copy_from_slice(&v.to_le_bytes());
         let err = open_mem(&other).unwrap_err();
         assert!(
-            matches!(err, FormatError::Version { found, supported: 2 } if found == v),
+            matches!(err, FormatError::Version { found, supported: 3 } if found == v),
             "{err}"
         );
         assert!(err.to_string().contains("re-bake"), "{err}");
@@ -745,5 +748,70 @@ fn write_replaces_atomically_and_reports_io_errors_with_the_path() {
     match open_psf(&missing, &OpenOptions::default()) {
         Err(FormatError::Io { path, .. }) => assert_eq!(path, missing),
         other => panic!("{other:?}"),
+    }
+}
+
+/// Version 3 records how the file was baked in header bytes 80..120; a version 2 file
+/// (those bytes zero) still opens, as a default bake, and traces the same.
+#[test]
+fn a_version_2_file_opens_as_a_default_bake() {
+    let (_, psf) = small_psf();
+    let good = to_bytes(&psf, &opts(Codec::None)).unwrap();
+    assert_eq!(u32::from_le_bytes(good[8..12].try_into().unwrap()), 3);
+    let record = open_mem(&good).unwrap().header.bake;
+    assert_eq!(record, format::BakeRecord::default_bake());
+    // The default layout is written out: 3 entries a slab, flat up to 32.
+    assert_eq!((good[80], good[81], good[82]), (0, 3, 32));
+    let mut v2 = good.clone();
+    v2[8..12].copy_from_slice(&2u32.to_le_bytes());
+    v2[80..120].fill(0);
+    reseal(&mut v2);
+    let old = open_mem(&v2).unwrap();
+    assert_eq!(old.header.version, 2);
+    assert_eq!(old.header.bake, format::BakeRecord::default_bake());
+    let new = open_mem(&good).unwrap();
+    let mut rng = synth::Rng::new(4);
+    for _ in 0..500 {
+        let r = Ray::new(rng.in_box(Vec3::splat(-3.0), Vec3::splat(3.0)), rng.unit());
+        assert_eq!(old.psf.intersect(&r), new.psf.intersect(&r));
+    }
+    // A version 2 file with anything in those bytes is refused.
+    let mut bad = v2.clone();
+    bad[90] = 1;
+    reseal(&mut bad);
+    let err = open_mem(&bad).unwrap_err();
+    assert!(err.to_string().contains("reserved byte 90"), "{err}");
+}
+
+/// A bake record out of range is refused, naming it, whatever the checksums say.
+#[test]
+fn a_bad_bake_record_is_refused_by_name() {
+    let (_, psf) = small_psf();
+    let good = to_bytes(&psf, &opts(Codec::None)).unwrap();
+    type Damage = fn(&mut Vec<u8>);
+    let cases: [(&str, Damage); 7] = [
+        ("quality 7", |b| b[80] = 7),
+        ("entries a slab 0", |b| b[81] = 0),
+        ("entries a slab 33", |b| b[81] = 33),
+        ("threshold 40", |b| b[82] = 40),
+        ("reserved byte 83", |b| b[83] = 1),
+        ("records no tuning", |b| b[88] = 1),
+        ("exceeds the default", |b| {
+            b[80] = 1;
+            b[84] = 2;
+            b[96] = 9;
+            b[104] = 8;
+        }),
+    ];
+    for (needle, damage) in cases {
+        let mut bad = good.clone();
+        damage(&mut bad);
+        reseal(&mut bad);
+        let err = open_mem(&bad).unwrap_err();
+        let text = err.to_string();
+        assert!(
+            text.contains("header bake record") && text.contains(needle),
+            "{needle}: {text}"
+        );
     }
 }

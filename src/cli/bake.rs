@@ -1,5 +1,7 @@
 //! `subfield bake SCENE -o FILE.psf [--levels L] [--tiles N] [--codec zstd|none]
-//! [--threads T]`: the static part of a scene (all clips playing), baked and written.
+//! [--quality default|high] [--threads T]`: the static part of a scene (all clips
+//! playing), baked and written; with `--quality high` its parameters are chosen by
+//! measured trace cost on the scene's own sample rays (`subfield::psf::tune`).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -8,6 +10,7 @@ use std::time::Instant;
 use anyhow::Context;
 use subfield::format::{write_psf, Codec, WriteOptions};
 use subfield::import;
+use subfield::psf::{Quality, TuneEvent, Tuning};
 use subfield::scene::{ClipSelection, Scene};
 use subfield::{Psf, PsfParams};
 
@@ -21,17 +24,24 @@ pub struct Args {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Direction level 0..=4 (4, 10, 34, 130, 514 directions; antipodes share a subfield;
-    /// default: from the triangle count, 3 below 16,384 triangles, 2 below 65,536, else
-    /// 1; these suit camera, shadow and mirror rays, use 2 or 1 for random directions).
+    /// default: from the triangle count, 1 below 1,024 triangles, 3 below 16,384, 2 below
+    /// 65,536, else 1; these suit camera, shadow and mirror rays, use 2 or 1 for random
+    /// directions).
     #[arg(long)]
     pub levels: Option<u32>,
     /// Tiles along the longer side of each subfield's grid, 1..=4096 (default: from the
-    /// triangle count, 0.5·√n rounded to a power of two within 4..=256).
+    /// triangle count, 16 below 1,024 triangles, else 0.5·√n rounded to a power of two
+    /// within 4..=256).
     #[arg(long)]
     pub tiles: Option<u32>,
     /// Section codec: zstd (smaller) or none (raw, opened in place).
     #[arg(long, default_value_t = Codec::Zstd)]
     pub codec: Codec,
+    /// default: parameters from the triangle count (or --levels / --tiles); high: level,
+    /// tiles and the BSP's layout chosen by measured trace cost on sample rays from the
+    /// scene's cameras and lights (seconds to minutes), recorded in the file.
+    #[arg(long, default_value_t = Quality::Default)]
+    pub quality: Quality,
     /// Worker threads; 0 or absent: all cores.
     #[arg(long)]
     pub threads: Option<usize>,
@@ -42,6 +52,9 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     super::set_threads(a.threads)?;
+    if a.quality == Quality::High && (a.levels.is_some() || a.tiles.is_some()) {
+        anyhow::bail!("--quality high chooses the level and tiles itself; give it without --levels and --tiles");
+    }
     // Check the flags before reading the scene; the tile count may wait for it.
     PsfParams {
         level: a.levels.unwrap_or(1),
@@ -58,7 +71,14 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     for w in &scene.warnings {
         say(format!("warning: {w}"));
     }
-    let (psf, baked) = bake_static(&scene, &a.scene, a.levels, a.tiles, a.quiet)?;
+    let (psf, baked) = match a.quality {
+        Quality::Default => bake_static(&scene, &a.scene, a.levels, a.tiles, a.quiet)?,
+        Quality::High => {
+            let (psf, tuning, secs) = bake_tuned(&scene, &a.scene, a.quiet)?;
+            say(tuning_summary(&tuning));
+            (psf, secs)
+        }
+    };
 
     let report = write_psf(
         &a.output,
@@ -100,7 +120,7 @@ pub fn bake_static(
         eprintln!("{}: {}", label.display(), split.summary());
     }
     let soup = scene.static_triangles(&split);
-    let auto = PsfParams::for_triangles(soup.len());
+    let auto = PsfParams::for_static(soup.len());
     let params = PsfParams {
         level: levels.unwrap_or(auto.level),
         tiles: tiles.unwrap_or(auto.tiles),
@@ -114,4 +134,80 @@ pub fn bake_static(
     .with_context(|| format!("cannot bake {}", label.display()))?;
     bar.finish();
     Ok((psf, start.elapsed().as_secs_f64()))
+}
+
+/// Bakes the static part of `scene` with the parameters [`tune`](subfield::psf::tune)
+/// chooses on the scene's sample rays, one line a trial on stderr unless `quiet`.
+/// Returns the tracer, what tuning found and the seconds it all took.
+pub fn bake_tuned(scene: &Scene, label: &Path, quiet: bool) -> anyhow::Result<(Psf, Tuning, f64)> {
+    let split = scene.split(ClipSelection::All);
+    if !quiet {
+        eprintln!("{}: {}", label.display(), split.summary());
+    }
+    let start = Instant::now();
+    let soup = scene.static_triangles(&split);
+    let context = || format!("cannot bake {}", label.display());
+    // Any bake finds the sample's hits (they do not depend on the parameters).
+    let first =
+        Psf::build(&soup.positions, &PsfParams::for_static(soup.len())).with_context(context)?;
+    let rays = subfield::render::tuning_rays(scene, &first);
+    drop(first);
+    if !quiet {
+        eprintln!(
+            "tuning on {} sample rays ({} closest-hit, {} shadow)",
+            rays.len(),
+            rays.closest.len(),
+            rays.any.len()
+        );
+    }
+    let n = std::cell::Cell::new(0u32);
+    let default_cost = std::cell::Cell::new(0u64);
+    let (psf, tuning) = subfield::psf::tune(&soup.positions, &rays, &|e| {
+        if quiet {
+            return;
+        }
+        match e {
+            TuneEvent::Stage(s) => eprintln!("tuning: {s}"),
+            TuneEvent::Trial { trial: t, over_cap } => {
+                n.set(n.get() + 1);
+                if n.get() == 1 {
+                    default_cost.set(t.cost.max(1));
+                }
+                eprintln!(
+                    "  trial {:>2}: level {}, {:>4} tiles, {:>2} a slab, flat up to {:>2}: cost {} ({:.3}x the default), {:.2} MiB{}",
+                    n.get(),
+                    t.params.level,
+                    t.params.tiles,
+                    t.bsp.leaf,
+                    t.bsp.flat_max,
+                    t.cost,
+                    t.cost as f64 / default_cost.get() as f64,
+                    t.raw_bytes as f64 / (1024.0 * 1024.0),
+                    if over_cap { " (over the size cap, not kept)" } else { "" }
+                );
+            }
+        }
+    })
+    .with_context(context)?;
+    Ok((psf, tuning, start.elapsed().as_secs_f64()))
+}
+
+/// One line: what tuning chose and what it gains over the default by its measure.
+pub fn tuning_summary(t: &Tuning) -> String {
+    let c = &t.chosen;
+    let d = &t.default;
+    format!(
+        "chose level {}, {} tiles, {} entries a slab, flat tiles up to {}: cost {:.3}x the default's (level {}, {} tiles) over {} sample rays, {} trials, {:.2} MiB raw against {:.2}",
+        c.params.level,
+        c.params.tiles,
+        c.bsp.leaf,
+        c.bsp.flat_max,
+        c.cost as f64 / d.cost.max(1) as f64,
+        d.params.level,
+        d.params.tiles,
+        t.record.sample_rays,
+        t.record.trials,
+        c.raw_bytes as f64 / (1024.0 * 1024.0),
+        d.raw_bytes as f64 / (1024.0 * 1024.0),
+    )
 }

@@ -16,7 +16,7 @@ pub enum FormatError {
     },
     #[error("not a baked subfield file: magic bytes {0:02x?}")]
     Magic([u8; 8]),
-    #[error("format version {found} is not supported (this build reads version {supported}); re-bake the scene")]
+    #[error("format version {found} is not supported (this build reads versions 2 to {supported}); re-bake the scene")]
     Version { found: u32, supported: u32 },
     #[error("file is truncated in {section}: needs {needed} bytes, has {have}")]
     Truncated {

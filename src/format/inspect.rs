@@ -213,6 +213,27 @@ fn mib(b: u64) -> f64 {
     b as f64 / (1024.0 * 1024.0)
 }
 
+impl super::BakeRecord {
+    /// One line: the quality, the layout, and for a tuned bake what it measured.
+    pub fn line(&self) -> String {
+        let mut s = format!(
+            "bake: quality {}, {} entries a slab, flat tiles up to {}",
+            self.quality, self.leaf, self.flat_max
+        );
+        if self.tuning().is_some() {
+            s.push_str(&format!(
+                "; tuned over {} trials on {} sample rays: cost {} against the default's {} ({:.3}x)",
+                self.trials,
+                self.sample_rays,
+                self.cost,
+                self.default_cost,
+                self.cost as f64 / self.default_cost.max(1) as f64
+            ));
+        }
+        s
+    }
+}
+
 impl Inspection {
     /// The one-screen form (`subfield inspect` without `--verbose`): header, hashes,
     /// sizes by section kind, the directions' grids and the occupancy in a few lines.
@@ -258,6 +279,7 @@ impl fmt::Display for InspectionSummary<'_> {
             "{} triangles; level {}: {} subfields, {} tiles per side, margin {:e}",
             h.triangle_count, h.level, h.subfield_count, h.tiles, h.margin
         )?;
+        writeln!(f, "{}", h.bake.line())?;
         writeln!(f, "content hash {}", ins.content_hash)?;
         writeln!(f, "scene hash {}", h.scene_hash)?;
         // Sections by kind (their names without the subfield index), in file order.
@@ -348,6 +370,7 @@ impl fmt::Display for Inspection {
             "level {} ({} subfields), {} tiles per side, {} triangles, margin {:e}",
             h.level, h.subfield_count, h.tiles, h.triangle_count, h.margin
         )?;
+        writeln!(f, "{}", h.bake.line())?;
         writeln!(f, "content hash {}", self.content_hash)?;
         writeln!(f, "scene hash {}", h.scene_hash)?;
         writeln!(

@@ -28,8 +28,12 @@ use glam::Vec3;
 use serde::Serialize;
 use xxhash_rust::xxh3::{xxh3_64, Xxh3};
 
+use crate::psf::TuneRecord;
+
 pub use content::{hash_copy, hash_file, hash_reader, BadContentHash, ContentHash, CopyError};
 pub use error::FormatError;
+// `Header::bake`'s types, for readers of a file's record.
+pub use crate::psf::{BspParams, Quality};
 pub use inspect::{
     inspect, inspect_bytes, DirectionInfo, Inspection, InspectionSummary, Occupancy, SectionInfo,
 };
@@ -39,9 +43,13 @@ pub use write::{to_bytes, write_psf, WriteOptions, WriteReport};
 /// The first 8 bytes of every file. After PNG: a non-ASCII first byte, and CR LF / SUB / LF
 /// so that text-mode transfers that rewrite line ends are caught.
 pub const MAGIC: [u8; 8] = *b"\x89PSF\r\n\x1a\n";
-/// The format version this build reads and writes. Version 2 added flat tiles and their
-/// `blocks` section; a version 1 file is refused (rebake it: the file is a cache).
-pub const VERSION: u32 = 2;
+/// The format version this build writes. Version 3 records how the file was baked (the
+/// header's bake record: quality, the BSP layout, what tuning measured); version 2
+/// added flat tiles and their `blocks` section.
+pub const VERSION: u32 = 3;
+/// The oldest version this build reads: a version 2 file (its bake record all zero)
+/// opens as a default bake; a version 1 file is refused (re-bake it: the file is a cache).
+pub const MIN_VERSION: u32 = 2;
 /// Sections per subfield: tiles, slab starts, entries, blocks.
 pub(crate) const PER_SUBFIELD: usize = 4;
 /// Written as a little-endian `u32`: a reader that sees other bytes (`0a 0b 0c 0d`) was
@@ -268,6 +276,128 @@ fn hex_u64<S: serde::Serializer>(x: &u64, s: S) -> Result<S::Ok, S::Error> {
     s.collect_str(&format_args!("{x:016x}"))
 }
 
+/// How a file was baked: header bytes 80..120 of version 3 (all zero in version 2,
+/// which reads as a default bake with the default layout). Tracing does not depend on
+/// it; `inspect` shows it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct BakeRecord {
+    /// `default`: parameters from the triangle count (or given); `high`: chosen by
+    /// [`tune`](crate::psf::tune) on the scene's sample rays.
+    #[serde(serialize_with = "display")]
+    pub quality: Quality,
+    /// The BSP layout the tiles were built with ([`BspParams`]).
+    pub leaf: u32,
+    pub flat_max: u32,
+    /// Parameter sets measured, sample rays, the chosen set's cost and the default's
+    /// (all zero for a default bake).
+    pub trials: u32,
+    pub sample_rays: u64,
+    pub cost: u64,
+    pub default_cost: u64,
+}
+
+fn display<T: fmt::Display, S: serde::Serializer>(x: &T, s: S) -> Result<S::Ok, S::Error> {
+    s.collect_str(x)
+}
+
+impl BakeRecord {
+    /// The record of a default bake with the default layout (what a version 2 file means).
+    pub fn default_bake() -> BakeRecord {
+        BakeRecord::of(&BspParams::default(), None)
+    }
+
+    /// The record of a bake laid out by `bsp`, tuned as `tuned` says when it was.
+    pub fn of(bsp: &BspParams, tuned: Option<&TuneRecord>) -> BakeRecord {
+        let t = tuned.copied().unwrap_or_default();
+        BakeRecord {
+            quality: if tuned.is_some() {
+                Quality::High
+            } else {
+                Quality::Default
+            },
+            leaf: bsp.leaf,
+            flat_max: bsp.flat_max,
+            trials: t.trials,
+            sample_rays: t.sample_rays,
+            cost: t.cost,
+            default_cost: t.default_cost,
+        }
+    }
+
+    pub fn bsp(&self) -> BspParams {
+        BspParams {
+            leaf: self.leaf,
+            flat_max: self.flat_max,
+        }
+    }
+
+    /// What tuning measured (`None` for a default bake).
+    pub fn tuning(&self) -> Option<TuneRecord> {
+        (self.quality == Quality::High).then_some(TuneRecord {
+            trials: self.trials,
+            sample_rays: self.sample_rays,
+            cost: self.cost,
+            default_cost: self.default_cost,
+        })
+    }
+
+    fn encode(&self, b: &mut [u8]) {
+        b[80] = self.quality as u8;
+        // Checked in range (`BspParams::validate`: at most 32) before a bake.
+        b[81] = self.leaf.min(255) as u8;
+        b[82] = self.flat_max.min(255) as u8;
+        // 83 reserved, zero
+        b[84..88].copy_from_slice(&self.trials.to_le_bytes());
+        b[88..96].copy_from_slice(&self.sample_rays.to_le_bytes());
+        b[96..104].copy_from_slice(&self.cost.to_le_bytes());
+        b[104..112].copy_from_slice(&self.default_cost.to_le_bytes());
+        // 112..120 reserved, zero
+    }
+
+    /// Parses and checks a version 3 record (header bytes 80..120).
+    fn decode(b: &[u8]) -> Result<BakeRecord, FormatError> {
+        let bad = |d: String| FormatError::invalid("header bake record", d);
+        let quality = match b[80] {
+            0 => Quality::Default,
+            1 => Quality::High,
+            q => {
+                return Err(bad(format!(
+                    "quality {q} is neither 0 (default) nor 1 (high)"
+                )))
+            }
+        };
+        if let Some(i) = [83usize].into_iter().chain(112..120).find(|&i| b[i] != 0) {
+            return Err(bad(format!("reserved byte {i} is not zero")));
+        }
+        let r = BakeRecord {
+            quality,
+            leaf: b[81] as u32,
+            flat_max: b[82] as u32,
+            trials: le_u32(b, 84),
+            sample_rays: le_u64(b, 88),
+            cost: le_u64(b, 96),
+            default_cost: le_u64(b, 104),
+        };
+        r.bsp().validate().map_err(bad)?;
+        match quality {
+            Quality::Default
+                if (r.trials, r.sample_rays, r.cost, r.default_cost) != (0, 0, 0, 0) =>
+            {
+                Err(bad(
+                    "a default bake records no tuning, but its trials, rays or costs are not zero"
+                        .into(),
+                ))
+            }
+            Quality::High if r.trials == 0 => Err(bad("a tuned bake records no trial".into())),
+            Quality::High if r.cost > r.default_cost => Err(bad(format!(
+                "the chosen cost {} exceeds the default's {}",
+                r.cost, r.default_cost
+            ))),
+            _ => Ok(r),
+        }
+    }
+}
+
 /// The file header: the first [`HEADER_LEN`] bytes.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Header {
@@ -284,6 +414,8 @@ pub struct Header {
     #[serde(serialize_with = "hex_u64")]
     pub table_checksum: u64,
     pub scene_hash: SceneHash,
+    /// How it was baked (version 3; a version 2 file reads as a default bake).
+    pub bake: BakeRecord,
 }
 
 fn le_u16(b: &[u8], at: usize) -> u16 {
@@ -316,7 +448,10 @@ impl Header {
         b[52..56].copy_from_slice(&self.section_count.to_le_bytes());
         b[56..64].copy_from_slice(&self.table_checksum.to_le_bytes());
         b[64..80].copy_from_slice(&self.scene_hash.0);
-        // 80..120 reserved, zero
+        // 80..120: the bake record (version 3; zero in version 2)
+        if self.version >= 3 {
+            self.bake.encode(&mut b);
+        }
         let sum = checksum(&b[..120]);
         b[120..128].copy_from_slice(&sum.to_le_bytes());
         b
@@ -341,7 +476,7 @@ impl Header {
             });
         };
         let version = le_u32(b, 8);
-        if version != VERSION {
+        if !(MIN_VERSION..=VERSION).contains(&version) {
             return Err(FormatError::Version {
                 found: version,
                 supported: VERSION,
@@ -373,12 +508,17 @@ impl Header {
                 format!("reserved flags {flags:#x} are not zero"),
             ));
         }
-        if let Some(i) = b[80..120].iter().position(|&x| x != 0) {
-            return Err(FormatError::invalid(
-                "header",
-                format!("reserved byte {} is not zero", 80 + i),
-            ));
-        }
+        let bake = if version >= 3 {
+            BakeRecord::decode(b)?
+        } else {
+            if let Some(i) = b[80..120].iter().position(|&x| x != 0) {
+                return Err(FormatError::invalid(
+                    "header",
+                    format!("reserved byte {} is not zero", 80 + i),
+                ));
+            }
+            BakeRecord::default_bake()
+        };
         let mut hash = [0u8; 16];
         hash.copy_from_slice(&b[64..80]);
         Ok(Header {
@@ -392,6 +532,7 @@ impl Header {
             section_count: le_u32(b, 52),
             table_checksum: le_u64(b, 56),
             scene_hash: SceneHash(hash),
+            bake,
         })
     }
 }

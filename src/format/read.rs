@@ -178,7 +178,8 @@ pub fn from_bytes(bytes: SharedBytes, opts: &OpenOptions) -> Result<BakedPsf, Fo
         level: header.level,
         tiles: header.tiles,
     };
-    let psf = Psf::from_parts(params, header.margin, triangles, subfields)?;
+    let psf = Psf::from_parts(params, header.margin, triangles, subfields)?
+        .with_record(header.bake.bsp(), header.bake.tuning());
     Ok(BakedPsf {
         psf,
         header,

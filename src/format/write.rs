@@ -9,9 +9,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::{
-    align_up, checksum, scene_hash, section_ids, Codec, ContentHash, FormatError, Header,
-    SceneHash, SectionEntry, SectionId, HEADER_LEN, MAX_RATIO, PER_SUBFIELD, TABLE_ENTRY_LEN,
-    VERSION,
+    align_up, checksum, scene_hash, section_ids, BakeRecord, Codec, ContentHash, FormatError,
+    Header, SceneHash, SectionEntry, SectionId, HEADER_LEN, MAX_RATIO, PER_SUBFIELD,
+    TABLE_ENTRY_LEN, VERSION,
 };
 use crate::psf::Psf;
 
@@ -146,6 +146,7 @@ fn encode(psf: &Psf, opts: &WriteOptions) -> Result<(Vec<u8>, WriteReport), Form
         section_count: ids.len() as u32,
         table_checksum: checksum(&table),
         scene_hash: scene_hash(psf.triangles()),
+        bake: BakeRecord::of(psf.bsp_params(), psf.tuning()),
     };
     let len = usize::try_from(file_length).map_err(|_| FormatError::NotSupported {
         what: format!("a {file_length}-byte file on this machine"),

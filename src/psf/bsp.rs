@@ -102,16 +102,56 @@ const _: () = assert!(std::mem::size_of::<TileHeader>() == 16);
 const _: () = assert!(std::mem::size_of::<Entry>() == 12);
 const _: () = assert!(std::mem::size_of::<Block>() == 96);
 
-/// Slabs a tile gets for `n` entries: about `LEAF` entries a slab, at most `MAX_SLABS`.
-/// Low resolution on purpose: most tiles hold a handful of triangles.
+/// Slabs a tile gets for `n` entries by default: about `LEAF` entries a slab, at most
+/// `MAX_SLABS`. Low resolution on purpose: most tiles hold a handful of triangles.
 pub const LEAF: usize = 3;
 pub const MAX_SLABS: usize = 32;
 
-pub fn slab_count_for(n: usize) -> u32 {
+/// How a tile's list is laid out: the BSP's resolution and the flat tiles' threshold.
+/// Only the bake reads these (a reader traces whatever layout each tile header gives),
+/// so `bake --quality high` may tune them per scene; the file records them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct BspParams {
+    /// Entries a slab aims at, `1..=MAX_SLABS` (slabs: `ceil(n / leaf)`, at most
+    /// [`MAX_SLABS`]); fewer make a deeper BSP.
+    pub leaf: u32,
+    /// Tiles of at most this many entries are flat, `0..=FLAT_MAX` (0: none).
+    pub flat_max: u32,
+}
+
+impl Default for BspParams {
+    fn default() -> Self {
+        BspParams {
+            leaf: LEAF as u32,
+            flat_max: FLAT_MAX as u32,
+        }
+    }
+}
+
+impl BspParams {
+    pub fn validate(&self) -> Result<(), String> {
+        if !(1..=MAX_SLABS as u32).contains(&self.leaf) {
+            return Err(format!(
+                "entries a slab {} is outside 1..={MAX_SLABS}",
+                self.leaf
+            ));
+        }
+        if self.flat_max > FLAT_MAX as u32 {
+            return Err(format!(
+                "flat-tile threshold {} is above {FLAT_MAX}",
+                self.flat_max
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Slabs for `n` entries, about `leaf` entries a slab, at most [`MAX_SLABS`].
+pub fn slab_count_with(n: usize, leaf: usize) -> u32 {
     if n == 0 {
         0
     } else {
-        n.div_ceil(LEAF).clamp(1, MAX_SLABS) as u32
+        n.div_ceil(leaf.max(1)).clamp(1, MAX_SLABS) as u32
     }
 }
 
@@ -151,15 +191,16 @@ impl TileHeader {
 
 /// Builds one tile from its entries (at most one a triangle): flat, its entries in
 /// order of `zmin` (ties by triangle) appended to `blocks`, when there are at most
-/// [`FLAT_MAX`]; otherwise its slabs, appended to `slab_starts` and `out` (offsets in
-/// `slab_starts` are absolute indices into `out`).
+/// `bsp.flat_max`; otherwise its slabs (about `bsp.leaf` entries each), appended to
+/// `slab_starts` and `out` (offsets in `slab_starts` are absolute indices into `out`).
 pub fn build_tile(
     entries: &[Entry],
+    bsp: &BspParams,
     slab_starts: &mut Vec<u32>,
     out: &mut Vec<Entry>,
     blocks: &mut Vec<Block>,
 ) -> TileHeader {
-    if !entries.is_empty() && entries.len() <= FLAT_MAX {
+    if !entries.is_empty() && entries.len() <= (bsp.flat_max as usize).min(FLAT_MAX) {
         let mut list = entries.to_vec();
         list.sort_by(|a, b| a.zmin.total_cmp(&b.zmin).then(a.tri.cmp(&b.tri)));
         let first = blocks.len() as u32;
@@ -179,17 +220,18 @@ pub fn build_tile(
             inv_slab: 0.0,
         };
     }
-    build_slabs(entries, slab_starts, out)
+    build_slabs_with(entries, bsp.leaf as usize, slab_starts, out)
 }
 
-/// A tile's BSP slabs, whatever its entry count.
-pub fn build_slabs(
+/// A tile's BSP slabs, about `leaf` entries a slab, whatever its entry count.
+pub fn build_slabs_with(
     entries: &[Entry],
+    leaf: usize,
     slab_starts: &mut Vec<u32>,
     out: &mut Vec<Entry>,
 ) -> TileHeader {
     let first_slab = slab_starts.len() as u32;
-    let n = slab_count_for(entries.len());
+    let n = slab_count_with(entries.len(), leaf);
     if n == 0 {
         return TileHeader {
             first_slab,
@@ -250,7 +292,7 @@ mod tests {
             .collect();
         let mut starts = Vec::new();
         let mut out = Vec::new();
-        let h = build_slabs(&entries, &mut starts, &mut out);
+        let h = build_slabs_with(&entries, LEAF, &mut starts, &mut out);
         assert_eq!(h.slab_count, 4);
         assert_eq!(starts.len(), 5);
         for s in 0..h.slab_count as usize {
@@ -277,7 +319,7 @@ mod tests {
         ];
         let mut starts = Vec::new();
         let mut out = Vec::new();
-        let h = build_slabs(&entries, &mut starts, &mut out);
+        let h = build_slabs_with(&entries, LEAF, &mut starts, &mut out);
         assert_eq!(h.inv_slab, 0.0);
         assert_eq!(h.slab_of(1e30), 0);
         assert_eq!(starts[1] - starts[0], 10);
@@ -293,7 +335,13 @@ mod tests {
             })
             .collect();
         let (mut starts, mut out, mut blocks) = (Vec::new(), Vec::new(), vec![PADDING]);
-        let h = build_tile(&entries, &mut starts, &mut out, &mut blocks);
+        let h = build_tile(
+            &entries,
+            &BspParams::default(),
+            &mut starts,
+            &mut out,
+            &mut blocks,
+        );
         assert!(h.is_flat());
         assert_eq!(h.slabs(), 0);
         assert_eq!(h.blocks(), 1..3);
@@ -310,6 +358,46 @@ mod tests {
     }
 
     #[test]
+    fn the_layout_sets_the_flat_threshold_and_the_slab_count() {
+        let entries: Vec<Entry> = (0..12)
+            .map(|i| Entry {
+                tri: i,
+                zmin: i as f32,
+                zmax: i as f32 + 0.5,
+            })
+            .collect();
+        let build = |leaf, flat_max| {
+            let (mut starts, mut out, mut blocks) = (Vec::new(), Vec::new(), Vec::new());
+            build_tile(
+                &entries,
+                &BspParams { leaf, flat_max },
+                &mut starts,
+                &mut out,
+                &mut blocks,
+            )
+        };
+        assert!(build(3, 32).is_flat());
+        assert!(build(3, 12).is_flat());
+        assert!(!build(3, 11).is_flat());
+        assert_eq!(build(3, 0).slabs(), 4);
+        assert_eq!(build(1, 0).slabs(), 12);
+        assert_eq!(build(8, 0).slabs(), 2);
+        assert!(BspParams {
+            leaf: 0,
+            flat_max: 0
+        }
+        .validate()
+        .is_err());
+        assert!(BspParams {
+            leaf: 3,
+            flat_max: 33
+        }
+        .validate()
+        .is_err());
+        assert!(BspParams::default().validate().is_ok());
+    }
+
+    #[test]
     fn long_lists_keep_the_bsp() {
         let entries: Vec<Entry> = (0..FLAT_MAX as u32 + 1)
             .map(|i| Entry {
@@ -319,9 +407,15 @@ mod tests {
             })
             .collect();
         let (mut starts, mut out, mut blocks) = (Vec::new(), Vec::new(), Vec::new());
-        let h = build_tile(&entries, &mut starts, &mut out, &mut blocks);
+        let h = build_tile(
+            &entries,
+            &BspParams::default(),
+            &mut starts,
+            &mut out,
+            &mut blocks,
+        );
         assert!(!h.is_flat());
-        assert_eq!(h.slabs(), slab_count_for(entries.len()));
+        assert_eq!(h.slabs(), slab_count_with(entries.len(), LEAF));
         assert!(blocks.is_empty());
         assert_eq!(h.blocks(), 0..0);
     }

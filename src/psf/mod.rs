@@ -22,18 +22,20 @@ mod point;
 mod stats;
 mod storage;
 mod traverse;
+pub mod tune;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::Vec3;
 use rayon::prelude::*;
 
-pub use bsp::{Block, Entry, TileHeader};
+pub use bsp::{Block, BspParams, Entry, TileHeader};
 pub use directions::{subfield_directions, tetrahedron_directions, DirectionTable, MAX_LEVEL};
 pub use dynamic::{DynamicLayer, DynamicStats, Layered, Prim};
 pub use grid::GridFrame;
 pub use stats::{Histogram, PsfStats, RayStats};
 pub use storage::{Buf, SharedBytes};
+pub use tune::{tune, Quality, SampleRays, Trial, TuneEvent, TuneRecord, Tuning};
 
 use crate::geometry::Aabb;
 use point::PointCache;
@@ -89,6 +91,29 @@ impl PsfParams {
         PsfParams { level, tiles }
     }
 
+    /// Parameters for a bake of `n` static triangles (`subfield bake`, a render's bake in
+    /// memory): [`for_triangles`](Self::for_triangles), but below [`SMALL`](Self::SMALL)
+    /// triangles level 1 (7 subfields, not 109) and 16 tiles. A small scene needs few
+    /// directions: on BoxAnimated (192 triangles) level 1 with 16 tiles does less
+    /// counted work on its tuning sample than level 3 with 8 (`examples/tune_weights`,
+    /// weighted as `psf::tune::cost`: 1.05M against 1.59M) in a file 10 times smaller
+    /// (100 KB against 1.0 MB, zstd), and on CornellBox (36 triangles) 12.9M against
+    /// 13.5M (level 3, 4 tiles) in 46 KB against 184 KB. The moving triangles' layer
+    /// keeps `for_triangles`.
+    pub fn for_static(n: usize) -> PsfParams {
+        if n < Self::SMALL {
+            PsfParams {
+                level: 1,
+                tiles: 16,
+            }
+        } else {
+            Self::for_triangles(n)
+        }
+    }
+
+    /// Below this many static triangles a bake is small ([`for_static`](Self::for_static)).
+    pub const SMALL: usize = 1024;
+
     pub fn validate(&self) -> Result<(), PsfError> {
         if self.level > MAX_LEVEL {
             return Err(PsfError::Params(format!(
@@ -141,6 +166,10 @@ pub struct Subfield {
 #[derive(Debug)]
 pub struct Psf {
     params: PsfParams,
+    /// How the tiles' lists were laid out (not needed to trace; recorded in a file).
+    bsp: BspParams,
+    /// What tuning measured, for a PSF whose parameters `tune` chose.
+    tuned: Option<TuneRecord>,
     bounds: Aabb,
     margin: f32,
     /// `bounds` grown by the rounding allowance: rays are clipped to it.
@@ -197,6 +226,46 @@ impl Psf {
         params: &PsfParams,
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<Psf, PsfError> {
+        Self::build_with_layout(tris, params, &BspParams::default(), progress)
+    }
+
+    /// As [`Psf::build_with_progress`], the tiles' lists laid out by `bsp`.
+    pub fn build_with_layout(
+        tris: &[[Vec3; 3]],
+        params: &PsfParams,
+        bsp: &BspParams,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<Psf, PsfError> {
+        let raster = Rasters::build(tris, params, progress)?;
+        Ok(raster.assemble(tris, bsp))
+    }
+}
+
+/// Every subfield's triangles listed by tile, before the tiles' lists are laid out: what
+/// a bake rasterises once, so that tuning can try several [`BspParams`] on it.
+pub(crate) struct Rasters {
+    params: PsfParams,
+    bounds: Aabb,
+    margin: f32,
+    clip: Aabb,
+    dirs: Vec<Vec3>,
+    subfields: Vec<Raster>,
+}
+
+/// One subfield's raster: its frame, and its entries by tile (`start[i]..start[i + 1]`
+/// of `by_tile`, in triangle order).
+struct Raster {
+    frame: GridFrame,
+    start: Vec<u32>,
+    by_tile: Vec<Entry>,
+}
+
+impl Rasters {
+    pub(crate) fn build(
+        tris: &[[Vec3; 3]],
+        params: &PsfParams,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<Rasters, PsfError> {
         params.validate()?;
         check_triangles(tris)?;
         let bounds = Aabb::from_triangles(tris);
@@ -204,30 +273,52 @@ impl Psf {
         let dirs = subfield_directions(params.level);
         let grid_bounds = bounds.padded(2.0 * margin);
         let done = AtomicUsize::new(0);
-        let subfields: Vec<Subfield> = if tris.is_empty() {
+        let subfields: Vec<Raster> = if tris.is_empty() {
             Vec::new()
         } else {
             dirs.par_iter()
                 .map(|d| {
                     let frame = GridFrame::new(*d, &grid_bounds, params.tiles);
-                    let s = bake_subfield(frame, tris, margin);
+                    let s = raster_subfield(frame, tris, margin);
                     progress(done.fetch_add(1, Ordering::Relaxed) + 1, dirs.len());
                     s
                 })
                 .collect()
         };
-        Ok(Psf {
+        Ok(Rasters {
             params: *params,
             bounds,
             margin,
             clip: grid_bounds,
-            triangles: Buf::Owned(tris.to_vec()),
+            dirs,
             subfields,
-            table: DirectionTable::new(&dirs),
-            points: PointCache::default(),
         })
     }
 
+    /// The PSF of these rasters with the tiles' lists laid out by `bsp` (`tris` are the
+    /// triangles rasterised).
+    pub(crate) fn assemble(&self, tris: &[[Vec3; 3]], bsp: &BspParams) -> Psf {
+        let subfields = self
+            .subfields
+            .par_iter()
+            .map(|r| lay_out_subfield(r, bsp))
+            .collect();
+        Psf {
+            params: self.params,
+            bsp: *bsp,
+            tuned: None,
+            bounds: self.bounds,
+            margin: self.margin,
+            clip: self.clip,
+            triangles: Buf::Owned(tris.to_vec()),
+            subfields,
+            table: DirectionTable::new(&self.dirs),
+            points: PointCache::default(),
+        }
+    }
+}
+
+impl Psf {
     /// Assembles a PSF from stored parts (a baked file), checking every index the
     /// traversal will follow: afterwards queries cannot go out of bounds.
     pub fn from_parts(
@@ -377,6 +468,8 @@ impl Psf {
         checked.into_iter().collect::<Result<(), PsfError>>()?;
         Ok(Psf {
             params,
+            bsp: BspParams::default(),
+            tuned: None,
             bounds,
             margin,
             clip: bounds.padded(2.0 * margin),
@@ -424,6 +517,43 @@ impl Psf {
         &self.params
     }
 
+    /// How the tiles' lists were laid out: as baked, or as a baked file records it.
+    pub fn bsp_params(&self) -> &BspParams {
+        &self.bsp
+    }
+
+    /// What tuning measured, when [`tune`] chose this PSF's parameters (or the file it
+    /// was opened from records it).
+    pub fn tuning(&self) -> Option<&TuneRecord> {
+        self.tuned.as_ref()
+    }
+
+    /// Records how the file this PSF was opened from says it was baked (the reader has
+    /// checked the record's ranges). Hits do not depend on it.
+    pub(crate) fn with_record(mut self, bsp: BspParams, tuned: Option<TuneRecord>) -> Psf {
+        self.bsp = bsp;
+        self.tuned = tuned;
+        self
+    }
+
+    pub(crate) fn set_tuning(&mut self, t: TuneRecord) {
+        self.tuned = Some(t);
+    }
+
+    /// Bytes of the arrays a baked file stores (before compression): triangles, frames,
+    /// and every subfield's tile headers, slab starts, entries and blocks.
+    pub fn raw_bytes(&self) -> u64 {
+        let mut n = std::mem::size_of_val(self.triangles()) as u64
+            + (self.subfields.len() * std::mem::size_of::<GridFrame>()) as u64;
+        for sf in &self.subfields {
+            n += (std::mem::size_of_val(&*sf.tiles)
+                + std::mem::size_of_val(&*sf.slab_starts)
+                + std::mem::size_of_val(&*sf.entries)
+                + std::mem::size_of_val(&*sf.blocks)) as u64;
+        }
+        n
+    }
+
     pub fn bounds(&self) -> &Aabb {
         &self.bounds
     }
@@ -441,9 +571,9 @@ impl Psf {
     }
 }
 
-/// Rasterises every triangle into one subfield and builds each tile's BSP. Sequential
+/// Rasterises every triangle into one subfield, the entries sorted by tile. Sequential
 /// within the subfield, so the layout depends on the input order alone.
-fn bake_subfield(frame: GridFrame, tris: &[[Vec3; 3]], margin: f32) -> Subfield {
+fn raster_subfield(frame: GridFrame, tris: &[[Vec3; 3]], margin: f32) -> Raster {
     let ntiles = frame.tile_count();
     let mut raw: Vec<(u32, Entry)> = Vec::new();
     for (i, t) in tris.iter().enumerate() {
@@ -472,6 +602,17 @@ fn bake_subfield(frame: GridFrame, tris: &[[Vec3; 3]], margin: f32) -> Subfield 
         by_tile[cursor[t as usize] as usize] = e;
         cursor[t as usize] += 1;
     }
+    Raster {
+        frame,
+        start,
+        by_tile,
+    }
+}
+
+/// One subfield's tiles laid out from its raster: each tile flat or a BSP (`bsp`).
+fn lay_out_subfield(r: &Raster, layout: &BspParams) -> Subfield {
+    let (frame, start, by_tile) = (r.frame, &r.start, &r.by_tile);
+    let ntiles = frame.tile_count();
     let mut tiles = Vec::with_capacity(ntiles);
     let mut slab_starts = Vec::new();
     let mut entries = Vec::new();
@@ -480,6 +621,7 @@ fn bake_subfield(frame: GridFrame, tris: &[[Vec3; 3]], margin: f32) -> Subfield 
         let list = &by_tile[start[i] as usize..start[i + 1] as usize];
         tiles.push(bsp::build_tile(
             list,
+            layout,
             &mut slab_starts,
             &mut entries,
             &mut blocks,
@@ -506,6 +648,23 @@ mod params_tests {
             [4, 4, 64, 128, 256]
         );
         assert!(PsfParams::for_triangles(123_456).validate().is_ok());
+        let s = |n| PsfParams::for_static(n);
+        assert_eq!(
+            s(192),
+            PsfParams {
+                level: 1,
+                tiles: 16
+            }
+        );
+        assert_eq!(
+            s(1023),
+            PsfParams {
+                level: 1,
+                tiles: 16
+            }
+        );
+        assert_eq!(s(1024), PsfParams::for_triangles(1024));
+        assert_eq!(s(100_000), PsfParams::for_triangles(100_000));
         let l = |n| PsfParams::for_triangles(n).level;
         assert_eq!(
             [

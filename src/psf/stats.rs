@@ -8,8 +8,12 @@ pub struct RayStats {
     pub rays: u64,
     pub tiles_visited: u64,
     pub candidates_tested: u64,
-    /// Tile entries looked at, whether or not their depth range let them through.
+    /// Tile entries looked at, whether or not their depth range let them through (a flat
+    /// tile's blocks count eight lanes each).
     pub entries_scanned: u64,
+    /// Flat tiles' blocks looked at (eight lanes filtered by depth at once; their lanes
+    /// are in `entries_scanned` too).
+    pub blocks_scanned: u64,
 }
 
 impl RayStats {
@@ -28,6 +32,7 @@ impl std::ops::AddAssign for RayStats {
         self.tiles_visited += o.tiles_visited;
         self.candidates_tested += o.candidates_tested;
         self.entries_scanned += o.entries_scanned;
+        self.blocks_scanned += o.blocks_scanned;
     }
 }
 
@@ -36,6 +41,7 @@ pub(crate) trait Counter {
     fn tile(&mut self);
     fn candidate(&mut self);
     fn scanned(&mut self, n: usize);
+    fn blocks(&mut self, n: usize);
 }
 
 pub(crate) struct NoCount;
@@ -47,6 +53,8 @@ impl Counter for NoCount {
     fn candidate(&mut self) {}
     #[inline(always)]
     fn scanned(&mut self, _: usize) {}
+    #[inline(always)]
+    fn blocks(&mut self, _: usize) {}
 }
 
 impl Counter for RayStats {
@@ -61,6 +69,10 @@ impl Counter for RayStats {
     #[inline(always)]
     fn scanned(&mut self, n: usize) {
         self.entries_scanned += n as u64;
+    }
+    #[inline(always)]
+    fn blocks(&mut self, n: usize) {
+        self.blocks_scanned += n as u64;
     }
 }
 

@@ -260,6 +260,7 @@ impl Psf {
                 let window = block_window(oz, dz, t_enter, t_exit, &best, slack, margin);
                 let run = &blocks[h.blocks()];
                 count.scanned(run.len() * LANES);
+                count.blocks(run.len());
                 if !scan_blocks::<ANY, _, _>(run, window, pre, tris, ray, &mut best, count, |t| t) {
                     return false;
                 }

@@ -41,6 +41,7 @@ mod sampling;
 mod sequence;
 mod shade;
 mod stats;
+mod tuning_rays;
 mod wavefront;
 mod writer;
 use std::path::PathBuf;
@@ -54,8 +55,8 @@ pub use camera::{
     animation_bounds, apply_exposure, aspect_warning, camera_aspect, default_size, size_for_aspect,
     size_matches, CameraModel, DEFAULT_WIDTH, MAX_EXPOSURE,
 };
-pub use mips::TextureMips;
 pub use errors::{FramesProblem, OptionError, OutputFile};
+pub use mips::TextureMips;
 pub use options::{
     Aovs, CancelFlag, FrameRange, FrameSet, FrameSpan, LookAt, PixelType, PreviewOptions,
     RenderOptions, ShadingOptions, Shard, DEFAULT_CRYPTO_LEVELS, MAX_FRAMES, MAX_SIDE,
@@ -68,6 +69,7 @@ pub use planning::{plan, CameraSource, FramePlan, OutputPattern, RenderPlan};
 pub use sequence::render_sequence;
 pub use shade::{CryptoBuffers, FrameBuffers, FrameWork, RayCounts, ShadeContext};
 pub use stats::{plot_png, plot_svg, stats_csv, FrameStats, FrameTotals, PLOT_BARS};
+pub use tuning_rays::tuning_rays;
 pub use wavefront::{render_frame, sample_offset, AovInputs};
 
 use crate::format::FormatError;

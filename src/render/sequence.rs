@@ -11,8 +11,8 @@ use glam::Vec3;
 
 use super::aov::{CryptoNames, FrameHeader};
 use super::camera::{apply_exposure, CameraModel};
-use super::mips::TextureMips;
 use super::errors::OutputFile;
+use super::mips::TextureMips;
 use super::options::RenderOptions;
 use super::planning::{check_outputs, plan, skips, static_dynamic_split, CameraSource, RenderPlan};
 use super::shade::{FrameBuffers, ShadeContext};
@@ -122,7 +122,7 @@ fn static_part(static_soup: &TriangleSoup, opts: &RenderOptions) -> Result<Psf, 
         }
         None => Psf::build(
             &static_soup.positions,
-            &PsfParams::for_triangles(static_soup.len()),
+            &PsfParams::for_static(static_soup.len()),
         )?,
     })
 }
