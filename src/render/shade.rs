@@ -190,12 +190,14 @@ impl<'a> ShadeContext<'a> {
 
     /// Samples a texture (RGBA, linearised RGB when `srgb`), or `None` without one.
     fn texture(&self, slot: Option<TextureRef>, uv: Vec2, srgb: bool) -> Option<Vec4> {
-        let tex = self.scene.textures.get(slot?.texture as usize)?;
+        let slot = slot?;
+        let tex = self.scene.textures.get(slot.texture as usize)?;
         let img = self.scene.images.get(tex.image as usize)?;
         let (w, h) = (img.width as i64, img.height as i64);
         if w == 0 || h == 0 || img.rgba8.len() as i64 != w * h * 4 {
             return None;
         }
+        let uv = slot.transform.map_or(uv, |t| t.apply(uv));
         let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
         let fetch = |x: i64, y: i64| -> Vec4 {
             let x = wrap(x, w, tex.wrap_s);
