@@ -125,8 +125,11 @@ fn buffers(r: &Root, n: &Counts, p: &mut Problems) {
             n.views,
             "bufferViews",
         );
-        if im.buffer_view.is_some() && im.uri.is_some() {
-            p.push(format!("images[{i}]"), "has both uri and bufferView");
+        match (&im.uri, im.buffer_view) {
+            (Some(_), Some(_)) => p.push(format!("images[{i}]"), "has both uri and bufferView"),
+            (None, None) => p.push(format!("images[{i}]"), "has neither uri nor bufferView"),
+            // A missing mimeType is tolerated: the decoder recognises the format.
+            _ => {}
         }
     }
 }

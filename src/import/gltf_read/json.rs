@@ -117,7 +117,6 @@ pub(super) struct BufferViewExtensions {
 #[serde(rename_all = "camelCase", default)]
 pub(super) struct Image {
     pub uri: Option<String>,
-    pub mime_type: Option<String>,
     pub buffer_view: Option<Index>,
     pub name: Option<String>,
 }
