@@ -112,15 +112,17 @@ impl Importer<'_> {
                     .and_then(|x| x.checked_add(elem));
                 match need {
                     Some(n) if n <= bytes.len() => {}
-                    _ => return Err(self.acc_err(
-                        ai,
-                        usage,
-                        format!(
+                    _ => {
+                        return Err(self.acc_err(
+                            ai,
+                            usage,
+                            format!(
                             "{count} elements of {elem} bytes (stride {stride}) from byte {start} \
                                  run past bufferViews[{view}] ({} bytes)",
                             bytes.len()
                         ),
-                    )),
+                        ))
+                    }
                 }
             }
             values.resize(total, 0.0);

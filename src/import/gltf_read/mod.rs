@@ -63,8 +63,8 @@ const UNDECODED_EXTENSIONS: &[(&str, &str)] = &[
     ),
     (
         "KHR_texture_basisu",
-        "KTX2 / Basis Universal textures are not decoded; convert the textures to PNG or \
-         JPEG (e.g. `gltf-transform ktxdecompress IN OUT`)",
+        "KTX2 / Basis Universal textures are not decoded; extract them to PNG (e.g. with \
+         KTX-Software's `ktx extract`) and give the textures those images as `source`",
     ),
 ];
 
