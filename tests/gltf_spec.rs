@@ -818,7 +818,12 @@ fn required_extensions_we_do_not_decode_are_one_line() {
 fn structural_errors_name_the_object() {
     let dir = temp_dir("invalid");
     type Breaker = fn(&mut Value);
-    let cases: [(&str, Breaker, &[&str]); 6] = [
+    let cases: [(&str, Breaker, &[&str]); 7] = [
+        (
+            "version",
+            |j| j["asset"]["version"] = json!("1.0"),
+            &["asset.version", "only glTF 2.x"],
+        ),
         (
             "source",
             |j| j["textures"] = json!([{"source": 5}]),

@@ -43,6 +43,7 @@ impl Problems {
 pub(super) fn check(root: &Root) -> Vec<String> {
     let mut p = Problems(Vec::new());
     let n = Counts::of(root);
+    asset(root, &mut p);
     buffers(root, &n, &mut p);
     accessors(root, &n, &mut p);
     textures(root, &n, &mut p);
@@ -89,6 +90,27 @@ impl Counts {
                 .as_ref()
                 .and_then(|e| e.lights_punctual.as_ref())
                 .map_or(0, |l| l.lights.len()),
+        }
+    }
+}
+
+/// `asset.version` is required; a major version other than 2 (glTF 1.0, or a future
+/// one) is not this format. `minVersion` above 2.0 asks for more than we know.
+fn asset(r: &Root, p: &mut Problems) {
+    let Some(a) = &r.asset else {
+        p.push("asset", "required, missing");
+        return;
+    };
+    match a.version.as_deref() {
+        None => p.push("asset.version", "required, missing"),
+        Some(v) if v.split('.').next() != Some("2") => {
+            p.push("asset.version", format!("{v:?}: only glTF 2.x is read"))
+        }
+        Some(_) => {}
+    }
+    if let Some(m) = a.min_version.as_deref() {
+        if m != "2.0" {
+            p.push("asset.minVersion", format!("{m:?}: only glTF 2.0 is read"));
         }
     }
 }

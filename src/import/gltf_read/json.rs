@@ -18,6 +18,7 @@ pub(super) type Index = usize;
 #[derive(Debug, Default, Deserialize)]
 #[serde(rename_all = "camelCase", default)]
 pub(super) struct Root {
+    pub asset: Option<Asset>,
     pub extensions_used: Vec<String>,
     pub extensions_required: Vec<String>,
     pub accessors: Vec<Accessor>,
@@ -35,6 +36,13 @@ pub(super) struct Root {
     pub skins: Vec<Skin>,
     pub textures: Vec<Texture>,
     pub extensions: Option<RootExtensions>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(rename_all = "camelCase", default)]
+pub(super) struct Asset {
+    pub version: Option<String>,
+    pub min_version: Option<String>,
 }
 
 #[derive(Debug, Default, Deserialize)]
