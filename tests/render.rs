@@ -564,6 +564,7 @@ fn textures_glass_and_alpha() {
     scene.materials[floor].base_color_texture = Some(TextureRef {
         texture: 0,
         tex_coord: 0,
+        transform: None,
     });
     scene.materials[floor].base_color = Vec4::ONE;
     // Looking straight down at the floor's centre: uv (0.5, 0.5) is where four texels

@@ -441,6 +441,7 @@ fn a_normal_mapped_plane_follows_the_map() {
     scene.materials[grey as usize].normal_texture = Some(TextureRef {
         texture: scene.textures.len() as u32 - 1,
         tex_coord: 0,
+        transform: None,
     });
     // What each texel's normal would be in world space, decoded as the renderer
     // decodes bytes.
@@ -532,6 +533,7 @@ fn a_checkerboard_to_the_horizon_averages_to_grey_at_one_spp() {
     scene.materials[board as usize].base_color_texture = Some(TextureRef {
         texture: 0,
         tex_coord: 0,
+        transform: None,
     });
     let look = LookAt {
         from: Vec3::new(0.3, 1.0, 0.3),

@@ -40,11 +40,14 @@ use crate::scene::Scene;
 
 /// Imports a scene file, choosing the reader by extension (any case).
 ///
-/// A `.gltf` (external or data-URI buffers and images) or `.glb` file: the default
-/// scene's hierarchy, triangle primitives (strips and fans unrolled; points and lines
-/// skipped with one warning), normals, `TEXCOORD_0`, skins, morph targets, materials (with
-/// emissive strength, transmission, ior), textures decoded to RGBA8, cameras,
-/// `KHR_lights_punctual` lights, animation clips and `extras.fps`.
+/// A `.gltf` (external or data-URI buffers and images) or `.glb` file, validated against
+/// the glTF 2.0 specification: the default scene's hierarchy, triangle primitives (strips
+/// and fans unrolled; points and lines skipped with one warning), normals, the
+/// `TEXCOORD_n` set the material's textures use, skins, morph targets, materials (with
+/// emissive strength, transmission, ior, texture transforms), textures decoded to RGBA8
+/// (PNG, JPEG, WebP), cameras, `KHR_lights_punctual` lights, animation clips (node
+/// channels and `KHR_animation_pointer` node pointers), quantized attributes and
+/// `extras.fps`. The README lists exactly what is read and what is refused.
 ///
 /// A BART `.aff` or `.nff` file is parsed and mapped onto the model
 /// ([`aff::load_scene`]), as the file `subfield convert` writes would import.

@@ -132,6 +132,12 @@ impl Check<'_> {
                         self.model(format!("materials[{mi}]: texture {} missing", r.texture))
                     );
                 }
+                if r.transform.is_some_and(|t| !t.is_finite()) {
+                    return Err(self.model(format!(
+                        "materials[{mi}]: KHR_texture_transform of texture {} is not finite",
+                        r.texture
+                    )));
+                }
             }
         }
         Ok(())

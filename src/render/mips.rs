@@ -300,6 +300,7 @@ mod tests {
                 base_color_texture: Some(TextureRef {
                     texture: 0,
                     tex_coord: 0,
+                    transform: None,
                 }),
                 ..Material::default()
             }],

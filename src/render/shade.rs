@@ -220,17 +220,20 @@ impl<'a> ShadeContext<'a> {
         self.scene.materials.get(i as usize)
     }
 
-    /// Samples a texture (RGBA, linearised RGB when `srgb`) at `uv`, filtered for a
-    /// footprint of level `lod + log2(√(width·height))` (see [`Surface::lod`]), or
-    /// `None` without one.
+    /// Samples a texture (RGBA, linearised RGB when `srgb`) at `uv` (through the slot's
+    /// `KHR_texture_transform`, if any), filtered for a footprint of level
+    /// `lod + log2(√(width·height))` (see [`Surface::lod`]), or `None` without one.
     fn texture(&self, slot: Option<TextureRef>, uv: Vec2, lod: f32, srgb: bool) -> Option<Vec4> {
-        let t = slot?.texture as usize;
+        let slot = slot?;
+        let t = slot.texture as usize;
         let tex = self.scene.textures.get(t)?;
         let img = self.scene.images.get(tex.image as usize)?;
         let (w, h) = (img.width, img.height);
         if w == 0 || h == 0 || img.rgba8.len() as u64 != u64::from(w) * u64::from(h) * 4 {
             return None;
         }
+        let uv = slot.transform.map_or(uv, |t| t.apply(uv));
+        let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
         let lod = lod + 0.5 * ((w as f32) * (h as f32)).log2();
         Some(self.mips.lookup(t, tex, &img.rgba8, w, h, uv, lod, srgb))
     }

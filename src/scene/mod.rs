@@ -88,7 +88,8 @@ pub struct Primitive {
     /// Per-vertex normals; `None` means flat normals computed from the posed triangle
     /// (what the glTF spec asks for when normals are absent).
     pub normals: Option<Vec<Vec3>>,
-    /// `TEXCOORD_0`; `None` gives `(0, 0)`.
+    /// The texture coordinates its material's textures use (`TEXCOORD_0` unless their
+    /// `texCoord` names another set); `None` gives `(0, 0)`.
     pub uvs: Option<Vec<Vec2>>,
     /// Triangles as vertex indices (strips and fans already unrolled).
     pub triangles: Vec<[u32; 3]>,
@@ -131,12 +132,40 @@ pub enum AlphaMode {
 }
 
 /// A texture slot of a material.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TextureRef {
     /// Index into [`Scene::textures`].
     pub texture: u32,
-    /// Which texture-coordinate set (only set 0 is imported; others warn).
+    /// Which texture-coordinate set the file names (`KHR_texture_transform`'s override
+    /// applied). The importer gives each primitive this set as [`Primitive::uvs`].
     pub tex_coord: u32,
+    /// `KHR_texture_transform`, applied to the uv before sampling; `None` is identity.
+    pub transform: Option<UvTransform>,
+}
+
+/// A texture-coordinate transform (`KHR_texture_transform`): scale, then rotate
+/// `rotation` radians, then offset.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UvTransform {
+    pub offset: Vec2,
+    pub rotation: f32,
+    pub scale: Vec2,
+}
+
+impl UvTransform {
+    /// The transformed uv. The rotation follows the extension's worked example (offset
+    /// `[0, 1]`, rotation π/2, scale `[0.5, 0.5]` maps the unit square onto the lower-left
+    /// quadrant): `(u, v) → (cos·u + sin·v, −sin·u + cos·v)`.
+    pub fn apply(&self, uv: Vec2) -> Vec2 {
+        let s = uv * self.scale;
+        let (sin, cos) = self.rotation.sin_cos();
+        Vec2::new(cos * s.x + sin * s.y, cos * s.y - sin * s.x) + self.offset
+    }
+
+    /// Every parameter finite.
+    pub fn is_finite(&self) -> bool {
+        self.offset.is_finite() && self.rotation.is_finite() && self.scale.is_finite()
+    }
 }
 
 /// A metallic-roughness material with the extensions we render (emissive strength,

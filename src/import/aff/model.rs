@@ -55,6 +55,7 @@ pub fn material(m: &AffMaterial, texture: Option<u32>) -> Material {
         base_color_texture: texture.map(|texture| TextureRef {
             texture,
             tex_coord: 0,
+            transform: None,
         }),
         metallic: clamp01(m.specular.max_element()),
         roughness: clamp01(roughness),

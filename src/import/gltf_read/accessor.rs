@@ -2,8 +2,8 @@
 //! finite floats. Every value is decoded exactly (`f64`) before conversion.
 
 use glam::Vec3;
-use gltf::accessor::{DataType, Dimensions};
 
+use super::json::{self, type_components, ComponentType as DataType};
 use super::{ImportError, Importer};
 
 /// Refuse accessors claiming more components than this.
@@ -22,49 +22,78 @@ struct Raw {
 
 impl Importer<'_> {
     /// The bytes of a buffer view, checked against its buffer.
-    fn view_bytes(
-        &self,
-        view: &gltf::buffer::View,
-        accessor: usize,
-        usage: &str,
-    ) -> Result<&[u8], ImportError> {
-        let b = view.buffer().index();
+    fn view_bytes(&self, view: usize, accessor: usize, usage: &str) -> Result<&[u8], ImportError> {
+        let v =
+            self.root.buffer_views.get(view).ok_or_else(|| {
+                self.acc_err(accessor, usage, format!("bufferViews[{view}] missing"))
+            })?;
+        let b = v.buffer.unwrap_or(usize::MAX);
         let buf = self.buffers.get(b).map(Vec::as_slice).unwrap_or(&[]);
-        let start = view.offset();
-        let end = start.checked_add(view.length());
+        let start = v.byte_offset;
+        let length = v.byte_length.unwrap_or(0);
+        let end = start.checked_add(length);
         end.and_then(|end| buf.get(start..end)).ok_or_else(|| {
             self.acc_err(
                 accessor,
                 usage,
                 format!(
-                    "bufferViews[{}] (bytes {start}..+{}) lies outside buffers[{b}] ({} bytes)",
-                    view.index(),
-                    view.length(),
+                    "bufferViews[{view}] (bytes {start}..+{length}) lies outside buffers[{b}] ({} bytes)",
                     buf.len()
                 ),
             )
         })
     }
 
-    fn read_raw(&self, acc: &gltf::Accessor, usage: &str) -> Result<Raw, ImportError> {
-        let ai = acc.index();
-        let data_type = acc.data_type();
-        let dims = acc.dimensions();
-        let comps = dims.multiplicity();
+    /// The accessor `ai` (validated to exist by `check`; an error otherwise).
+    pub(super) fn accessor(&self, ai: usize, usage: &str) -> Result<&json::Accessor, ImportError> {
+        self.root
+            .accessors
+            .get(ai)
+            .ok_or_else(|| self.acc_err(ai, usage, "missing"))
+    }
+
+    /// Its element count.
+    pub(super) fn count(&self, ai: usize) -> usize {
+        self.root
+            .accessors
+            .get(ai)
+            .and_then(|a| a.count)
+            .unwrap_or(0)
+    }
+
+    /// Its components per element (0 for a missing accessor).
+    pub(super) fn components(&self, ai: usize) -> usize {
+        self.root
+            .accessors
+            .get(ai)
+            .and_then(|a| a.type_.as_deref())
+            .and_then(type_components)
+            .unwrap_or(0)
+    }
+
+    fn read_raw(&self, ai: usize, usage: &str) -> Result<Raw, ImportError> {
+        let acc = self.accessor(ai, usage)?;
+        let data_type = acc
+            .component_type
+            .and_then(DataType::from_code)
+            .ok_or_else(|| self.acc_err(ai, usage, "no valid componentType"))?;
+        let type_ = acc.type_.as_deref().unwrap_or("");
+        let comps =
+            type_components(type_).ok_or_else(|| self.acc_err(ai, usage, "no valid type"))?;
         let csize = data_type.size();
-        if matches!(dims, Dimensions::Mat2 | Dimensions::Mat3) && csize < 4 {
+        if matches!(type_, "MAT2" | "MAT3") && csize < 4 {
             return Err(self.acc_err(ai, usage, "padded matrix columns are not supported"));
         }
         let elem = csize * comps;
-        let count = acc.count();
+        let count = acc.count.unwrap_or(0);
         let total = count
             .checked_mul(comps)
             .filter(|&n| n <= MAX_COMPONENTS)
             .ok_or_else(|| self.acc_err(ai, usage, format!("count {count} is too large")))?;
         let mut values = Vec::new();
-        if let Some(view) = acc.view() {
-            let bytes = self.view_bytes(&view, ai, usage)?;
-            let stride = match view.stride() {
+        if let Some(view) = acc.buffer_view {
+            let bytes = self.view_bytes(view, ai, usage)?;
+            let stride = match self.root.buffer_views.get(view).and_then(|v| v.byte_stride) {
                 Some(s) if s < elem => {
                     return Err(self.acc_err(
                         ai,
@@ -75,7 +104,7 @@ impl Importer<'_> {
                 Some(s) => s,
                 None => elem,
             };
-            let start = acc.offset();
+            let start = acc.byte_offset;
             if count > 0 {
                 let need = (count - 1)
                     .checked_mul(stride)
@@ -89,8 +118,7 @@ impl Importer<'_> {
                             usage,
                             format!(
                             "{count} elements of {elem} bytes (stride {stride}) from byte {start} \
-                                 run past bufferViews[{}] ({} bytes)",
-                            view.index(),
+                                 run past bufferViews[{view}] ({} bytes)",
                             bytes.len()
                         ),
                         ))
@@ -114,54 +142,54 @@ impl Importer<'_> {
                 format!("count {count} without a buffer view is too large"),
             ));
         }
-        if let Some(sparse) = acc.sparse() {
-            self.apply_sparse(acc, usage, &sparse, &mut values)?;
+        if let Some(sparse) = &acc.sparse {
+            self.apply_sparse(ai, usage, sparse, (data_type, comps, count), &mut values)?;
         }
         Ok(Raw {
             values,
             comps,
             data_type,
-            normalized: acc.normalized(),
+            normalized: acc.normalized,
         })
     }
 
     /// Overwrites the elements that sparse storage names (after the dense or zero data).
     fn apply_sparse(
         &self,
-        acc: &gltf::Accessor,
+        ai: usize,
         usage: &str,
-        sparse: &gltf::accessor::sparse::Sparse,
+        sparse: &json::Sparse,
+        (data_type, comps, count): (DataType, usize, usize),
         values: &mut [f64],
     ) -> Result<(), ImportError> {
-        let ai = acc.index();
-        let data_type = acc.data_type();
-        let comps = acc.dimensions().multiplicity();
         let csize = data_type.size();
         let elem = csize * comps;
-        let count = acc.count();
-        let n = sparse.count();
-        let idx = sparse.indices();
-        let vals = sparse.values();
-        let isize = match idx.index_type() {
-            gltf::accessor::sparse::IndexType::U8 => 1,
-            gltf::accessor::sparse::IndexType::U16 => 2,
-            gltf::accessor::sparse::IndexType::U32 => 4,
+        let n = sparse.count.unwrap_or(0);
+        let (Some(idx), Some(vals)) = (&sparse.indices, &sparse.values) else {
+            return Err(self.acc_err(ai, usage, "sparse without indices or values"));
         };
-        let ibytes = self.view_bytes(&idx.view(), ai, usage)?;
-        let vbytes = self.view_bytes(&vals.view(), ai, usage)?;
+        let isize = match idx.component_type {
+            Some(5121) => 1,
+            Some(5123) => 2,
+            Some(5125) => 4,
+            _ => return Err(self.acc_err(ai, usage, "sparse indices of no unsigned type")),
+        };
+        let ibytes = self.view_bytes(idx.buffer_view.unwrap_or(usize::MAX), ai, usage)?;
+        let vbytes = self.view_bytes(vals.buffer_view.unwrap_or(usize::MAX), ai, usage)?;
+        let (ioff, voff) = (idx.byte_offset, vals.byte_offset);
         let ifits = n
             .checked_mul(isize)
-            .and_then(|x| x.checked_add(idx.offset()))
+            .and_then(|x| x.checked_add(ioff))
             .is_some_and(|end| end <= ibytes.len());
         let vfits = n
             .checked_mul(elem)
-            .and_then(|x| x.checked_add(vals.offset()))
+            .and_then(|x| x.checked_add(voff))
             .is_some_and(|end| end <= vbytes.len());
         if !ifits || !vfits {
             return Err(self.acc_err(ai, usage, "sparse data runs past its buffer view"));
         }
         for k in 0..n {
-            let at = idx.offset() + k * isize;
+            let at = ioff + k * isize;
             let target = match isize {
                 1 => usize::from(ibytes[at]),
                 2 => usize::from(u16::from_le_bytes([ibytes[at], ibytes[at + 1]])),
@@ -178,7 +206,7 @@ impl Importer<'_> {
                 ));
             }
             for c in 0..comps {
-                let at = vals.offset() + k * elem + c * csize;
+                let at = voff + k * elem + c * csize;
                 values[target * comps + c] = component(&vbytes[at..at + csize], data_type);
             }
         }
@@ -189,15 +217,15 @@ impl Importer<'_> {
     /// `normalize_ints` (weights, uvs, rotations: the spec only allows normalised ints).
     pub(super) fn floats(
         &self,
-        acc: &gltf::Accessor,
+        ai: usize,
         usage: &str,
         comps: usize,
         normalize_ints: bool,
     ) -> Result<Vec<f32>, ImportError> {
-        let raw = self.read_raw(acc, usage)?;
+        let raw = self.read_raw(ai, usage)?;
         if raw.comps != comps {
             return Err(self.acc_err(
-                acc.index(),
+                ai,
                 usage,
                 format!("has {} components per element, expected {comps}", raw.comps),
             ));
@@ -210,7 +238,7 @@ impl Importer<'_> {
             DataType::I16 if normalize => Some(32767.0),
             DataType::U16 if normalize => Some(65535.0),
             DataType::U32 if normalize => {
-                return Err(self.acc_err(acc.index(), usage, "normalised UNSIGNED_INT"))
+                return Err(self.acc_err(ai, usage, "normalised UNSIGNED_INT"))
             }
             _ => None,
         };
@@ -222,7 +250,7 @@ impl Importer<'_> {
             };
             if !f.is_finite() {
                 return Err(self.acc_err(
-                    acc.index(),
+                    ai,
                     usage,
                     format!(
                         "element {} component {} is {f} (not finite)",
@@ -236,28 +264,24 @@ impl Importer<'_> {
         Ok(out)
     }
 
-    pub(super) fn vec3s(
-        &self,
-        acc: &gltf::Accessor,
-        usage: &str,
-    ) -> Result<Vec<Vec3>, ImportError> {
-        let f = self.floats(acc, usage, 3, false)?;
+    pub(super) fn vec3s(&self, ai: usize, usage: &str) -> Result<Vec<Vec3>, ImportError> {
+        let f = self.floats(ai, usage, 3, false)?;
         Ok(f.chunks_exact(3).map(Vec3::from_slice).collect())
     }
 
     /// Unsigned integers (indices, joints): must be an unsigned, non-normalised type.
     pub(super) fn uints(
         &self,
-        acc: &gltf::Accessor,
+        ai: usize,
         usage: &str,
         comps: usize,
     ) -> Result<Vec<u32>, ImportError> {
-        let raw = self.read_raw(acc, usage)?;
+        let raw = self.read_raw(ai, usage)?;
         if raw.comps != comps
             || !matches!(raw.data_type, DataType::U8 | DataType::U16 | DataType::U32)
         {
             return Err(self.acc_err(
-                acc.index(),
+                ai,
                 usage,
                 format!(
                     "expected {comps} unsigned integer component(s), found {} of {:?}",

@@ -1,25 +1,57 @@
-//! Meshes and their primitives: positions, normals, `TEXCOORD_0`, skin influences,
-//! indices (strips and fans unrolled) and morph targets.
+//! Meshes and their primitives: positions, normals, the texture-coordinate set the
+//! material's textures use, skin influences, indices (strips and fans unrolled) and morph
+//! targets. `KHR_mesh_quantization`'s integer attributes are read like any other (the
+//! accessor's `normalized` flag decides).
+
+use std::collections::BTreeMap;
 
 use glam::{Vec2, Vec3};
-use gltf::mesh::Mode;
 
+use super::json;
 use super::{ImportError, Importer};
-use crate::scene::{Mesh, MorphTarget, Primitive};
+use crate::scene::{Material, Mesh, MorphTarget, Primitive};
 
 /// Per-vertex skin influences: joints and weights, `sets` entries per vertex.
 type Influences = (Vec<[u16; 4]>, Vec<[f32; 4]>);
 
+/// Primitive modes (spec 3.7.2.1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mode {
+    Points,
+    Lines,
+    LineLoop,
+    LineStrip,
+    Triangles,
+    TriangleStrip,
+    TriangleFan,
+}
+
+impl Mode {
+    fn from_code(code: u32) -> Option<Mode> {
+        Some(match code {
+            0 => Mode::Points,
+            1 => Mode::Lines,
+            2 => Mode::LineLoop,
+            3 => Mode::LineStrip,
+            4 => Mode::Triangles,
+            5 => Mode::TriangleStrip,
+            6 => Mode::TriangleFan,
+            _ => return None,
+        })
+    }
+}
+
 impl Importer<'_> {
-    pub(super) fn meshes(&mut self) -> Result<Vec<Mesh>, ImportError> {
+    /// `materials` are the imported ones (same indices as the file's): a primitive reads
+    /// the texture-coordinate set its material's textures name.
+    pub(super) fn meshes(&mut self, materials: &[Material]) -> Result<Vec<Mesh>, ImportError> {
         let mut skipped = Vec::new();
         let mut meshes = Vec::new();
-        for mesh in self.doc.meshes() {
-            let mi = mesh.index();
+        let root = self.root;
+        for (mi, mesh) in root.meshes.iter().enumerate() {
             let mut primitives = Vec::new();
-            for prim in mesh.primitives() {
-                let pi = prim.index();
-                let mode = prim.mode();
+            for (pi, prim) in mesh.primitives.iter().flatten().enumerate() {
+                let mode = Mode::from_code(prim.mode.unwrap_or(4)).unwrap_or(Mode::Triangles);
                 if matches!(
                     mode,
                     Mode::Points | Mode::Lines | Mode::LineLoop | Mode::LineStrip
@@ -27,12 +59,13 @@ impl Importer<'_> {
                     skipped.push(format!("meshes[{mi}].primitives[{pi}] ({mode:?})"));
                     continue;
                 }
-                primitives.push(self.primitive(&prim, mi, pi, mode)?);
+                let material = prim.material.and_then(|m| materials.get(m));
+                primitives.push(self.primitive(prim, mi, pi, mode, material)?);
             }
             meshes.push(Mesh {
-                name: mesh.name().map(str::to_string),
+                name: mesh.name.clone(),
                 primitives,
-                weights: mesh.weights().map(<[f32]>::to_vec).unwrap_or_default(),
+                weights: mesh.weights.clone().unwrap_or_default(),
             });
         }
         if !skipped.is_empty() {
@@ -46,39 +79,54 @@ impl Importer<'_> {
     }
 
     /// One triangle primitive; its accessors must agree with the POSITION count.
-    pub(super) fn primitive(
+    fn primitive(
         &mut self,
-        prim: &gltf::Primitive,
+        prim: &json::Primitive,
         mi: usize,
         pi: usize,
         mode: Mode,
+        material: Option<&Material>,
     ) -> Result<Primitive, ImportError> {
         let at = format!("meshes[{mi}].primitives[{pi}]");
-        let get = |s: gltf::Semantic| prim.get(&s);
-        let pos_acc = get(gltf::Semantic::Positions).ok_or_else(|| ImportError::Model {
+        let empty = BTreeMap::new();
+        let attrs = prim.attributes.as_ref().unwrap_or(&empty);
+        let get = |s: &str| attrs.get(s).copied();
+        let pos_acc = get("POSITION").ok_or_else(|| ImportError::Model {
             path: self.path.to_path_buf(),
             reason: format!("{at} has no POSITION"),
         })?;
-        let positions = self.vec3s(&pos_acc, &format!("{at}.POSITION"))?;
+        let positions = self.vec3s(pos_acc, &format!("{at}.POSITION"))?;
         let nv = positions.len();
-        let normals = match get(gltf::Semantic::Normals) {
+        let normals = match get("NORMAL") {
             Some(acc) => {
                 let usage = format!("{at}.NORMAL");
-                self.same_count(&acc, &usage, nv)?;
-                Some(self.vec3s(&acc, &usage)?)
+                self.same_count(acc, &usage, nv)?;
+                Some(self.vec3s(acc, &usage)?)
             }
             None => None,
         };
-        let uvs = match get(gltf::Semantic::TexCoords(0)) {
+        let set = self.uv_set(material, &at);
+        let uvs = match get(&format!("TEXCOORD_{set}")) {
             Some(acc) => {
-                let usage = format!("{at}.TEXCOORD_0");
-                self.same_count(&acc, &usage, nv)?;
-                let f = self.floats(&acc, &usage, 2, true)?;
+                let usage = format!("{at}.TEXCOORD_{set}");
+                self.same_count(acc, &usage, nv)?;
+                // The base specification allows only normalised integer texture
+                // coordinates; KHR_mesh_quantization adds plain integers.
+                let force = !self.uses("KHR_mesh_quantization");
+                let f = self.floats(acc, &usage, 2, force)?;
                 Some(f.chunks_exact(2).map(Vec2::from_slice).collect())
             }
-            None => None,
+            None => {
+                if set != 0 {
+                    self.warn(format!(
+                        "{at}: its material's textures use TEXCOORD_{set}, which it lacks; \
+                         textures sampled at (0, 0)"
+                    ));
+                }
+                None
+            }
         };
-        let (joints, weights) = self.skin_influences(prim, &at, nv)?;
+        let (joints, weights) = self.skin_influences(attrs, &at, nv)?;
         let triangles = self.triangles(prim, &at, nv, mode)?;
         let morph_targets = self.morph_targets(prim, &at, nv)?;
         Ok(Primitive {
@@ -86,20 +134,46 @@ impl Importer<'_> {
             normals,
             uvs,
             triangles,
-            material: prim.material().index().map_or(u32::MAX, |m| m as u32),
+            material: prim.material.map_or(u32::MAX, |m| m as u32),
             joints,
             weights,
             morph_targets,
         })
     }
 
+    /// The texture-coordinate set a material's textures use: the base colour's, else the
+    /// emissive's, else the metallic-roughness', else the normal map's. Textures naming different sets are
+    /// drawn with the first one's (warned): a triangle carries one set.
+    fn uv_set(&mut self, material: Option<&Material>, at: &str) -> u32 {
+        let Some(m) = material else { return 0 };
+        let refs: Vec<u32> = [
+            m.base_color_texture,
+            m.emissive_texture,
+            m.metallic_roughness_texture,
+            m.normal_texture,
+        ]
+        .into_iter()
+        .flatten()
+        .map(|r| r.tex_coord)
+        .collect();
+        let Some(&first) = refs.first() else { return 0 };
+        if refs.iter().any(|&s| s != first) {
+            self.warn(format!(
+                "{at}: its material's textures use different TEXCOORD sets {refs:?}; all \
+                 are sampled with TEXCOORD_{first}"
+            ));
+        }
+        first
+    }
+
     /// An attribute accessor must have one element per vertex.
-    fn same_count(&self, acc: &gltf::Accessor, usage: &str, nv: usize) -> Result<(), ImportError> {
-        if acc.count() != nv {
+    fn same_count(&self, acc: usize, usage: &str, nv: usize) -> Result<(), ImportError> {
+        let count = self.count(acc);
+        if count != nv {
             Err(self.acc_err(
-                acc.index(),
+                acc,
                 usage,
-                format!("count {} differs from the POSITION count {nv}", acc.count()),
+                format!("count {count} differs from the POSITION count {nv}"),
             ))
         } else {
             Ok(())
@@ -109,26 +183,26 @@ impl Importer<'_> {
     /// Skin influences, every JOINTS_n/WEIGHTS_n pair, interleaved per vertex.
     fn skin_influences(
         &self,
-        prim: &gltf::Primitive,
+        attrs: &BTreeMap<String, usize>,
         at: &str,
         nv: usize,
     ) -> Result<Influences, ImportError> {
         let mut sets: Vec<(Vec<u32>, Vec<f32>)> = Vec::new();
         for s in 0u32.. {
-            let (Some(j), Some(w)) = (
-                prim.get(&gltf::Semantic::Joints(s)),
-                prim.get(&gltf::Semantic::Weights(s)),
+            let (Some(&j), Some(&w)) = (
+                attrs.get(&format!("JOINTS_{s}")),
+                attrs.get(&format!("WEIGHTS_{s}")),
             ) else {
                 break;
             };
             let (ju, wu) = (format!("{at}.JOINTS_{s}"), format!("{at}.WEIGHTS_{s}"));
-            self.same_count(&j, &ju, nv)?;
-            self.same_count(&w, &wu, nv)?;
-            let joints = self.uints(&j, &ju, 4)?;
+            self.same_count(j, &ju, nv)?;
+            self.same_count(w, &wu, nv)?;
+            let joints = self.uints(j, &ju, 4)?;
             if let Some(big) = joints.iter().find(|&&x| x > u32::from(u16::MAX)) {
-                return Err(self.acc_err(j.index(), &ju, format!("joint {big} out of range")));
+                return Err(self.acc_err(j, &ju, format!("joint {big} out of range")));
             }
-            sets.push((joints, self.floats(&w, &wu, 4, true)?));
+            sets.push((joints, self.floats(w, &wu, 4, true)?));
         }
         let mut joints = Vec::with_capacity(nv * sets.len());
         let mut weights = Vec::with_capacity(nv * sets.len());
@@ -146,18 +220,18 @@ impl Importer<'_> {
     /// and fans unrolled, a trailing partial triangle dropped with a warning.
     fn triangles(
         &mut self,
-        prim: &gltf::Primitive,
+        prim: &json::Primitive,
         at: &str,
         nv: usize,
         mode: Mode,
     ) -> Result<Vec<[u32; 3]>, ImportError> {
-        let indices: Vec<u32> = match prim.indices() {
+        let indices: Vec<u32> = match prim.indices {
             Some(acc) => {
                 let usage = format!("{at}.indices");
-                let idx = self.uints(&acc, &usage, 1)?;
+                let idx = self.uints(acc, &usage, 1)?;
                 if let Some((k, &i)) = idx.iter().enumerate().find(|(_, &i)| i as usize >= nv) {
                     return Err(self.acc_err(
-                        acc.index(),
+                        acc,
                         &usage,
                         format!("index {i} (element {k}) is past the vertex count {nv}"),
                     ));
@@ -198,25 +272,24 @@ impl Importer<'_> {
     /// Morph targets: POSITION and NORMAL displacements (empty when absent).
     fn morph_targets(
         &self,
-        prim: &gltf::Primitive,
+        prim: &json::Primitive,
         at: &str,
         nv: usize,
     ) -> Result<Vec<MorphTarget>, ImportError> {
         let mut morph_targets = Vec::new();
-        for (ti, target) in prim.morph_targets().enumerate() {
-            let read =
-                |acc: Option<gltf::Accessor>, what: &str| -> Result<Vec<Vec3>, ImportError> {
-                    match acc {
-                        Some(acc) => {
-                            let usage = format!("{at}.targets[{ti}].{what}");
-                            self.same_count(&acc, &usage, nv)?;
-                            self.vec3s(&acc, &usage)
-                        }
-                        None => Ok(Vec::new()),
+        for (ti, target) in prim.targets.iter().enumerate() {
+            let read = |what: &str| -> Result<Vec<Vec3>, ImportError> {
+                match target.get(what) {
+                    Some(&acc) => {
+                        let usage = format!("{at}.targets[{ti}].{what}");
+                        self.same_count(acc, &usage, nv)?;
+                        self.vec3s(acc, &usage)
                     }
-                };
-            let positions = read(target.positions(), "POSITION")?;
-            let normals = read(target.normals(), "NORMAL")?;
+                    None => Ok(Vec::new()),
+                }
+            };
+            let positions = read("POSITION")?;
+            let normals = read("NORMAL")?;
             morph_targets.push(MorphTarget { positions, normals });
         }
         Ok(morph_targets)

@@ -1,18 +1,23 @@
 //! glTF 2.0 import (`.gltf` with external or data-URI buffers and images, and `.glb`).
 //!
-//! The `gltf` crate parses and validates the JSON (indices in range, required fields);
-//! everything that touches bytes is ours: the GLB container, buffers, URIs, accessors
-//! (bounds, types, sparse storage, finite floats) and images. Its `import` helpers are
-//! not used because they trust the offsets they read and can panic on malformed files;
-//! here every failure is an [`ImportError`] naming the file and the accessor, node or URI.
+//! The JSON is read into our own model of the specification ([`json`]: every optional
+//! property optional, unknown properties, extras and extensions skipped) and validated by
+//! [`check`] against the specification itself, so a file the specification allows is
+//! never refused for a rule of a library's. Everything that touches bytes is ours too:
+//! the GLB container, buffers, URIs, accessors (bounds, types, sparse storage, finite
+//! floats) and images. Every failure is an [`ImportError`] naming the file and the
+//! accessor, node, extension or URI; what we read but cannot draw is a warning.
 //!
-//! One concept per file: this one holds the entry points, the GLB container and the
-//! scene assembly; `uri` buffers and URIs, `accessor` typed accessor reads, `material`
+//! One concept per file: this one holds the entry points, the GLB container, the
+//! extension policy and the scene assembly; `json` the document model, `check` its
+//! validation, `uri` buffers and URIs, `accessor` typed accessor reads, `material`
 //! materials, textures and images, `mesh` primitives, `node` nodes, skins, cameras and
 //! lights, `animation` clips.
 
 mod accessor;
 mod animation;
+mod check;
+mod json;
 mod material;
 mod mesh;
 mod node;
@@ -23,13 +28,44 @@ use std::path::Path;
 use super::ImportError;
 use crate::scene::{Scene, Warning};
 
-/// Extensions whose absence from our reader would change the picture; files that
-/// require any other extension are refused rather than drawn wrongly.
+/// Extensions we read; a file may require any of these.
 const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_lights_punctual",
     "KHR_materials_emissive_strength",
     "KHR_materials_transmission",
     "KHR_materials_ior",
+    "KHR_mesh_quantization",
+    "KHR_texture_transform",
+    "EXT_texture_webp",
+    // Pointers to node TRS and weights are animated; other pointers are skipped with a
+    // warning (see `animation`).
+    "KHR_animation_pointer",
+];
+
+/// Extensions we know but do not decode, with how to convert a file that requires one.
+/// A file that only uses them (with the fallback the extension keeps) imports, warned.
+const UNDECODED_EXTENSIONS: &[(&str, &str)] = &[
+    (
+        "KHR_draco_mesh_compression",
+        "Draco-compressed geometry is not decoded (no maintained pure-Rust decoder); \
+         re-export the file without Draco compression (e.g. Blender's glTF exporter with \
+         Compression off)",
+    ),
+    (
+        "EXT_meshopt_compression",
+        "meshopt-compressed buffer views are not decoded; unpack the file with \
+         `gltfpack -i IN -o OUT -noq` (without -c/-cc)",
+    ),
+    (
+        "KHR_meshopt_compression",
+        "meshopt-compressed buffer views are not decoded; unpack the file with \
+         `gltfpack -i IN -o OUT -noq` (without -c/-cc)",
+    ),
+    (
+        "KHR_texture_basisu",
+        "KTX2 / Basis Universal textures are not decoded; extract them to PNG (e.g. with \
+         KTX-Software's `ktx extract`) and give the textures those images as `source`",
+    ),
 ];
 
 pub(crate) fn load(path: &Path) -> Result<Scene, ImportError> {
@@ -50,47 +86,21 @@ pub(crate) fn from_slice(bytes: &[u8], path: &Path, folder: &Path) -> Result<Sce
     } else {
         (bytes, None)
     };
-    let root: gltf::json::Root =
-        gltf::json::deserialize::from_slice(json).map_err(|e| ImportError::Json {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?;
-    // gltf-json's validation indexes `accessors` with the POSITION index unchecked (and
-    // panics when it is out of range): check that one first.
-    let mut problems = Vec::new();
-    for (mi, m) in root.meshes.iter().enumerate() {
-        for (pi, p) in m.primitives.iter().enumerate() {
-            let pos = gltf::json::validation::Checked::Valid(gltf::json::mesh::Semantic::Positions);
-            if let Some(i) = p.attributes.get(&pos) {
-                if i.value() >= root.accessors.len() {
-                    problems.push(format!(
-                        "meshes[{mi}].primitives[{pi}].attributes.POSITION: accessor {} out of range",
-                        i.value()
-                    ));
-                }
-            }
-        }
-    }
+    let root: json::Root = serde_json::from_slice(json).map_err(|e| ImportError::Json {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    let problems = check::check(&root);
     if !problems.is_empty() {
         return Err(ImportError::Invalid {
             path: path.to_path_buf(),
             problems,
         });
     }
-    let doc = gltf::Document::from_json(root).map_err(|e| match e {
-        gltf::Error::Validation(list) => ImportError::Invalid {
-            path: path.to_path_buf(),
-            problems: list.iter().map(|(p, e)| format!("{p}: {e}")).collect(),
-        },
-        other => ImportError::Json {
-            path: path.to_path_buf(),
-            reason: other.to_string(),
-        },
-    })?;
     let mut importer = Importer {
         path,
         folder,
-        doc: &doc,
+        root: &root,
         buffers: Vec::new(),
         warnings: Vec::new(),
     };
@@ -149,7 +159,7 @@ fn split_glb(bytes: &[u8]) -> Result<(&[u8], Option<&[u8]>), String> {
 struct Importer<'a> {
     path: &'a Path,
     folder: &'a Path,
-    doc: &'a gltf::Document,
+    root: &'a json::Root,
     buffers: Vec<Vec<u8>>,
     warnings: Vec<Warning>,
 }
@@ -168,31 +178,45 @@ impl Importer<'_> {
         }
     }
 
+    /// A required extension we do not read is one clear error (with how to convert the
+    /// file when we know one); one only used is a warning.
     fn check_extensions(&mut self) -> Result<(), ImportError> {
-        for ext in self.doc.extensions_required() {
-            if !SUPPORTED_EXTENSIONS.contains(&ext) {
-                return Err(ImportError::Unsupported {
-                    path: self.path.to_path_buf(),
-                    what: format!("required extension {ext}"),
-                });
+        for ext in &self.root.extensions_required {
+            if SUPPORTED_EXTENSIONS.contains(&ext.as_str()) {
+                continue;
             }
+            let what = match UNDECODED_EXTENSIONS.iter().find(|(e, _)| e == ext) {
+                Some((_, how)) => format!("required extension {ext}: {how}"),
+                None => format!("required extension {ext} is not supported"),
+            };
+            return Err(ImportError::Unsupported {
+                path: self.path.to_path_buf(),
+                what,
+            });
         }
         let ignored: Vec<String> = self
-            .doc
-            .extensions_used()
-            .filter(|e| !SUPPORTED_EXTENSIONS.contains(e))
-            .map(str::to_string)
+            .root
+            .extensions_used
+            .iter()
+            .filter(|e| !SUPPORTED_EXTENSIONS.contains(&e.as_str()))
+            .cloned()
             .collect();
         for ext in ignored {
-            self.warn(format!("extension {ext} is ignored"));
+            self.warn(format!("extension {ext} is not supported; ignored"));
         }
         Ok(())
     }
 
+    /// Whether the file declares `ext` in `extensionsUsed`.
+    fn uses(&self, ext: &str) -> bool {
+        self.root.extensions_used.iter().any(|e| e == ext)
+    }
+
     fn build(mut self) -> Result<Scene, ImportError> {
         let path = self.path.to_path_buf();
-        let (materials, used_textures) = self.materials();
-        let (textures, images) = self.textures_and_images(&used_textures)?;
+        let texture_images = self.texture_images();
+        let (materials, used_textures) = self.materials(&texture_images);
+        let (textures, images) = self.textures_and_images(&used_textures, &texture_images)?;
         let mut scene = Scene {
             source: path.clone(),
             materials,
@@ -200,7 +224,7 @@ impl Importer<'_> {
             images,
             ..Scene::default()
         };
-        scene.meshes = self.meshes()?;
+        scene.meshes = self.meshes(&scene.materials)?;
         if scene
             .meshes
             .iter()
@@ -214,39 +238,39 @@ impl Importer<'_> {
                 }
             }
         }
-        scene.nodes = self.nodes()?;
+        let (lights, light_slots) = self.lights();
+        scene.lights = lights;
+        scene.nodes = self.nodes(&light_slots)?;
         scene.skins = self.skins()?;
         scene.cameras = self.cameras();
-        scene.lights = self.lights();
         scene.animations = self.animations()?;
-        let shown = self
-            .doc
-            .default_scene()
-            .or_else(|| self.doc.scenes().next());
-        match &shown {
-            Some(s) => scene.roots = s.nodes().map(|n| n.index()).collect(),
+        let root = self.root;
+        let shown = root
+            .scene
+            .and_then(|s| root.scenes.get(s))
+            .or_else(|| root.scenes.first());
+        match shown {
+            Some(s) => scene.roots = s.nodes.clone(),
             None => {
                 scene.roots = (0..scene.nodes.len())
                     .filter(|&i| scene.nodes[i].parent.is_none())
                     .collect();
-                self.warn("no scene defined: showing every root node".into());
+                if !scene.nodes.is_empty() {
+                    self.warn("no scene defined: showing every root node".into());
+                }
             }
         }
-        scene.fps = self.fps(shown.as_ref());
+        scene.fps = self.fps(shown);
         scene.warnings = std::mem::take(&mut self.warnings);
         super::validate(&scene)?;
         Ok(scene)
     }
 
-    fn fps(&mut self, shown: Option<&gltf::Scene>) -> Option<f32> {
-        let read = |s: &gltf::Scene| -> Option<f64> {
-            let raw = s.extras().as_ref()?;
-            let v: serde_json::Value = serde_json::from_str(raw.get()).ok()?;
-            v.get("fps")?.as_f64()
-        };
+    fn fps(&mut self, shown: Option<&json::Scene>) -> Option<f32> {
+        let read = |s: &json::Scene| -> Option<f64> { s.extras.as_ref()?.get("fps")?.as_f64() };
         let fps = shown
             .and_then(read)
-            .or_else(|| self.doc.scenes().next().as_ref().and_then(read))?;
+            .or_else(|| self.root.scenes.first().and_then(read))?;
         if fps.is_finite() && fps > 0.0 && fps < f64::from(f32::MAX) {
             Some(fps as f32)
         } else {

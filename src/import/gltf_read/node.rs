@@ -1,5 +1,6 @@
 //! The node hierarchy (transforms, parents), skins, camera definitions and
-//! `KHR_lights_punctual` lights.
+//! `KHR_lights_punctual` lights (a light of a type the extension does not define is
+//! skipped with a warning, as the nodes that carry it).
 
 use glam::{Mat4, Quat, Vec3};
 
@@ -7,49 +8,47 @@ use super::{ImportError, Importer};
 use crate::scene::{CameraDef, LightDef, LightKind, Node, NodeTransform, Projection, Skin, Trs};
 
 impl Importer<'_> {
-    pub(super) fn nodes(&self) -> Result<Vec<Node>, ImportError> {
+    /// `light_slots` maps the file's light indices to the imported lights.
+    pub(super) fn nodes(&self, light_slots: &[Option<usize>]) -> Result<Vec<Node>, ImportError> {
         let mut nodes: Vec<Node> = Vec::new();
-        for n in self.doc.nodes() {
-            let transform = match n.transform() {
-                gltf::scene::Transform::Matrix { matrix } => {
-                    NodeTransform::Matrix(Mat4::from_cols_array_2d(&matrix))
-                }
-                gltf::scene::Transform::Decomposed {
-                    translation,
-                    rotation,
-                    scale,
-                } => {
+        for (ni, n) in self.root.nodes.iter().enumerate() {
+            let transform = match n.matrix {
+                Some(m) => NodeTransform::Matrix(Mat4::from_cols_array(&m)),
+                None => {
+                    let rotation = n.rotation.unwrap_or([0.0, 0.0, 0.0, 1.0]);
                     let q = Quat::from_array(rotation);
                     // The spec asks for a unit quaternion; tolerate rounding, refuse zero.
                     if q.length().is_nan() || q.length() <= 1e-3 {
                         return Err(ImportError::Node {
                             path: self.path.to_path_buf(),
-                            node: n.index(),
-                            name: n.name().map(str::to_string),
+                            node: ni,
+                            name: n.name.clone(),
                             reason: format!("rotation {rotation:?} is not a unit quaternion"),
                         });
                     }
                     NodeTransform::Trs(Trs {
-                        translation: Vec3::from_array(translation),
+                        translation: Vec3::from_array(n.translation.unwrap_or([0.0; 3])),
                         rotation: q.normalize(),
-                        scale: Vec3::from_array(scale),
+                        scale: Vec3::from_array(n.scale.unwrap_or([1.0; 3])),
                     })
                 }
             };
+            let light = n
+                .extensions
+                .as_ref()
+                .and_then(|e| e.light.as_ref())
+                .and_then(|l| l.light)
+                .and_then(|l| light_slots.get(l).copied().flatten());
             nodes.push(Node {
-                name: n.name().map(str::to_string),
+                name: n.name.clone(),
                 parent: None,
-                children: n.children().map(|c| c.index()).collect(),
+                children: n.children.clone(),
                 transform,
-                mesh: n.mesh().map(|m| m.index()),
-                skin: n.skin().map(|s| s.index()),
-                camera: n.camera().map(|c| c.index()),
-                // From the JSON: the wrapper unwraps an index the validation may not cover.
-                light: self.doc.as_json().nodes.get(n.index()).and_then(|j| {
-                    let ext = j.extensions.as_ref()?.khr_lights_punctual.as_ref()?;
-                    Some(ext.light.value())
-                }),
-                weights: n.weights().map(<[f32]>::to_vec),
+                mesh: n.mesh,
+                skin: n.skin,
+                camera: n.camera,
+                light,
+                weights: n.weights.clone(),
             });
         }
         for p in 0..nodes.len() {
@@ -74,15 +73,15 @@ impl Importer<'_> {
 
     pub(super) fn skins(&self) -> Result<Vec<Skin>, ImportError> {
         let mut out = Vec::new();
-        for s in self.doc.skins() {
-            let joints: Vec<usize> = s.joints().map(|j| j.index()).collect();
-            let inverse_bind_matrices = match s.inverse_bind_matrices() {
+        for (si, s) in self.root.skins.iter().enumerate() {
+            let joints: Vec<usize> = s.joints.clone().unwrap_or_default();
+            let inverse_bind_matrices = match s.inverse_bind_matrices {
                 Some(acc) => {
-                    let usage = format!("skins[{}].inverseBindMatrices", s.index());
-                    let f = self.floats(&acc, &usage, 16, false)?;
+                    let usage = format!("skins[{si}].inverseBindMatrices");
+                    let f = self.floats(acc, &usage, 16, false)?;
                     if f.len() / 16 < joints.len() {
                         return Err(self.acc_err(
-                            acc.index(),
+                            acc,
                             &usage,
                             format!("{} matrices for {} joints", f.len() / 16, joints.len()),
                         ));
@@ -95,7 +94,7 @@ impl Importer<'_> {
                 None => vec![Mat4::IDENTITY; joints.len()],
             };
             out.push(Skin {
-                name: s.name().map(str::to_string),
+                name: s.name.clone(),
                 joints,
                 inverse_bind_matrices,
             });
@@ -105,50 +104,78 @@ impl Importer<'_> {
 
     /// Camera definitions (placed later by the nodes that reference them).
     pub(super) fn cameras(&self) -> Vec<CameraDef> {
-        self.doc
-            .cameras()
+        self.root
+            .cameras
+            .iter()
             .map(|c| CameraDef {
-                name: c.name().map(str::to_string),
-                projection: match c.projection() {
-                    gltf::camera::Projection::Perspective(p) => Projection::Perspective {
-                        yfov: p.yfov(),
-                        aspect: p.aspect_ratio(),
-                        znear: p.znear(),
-                        zfar: p.zfar(),
+                name: c.name.clone(),
+                projection: match (&c.perspective, &c.orthographic, c.type_.as_deref()) {
+                    (_, Some(o), Some("orthographic")) => Projection::Orthographic {
+                        xmag: o.xmag.unwrap_or(1.0),
+                        ymag: o.ymag.unwrap_or(1.0),
+                        znear: o.znear.unwrap_or(0.0),
+                        zfar: o.zfar.unwrap_or(1.0),
                     },
-                    gltf::camera::Projection::Orthographic(o) => Projection::Orthographic {
-                        xmag: o.xmag(),
-                        ymag: o.ymag(),
-                        znear: o.znear(),
-                        zfar: o.zfar(),
+                    (Some(p), _, _) => Projection::Perspective {
+                        yfov: p.yfov.unwrap_or(std::f32::consts::FRAC_PI_4),
+                        aspect: p.aspect_ratio,
+                        znear: p.znear.unwrap_or(0.01),
+                        zfar: p.zfar,
+                    },
+                    // `check` requires the object that the type names.
+                    _ => Projection::Perspective {
+                        yfov: std::f32::consts::FRAC_PI_4,
+                        aspect: None,
+                        znear: 0.01,
+                        zfar: None,
                     },
                 },
             })
             .collect()
     }
 
-    pub(super) fn lights(&self) -> Vec<LightDef> {
-        let Some(lights) = self.doc.lights() else {
-            return Vec::new();
+    /// The lights we know the type of, and for each light of the file its slot among
+    /// them (`None`: skipped with a warning).
+    pub(super) fn lights(&mut self) -> (Vec<LightDef>, Vec<Option<usize>>) {
+        let root = self.root;
+        let Some(lights) = root
+            .extensions
+            .as_ref()
+            .and_then(|e| e.lights_punctual.as_ref())
+        else {
+            return (Vec::new(), Vec::new());
         };
-        lights
-            .map(|l| LightDef {
-                name: l.name().map(str::to_string),
-                kind: match l.kind() {
-                    gltf::khr_lights_punctual::Kind::Point => LightKind::Point,
-                    gltf::khr_lights_punctual::Kind::Directional => LightKind::Directional,
-                    gltf::khr_lights_punctual::Kind::Spot {
-                        inner_cone_angle,
-                        outer_cone_angle,
-                    } => LightKind::Spot {
-                        inner_cone_angle,
-                        outer_cone_angle,
-                    },
+        let mut out = Vec::new();
+        let mut slots = Vec::with_capacity(lights.lights.len());
+        for (li, l) in lights.lights.iter().enumerate() {
+            let spot = l.spot.as_ref();
+            let kind = match l.type_.as_deref() {
+                Some("point") => LightKind::Point,
+                Some("directional") => LightKind::Directional,
+                Some("spot") => LightKind::Spot {
+                    inner_cone_angle: spot.map_or(0.0, |s| s.inner_cone_angle),
+                    outer_cone_angle: spot
+                        .map_or(std::f32::consts::FRAC_PI_4, |s| s.outer_cone_angle),
                 },
-                color: Vec3::from_array(l.color()),
-                intensity: l.intensity(),
-                range: l.range(),
-            })
-            .collect()
+                other => {
+                    self.warn(format!(
+                        "KHR_lights_punctual lights[{li}]: type {:?} is not point, spot or \
+                         directional; the light is skipped",
+                        other.unwrap_or("(none)")
+                    ));
+                    slots.push(None);
+                    continue;
+                }
+            };
+            slots.push(Some(out.len()));
+            out.push(LightDef {
+                name: l.name.clone(),
+                kind,
+                color: Vec3::from_array(l.color),
+                intensity: l.intensity,
+                range: l.range,
+            });
+        }
+        (out, slots)
     }
 }

@@ -9,15 +9,14 @@ use super::{ImportError, Importer};
 impl Importer<'_> {
     pub(super) fn load_buffers(&self, bin: Option<&[u8]>) -> Result<Vec<Vec<u8>>, ImportError> {
         let mut out = Vec::new();
-        for buffer in self.doc.buffers() {
-            let i = buffer.index();
+        for (i, buffer) in self.root.buffers.iter().enumerate() {
             let err = |reason: String| ImportError::Buffer {
                 path: self.path.to_path_buf(),
                 buffer: i,
                 reason,
             };
-            let mut data = match buffer.source() {
-                gltf::buffer::Source::Bin => match (i, bin) {
+            let mut data = match &buffer.uri {
+                None => match (i, bin) {
                     (0, Some(b)) => b.to_vec(),
                     _ => {
                         return Err(err(
@@ -25,16 +24,16 @@ impl Importer<'_> {
                         ))
                     }
                 },
-                gltf::buffer::Source::Uri(uri) => self.load_uri(uri, &format!("buffers[{i}]"))?,
+                Some(uri) => self.load_uri(uri, &format!("buffers[{i}]"))?,
             };
-            if data.len() < buffer.length() {
+            let length = buffer.byte_length.unwrap_or(0);
+            if data.len() < length {
                 return Err(err(format!(
-                    "holds {} bytes but byteLength is {}",
+                    "holds {} bytes but byteLength is {length}",
                     data.len(),
-                    buffer.length()
                 )));
             }
-            data.truncate(buffer.length());
+            data.truncate(length);
             out.push(data);
         }
         Ok(out)

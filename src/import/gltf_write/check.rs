@@ -40,20 +40,6 @@ pub(super) fn check(scene: &Scene) -> Result<(), ImportError> {
             }
         }
     }
-    for (mi, m) in scene.materials.iter().enumerate() {
-        let refs = [
-            &m.base_color_texture,
-            &m.metallic_roughness_texture,
-            &m.emissive_texture,
-            &m.normal_texture,
-        ];
-        if let Some(r) = refs.into_iter().flatten().find(|r| r.tex_coord != 0) {
-            return bad(format!(
-                "materials[{mi}]: texture {} reads TEXCOORD_{}; only TEXCOORD_0 is written",
-                r.texture, r.tex_coord
-            ));
-        }
-    }
     if scene.extras.materials.len() > scene.materials.len() {
         return bad(format!(
             "extras for {} materials, the scene has {}",

@@ -74,10 +74,18 @@ pub(super) fn document(scene: &Scene) -> Result<(Value, Vec<u8>), ImportError> {
 }
 
 /// `{ "index": i }`, with `texCoord` when it is not 0.
-fn texture_info(r: &TextureRef) -> Value {
+/// A texture reference. The writer writes each primitive's one uv set as `TEXCOORD_0`
+/// (the set its material's textures read), so every reference reads set 0; a uv
+/// transform becomes `KHR_texture_transform`.
+fn texture_info(r: &TextureRef, used: &mut Used) -> Value {
     let mut o = json!({ "index": r.texture });
-    if r.tex_coord != 0 {
-        o["texCoord"] = json!(r.tex_coord);
+    if let Some(t) = &r.transform {
+        used.insert("KHR_texture_transform");
+        o["extensions"] = json!({ "KHR_texture_transform": {
+            "offset": t.offset.to_array(),
+            "rotation": t.rotation,
+            "scale": t.scale.to_array(),
+        }});
     }
     o
 }
@@ -103,10 +111,10 @@ fn material_json(m: &Material, extras: Option<&Option<Value>>, used: &mut Used) 
         "roughnessFactor": m.roughness,
     });
     if let Some(t) = &m.base_color_texture {
-        pbr["baseColorTexture"] = texture_info(t);
+        pbr["baseColorTexture"] = texture_info(t, used);
     }
     if let Some(t) = &m.metallic_roughness_texture {
-        pbr["metallicRoughnessTexture"] = texture_info(t);
+        pbr["metallicRoughnessTexture"] = texture_info(t, used);
     }
     o.insert("pbrMetallicRoughness".into(), pbr);
     if let Some(Some(e)) = extras {
@@ -131,10 +139,10 @@ fn material_json(m: &Material, extras: Option<&Option<Value>>, used: &mut Used) 
         }
     }
     if let Some(t) = &m.emissive_texture {
-        o.insert("emissiveTexture".into(), texture_info(t));
+        o.insert("emissiveTexture".into(), texture_info(t, used));
     }
     if let Some(t) = &m.normal_texture {
-        let mut info = texture_info(t);
+        let mut info = texture_info(t, used);
         if m.normal_scale != 1.0 {
             info["scale"] = json!(m.normal_scale);
         }
