@@ -352,6 +352,8 @@ pub fn drive(
                 };
                 b.set(done, &extra);
             }
+            // Events a later version adds (the enum is non-exhaustive) need no word here.
+            _ => {}
         })
     });
     let summary = match result {

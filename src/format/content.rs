@@ -65,6 +65,7 @@ impl FromStr for ContentHash {
 
 /// A copy that stopped: reading its source or writing its destination failed.
 #[derive(Debug)]
+#[non_exhaustive]
 pub enum CopyError {
     Read(std::io::Error),
     Write(std::io::Error),

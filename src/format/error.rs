@@ -7,6 +7,7 @@ use super::SceneHash;
 use crate::psf::PsfError;
 
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum FormatError {
     #[error("{}: {source}", path.display())]
     Io {

@@ -74,6 +74,7 @@ pub(crate) fn checksum(bytes: &[u8]) -> u64 {
 /// What a section holds. Each is an array of one fixed-size little-endian element type.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
+#[non_exhaustive]
 pub enum SectionKind {
     /// `[[f32; 3]; 3]` per triangle, 36 bytes.
     Triangles = 1,
@@ -147,6 +148,7 @@ const _: () = assert!(std::mem::size_of::<crate::psf::Block>() == 96);
 /// How a section's bytes are stored.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
+#[non_exhaustive]
 pub enum Codec {
     /// The raw array, used in place from the mapping.
     None = 0,

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 /// Everything that can go wrong while reading a scene file or writing a glTF one.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum ImportError {
     /// The file (or a file it refers to) could not be read.
     #[error("{path}: cannot read: {source}")]

@@ -133,6 +133,7 @@ impl PsfParams {
 }
 
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum PsfError {
     #[error("invalid parameters: {0}")]
     Params(String),

@@ -190,6 +190,7 @@ pub struct FrameReport {
 /// Progress of [`render_sequence`], in order: `Planned`, `StaticReady`, then one
 /// `Frame` per planned frame (rendered frames are reported once written).
 #[derive(Debug)]
+#[non_exhaustive]
 pub enum RenderEvent<'a> {
     Planned(&'a RenderPlan),
     /// The static part is ready: baked in memory, or opened from `--baked`.

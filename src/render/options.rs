@@ -321,6 +321,7 @@ impl Aovs {
 
 /// Pixel type of the RGBA channels (AOVs are always 32-bit float).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum PixelType {
     #[default]
     Half,

@@ -107,6 +107,7 @@ impl OutputPattern {
 
 /// Where each frame's camera comes from.
 #[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
 pub enum CameraSource {
     /// A scene camera (by name, or the first), posed every frame.
     Scene(Option<String>),

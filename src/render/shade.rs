@@ -4,6 +4,11 @@
 //! next level's rays (mirror reflection, refraction, and the continuation through
 //! alpha-cut or blended surfaces). Tracing and shading are timed apart.
 //!
+//! Why this file is over 800 lines: the shading of one hit (surface, lobes, direct and
+//! area light, the secondary rays) shares `Surface`, `Lobes` and `BlockOut` and reads
+//! best as one piece; what stands alone already lives beside it (`lights`, `sampling`,
+//! `mips`). The next split, if it grows: the lobes and BRDF into a `bsdf` module.
+//!
 //! Determinism: rays sit in arrays in a fixed order; each block of rays is shaded by one
 //! task into its own lists, blocks are merged in order, and contributions are added to
 //! their sample one after the other in array order. Jitter comes from a hash of (frame,

@@ -16,6 +16,7 @@ use super::{Camera, Channel, Interpolation, Light, Property, Scene, SceneError, 
 
 /// Which clips play.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash)]
+#[non_exhaustive]
 pub enum ClipSelection {
     /// Every clip together (the later clip wins where two drive the same property; the
     /// default selection picks this only when no two clips do, see

@@ -2,6 +2,7 @@
 
 /// What can go wrong while choosing what to sample from a scene.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum SceneError {
     /// `--animation NAME|INDEX` named no clip of the file.
     #[error("no animation {requested:?}; available: {}", available_list(.available))]

@@ -122,6 +122,7 @@ pub struct MorphTarget {
 
 /// Alpha handling of a material (glTF `alphaMode`).
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[non_exhaustive]
 pub enum AlphaMode {
     #[default]
     Opaque,
@@ -223,6 +224,7 @@ impl Default for Material {
 
 /// Texture wrapping mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[non_exhaustive]
 pub enum Wrap {
     #[default]
     Repeat,
@@ -277,6 +279,7 @@ impl Trs {
 
 /// A node's rest transform as the file gives it.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
 pub enum NodeTransform {
     /// Kept exactly (a matrix may not be a pure TRS). An animated matrix node is animated
     /// on the TRS decomposition of the matrix.
@@ -338,6 +341,7 @@ pub struct Skin {
 
 /// A camera's projection.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
 pub enum Projection {
     Perspective {
         /// Vertical field of view, radians.
@@ -400,6 +404,7 @@ impl Camera {
 
 /// Kind of a punctual light (`KHR_lights_punctual`).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
 pub enum LightKind {
     /// Intensity in candela (lm/sr).
     Point,
@@ -441,6 +446,7 @@ pub struct Light {
 
 /// The property an animation channel drives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
 pub enum Property {
     Translation,
     Rotation,
@@ -451,6 +457,7 @@ pub enum Property {
 
 /// Keyframe interpolation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum Interpolation {
     Step,
     /// Slerp for rotations.

@@ -153,6 +153,7 @@ impl MuseumParams {
 
 /// Why the museum could not be built or written.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum MuseumError {
     /// A parameter out of range.
     #[error("museum: {param} {value}: {reason}")]
