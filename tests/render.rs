@@ -4,6 +4,7 @@
 
 mod common;
 
+use common::exr_read::{channel, read_exr};
 use common::render_scene;
 
 use std::path::{Path, PathBuf};
@@ -15,32 +16,6 @@ use subfield::import;
 use subfield::render::{self, Aovs, FrameRange, PixelType, RenderOptions};
 use subfield::scene::{ClipSelection, Scene, TriangleSoup};
 use subfield::{BruteForce, Intersector, Ray};
-
-/// Channel name → samples (as f32), read with the `exr` crate.
-fn read_exr(path: &Path) -> (usize, usize, Vec<(String, Vec<f32>)>) {
-    let img = exr::prelude::read_first_flat_layer_from_file(path).unwrap();
-    let layer = img.layer_data;
-    let chans = layer
-        .channel_data
-        .list
-        .iter()
-        .map(|c| {
-            (
-                c.name.to_string(),
-                c.sample_data.values_as_f32().collect::<Vec<f32>>(),
-            )
-        })
-        .collect();
-    (layer.size.0, layer.size.1, chans)
-}
-
-fn channel<'a>(chans: &'a [(String, Vec<f32>)], name: &str) -> &'a [f32] {
-    &chans
-        .iter()
-        .find(|(n, _)| n == name)
-        .unwrap_or_else(|| panic!("no channel {name}"))
-        .1
-}
 
 fn quiet(_: render::RenderEvent<'_>) {}
 

@@ -8,38 +8,13 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::build::{diffuse, linear, mesh, perspective, placed, SceneBuilder};
+use common::exr_read::{channel, read_exr};
 use common::farm::{ok, s, stderr, subfield};
 use common::render_scene::{quad, temp_dir};
 use glam::{Quat, Vec3, Vec4};
 use subfield::render::{self, RenderOptions};
 use subfield::scene::{Animation, Node, Scene};
 use subfield::scene::{ClipSelection, Property};
-
-/// Width, height and channels (name → samples as f32) of an EXR frame.
-fn read_exr(path: &Path) -> (usize, usize, Vec<(String, Vec<f32>)>) {
-    let img = exr::prelude::read_first_flat_layer_from_file(path).unwrap();
-    let layer = img.layer_data;
-    let chans = layer
-        .channel_data
-        .list
-        .iter()
-        .map(|c| {
-            (
-                c.name.to_string(),
-                c.sample_data.values_as_f32().collect::<Vec<f32>>(),
-            )
-        })
-        .collect();
-    (layer.size.0, layer.size.1, chans)
-}
-
-fn channel<'a>(chans: &'a [(String, Vec<f32>)], name: &str) -> &'a [f32] {
-    &chans
-        .iter()
-        .find(|(n, _)| n == name)
-        .unwrap_or_else(|| panic!("no channel {name}"))
-        .1
-}
 
 /// Half the side of the square, and its distance in front of the camera.
 const HALF: f32 = 1.0;

@@ -8,6 +8,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::build::{placed, SceneBuilder};
+use common::exr_read::read_exr;
 use common::render_scene::{quad, temp_dir};
 use glam::{Quat, Vec3, Vec4};
 use subfield::import;
@@ -15,24 +16,6 @@ use subfield::render::{self, FrameRange, LookAt, PixelType, RenderOptions};
 use subfield::scene::{
     Image, LightDef, LightKind, Material, Mesh, Node, Primitive, Scene, Texture, TextureRef, Wrap,
 };
-
-/// Channel name → samples, read with the `exr` crate.
-fn read_exr(path: &Path) -> (usize, Vec<(String, Vec<f32>)>) {
-    let img = exr::prelude::read_first_flat_layer_from_file(path).unwrap();
-    let layer = img.layer_data;
-    let chans = layer
-        .channel_data
-        .list
-        .iter()
-        .map(|c| {
-            (
-                c.name.to_string(),
-                c.sample_data.values_as_f32().collect::<Vec<f32>>(),
-            )
-        })
-        .collect();
-    (layer.size.0, chans)
-}
 
 /// Luminance-free view of a render: one RGB triple per pixel, rows top to bottom.
 struct Frame {
@@ -67,7 +50,7 @@ fn render(
     };
     tweak(&mut opts);
     render::render_sequence(scene, &opts, &mut |_| {}).unwrap();
-    let (w, chans) = read_exr(&out);
+    let (w, _, chans) = read_exr(&out);
     let ch = |n: &str| &chans.iter().find(|(c, _)| c == n).unwrap().1;
     let (r, g, b) = (ch("R"), ch("G"), ch("B"));
     let rgb = (0..r.len()).map(|i| Vec3::new(r[i], g[i], b[i])).collect();

@@ -5,6 +5,7 @@
 #![allow(dead_code)]
 
 pub mod build;
+pub mod exr_read;
 pub mod farm;
 pub mod render_scene;
 pub mod reseal;
