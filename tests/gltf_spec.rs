@@ -797,8 +797,6 @@ fn required_extensions_we_do_not_decode_are_one_line() {
     let dir = temp_dir("required");
     for (ext, hint) in [
         ("KHR_draco_mesh_compression", "without Draco"),
-        ("EXT_meshopt_compression", "gltfpack"),
-        ("KHR_meshopt_compression", "gltfpack"),
         ("KHR_texture_basisu", "PNG"),
         ("EXT_lights_image_based", "not supported"),
     ] {

@@ -69,6 +69,15 @@ pub enum ImportError {
         reason: String,
     },
 
+    /// A compressed buffer view (`EXT_meshopt_compression`, `KHR_meshopt_compression`)
+    /// is malformed or its data does not decode.
+    #[error("{path}: bufferViews[{view}]: {reason}")]
+    BufferView {
+        path: PathBuf,
+        view: usize,
+        reason: String,
+    },
+
     /// An accessor's data is unusable: outside its buffer view, wrong type for its use,
     /// a non-finite float, an index past the vertex count.
     #[error("{path}: accessors[{accessor}] ({usage}): {reason}")]

@@ -27,6 +27,9 @@ impl Importer<'_> {
             self.root.buffer_views.get(view).ok_or_else(|| {
                 self.acc_err(accessor, usage, format!("bufferViews[{view}] missing"))
             })?;
+        if let Some(Some(decoded)) = self.decoded_views.get(view) {
+            return Ok(decoded);
+        }
         let b = v.buffer.unwrap_or(usize::MAX);
         let buf = self.buffers.get(b).map(Vec::as_slice).unwrap_or(&[]);
         let start = v.byte_offset;

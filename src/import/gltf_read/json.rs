@@ -100,6 +100,24 @@ pub(super) struct SparseValues {
 pub(super) struct Buffer {
     pub uri: Option<String>,
     pub byte_length: Option<usize>,
+    pub extensions: Option<BufferExtensions>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(default)]
+pub(super) struct BufferExtensions {
+    #[serde(rename = "EXT_meshopt_compression")]
+    pub ext_meshopt: Option<MeshoptBuffer>,
+    #[serde(rename = "KHR_meshopt_compression")]
+    pub khr_meshopt: Option<MeshoptBuffer>,
+}
+
+/// A buffer's meshopt extension: `fallback` marks a buffer only compressed views
+/// reference, which a decoder need not load (it may have no data at all).
+#[derive(Debug, Default, Deserialize)]
+#[serde(default)]
+pub(super) struct MeshoptBuffer {
+    pub fallback: bool,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -116,9 +134,24 @@ pub(super) struct BufferView {
 #[serde(default)]
 pub(super) struct BufferViewExtensions {
     #[serde(rename = "EXT_meshopt_compression")]
-    pub ext_meshopt: Option<serde_json::Value>,
+    pub ext_meshopt: Option<Meshopt>,
     #[serde(rename = "KHR_meshopt_compression")]
-    pub khr_meshopt: Option<serde_json::Value>,
+    pub khr_meshopt: Option<Meshopt>,
+}
+
+/// A compressed buffer view (`EXT_meshopt_compression` / `KHR_meshopt_compression`): the
+/// view's bytes are `count * byteStride` bytes decoded from
+/// `buffer[byteOffset..+byteLength]` by `mode`, then `filter` (see `meshopt`).
+#[derive(Debug, Default, Deserialize)]
+#[serde(rename_all = "camelCase", default)]
+pub(super) struct Meshopt {
+    pub buffer: Option<Index>,
+    pub byte_offset: usize,
+    pub byte_length: Option<usize>,
+    pub byte_stride: Option<usize>,
+    pub count: Option<usize>,
+    pub mode: Option<String>,
+    pub filter: Option<String>,
 }
 
 #[derive(Debug, Default, Deserialize)]

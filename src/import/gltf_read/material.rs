@@ -187,6 +187,10 @@ impl Importer<'_> {
                         .buffer_views
                         .get(v)
                         .ok_or_else(|| err(format!("bufferViews[{v}] missing")))?;
+                    if let Some(Some(decoded)) = self.decoded_views.get(v) {
+                        encoded.push((i, img.name.clone(), decoded.clone()));
+                        continue;
+                    }
                     let b = view.buffer.unwrap_or(usize::MAX);
                     let buf = self.buffers.get(b).map(Vec::as_slice).unwrap_or(&[]);
                     let start = view.byte_offset;

@@ -10,7 +10,7 @@
 //!
 //! One concept per file: this one holds the entry points, the GLB container, the
 //! extension policy and the scene assembly; `json` the document model, `check` its
-//! validation, `uri` buffers and URIs, `accessor` typed accessor reads, `material`
+//! validation, `uri` buffers and URIs, `meshopt` compressed buffer views, `accessor` typed accessor reads, `material`
 //! materials, textures and images, `mesh` primitives, `node` nodes, skins, cameras and
 //! lights, `animation` clips.
 
@@ -20,6 +20,7 @@ mod check;
 mod json;
 mod material;
 mod mesh;
+mod meshopt;
 mod node;
 mod uri;
 
@@ -37,6 +38,9 @@ const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_mesh_quantization",
     "KHR_texture_transform",
     "EXT_texture_webp",
+    // Compressed buffer views, decoded with meshoptimizer (see `meshopt`).
+    "EXT_meshopt_compression",
+    "KHR_meshopt_compression",
     // Pointers to node TRS and weights are animated; other pointers are skipped with a
     // warning (see `animation`).
     "KHR_animation_pointer",
@@ -50,16 +54,6 @@ const UNDECODED_EXTENSIONS: &[(&str, &str)] = &[
         "Draco-compressed geometry is not decoded (no maintained pure-Rust decoder); \
          re-export the file without Draco compression (e.g. Blender's glTF exporter with \
          Compression off)",
-    ),
-    (
-        "EXT_meshopt_compression",
-        "meshopt-compressed buffer views are not decoded; unpack the file with \
-         `gltfpack -i IN -o OUT -noq` (without -c/-cc)",
-    ),
-    (
-        "KHR_meshopt_compression",
-        "meshopt-compressed buffer views are not decoded; unpack the file with \
-         `gltfpack -i IN -o OUT -noq` (without -c/-cc)",
     ),
     (
         "KHR_texture_basisu",
@@ -102,10 +96,12 @@ pub(crate) fn from_slice(bytes: &[u8], path: &Path, folder: &Path) -> Result<Sce
         folder,
         root: &root,
         buffers: Vec::new(),
+        decoded_views: Vec::new(),
         warnings: Vec::new(),
     };
     importer.check_extensions()?;
     importer.buffers = importer.load_buffers(bin)?;
+    importer.decoded_views = importer.decode_views()?;
     importer.build()
 }
 
@@ -161,6 +157,8 @@ struct Importer<'a> {
     folder: &'a Path,
     root: &'a json::Root,
     buffers: Vec<Vec<u8>>,
+    /// Per buffer view, its decoded bytes when it is meshopt-compressed (`meshopt`).
+    decoded_views: Vec<Option<Vec<u8>>>,
     warnings: Vec<Warning>,
 }
 

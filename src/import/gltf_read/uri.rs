@@ -15,6 +15,16 @@ impl Importer<'_> {
                 buffer: i,
                 reason,
             };
+            // Only compressed views read a meshopt fallback buffer, and they read the
+            // compressed buffer instead: it need not be loaded (it may hold no data).
+            let ext = buffer.extensions.as_ref();
+            if ext.is_some_and(|e| {
+                e.ext_meshopt.as_ref().is_some_and(|m| m.fallback)
+                    || e.khr_meshopt.as_ref().is_some_and(|m| m.fallback)
+            }) {
+                out.push(Vec::new());
+                continue;
+            }
             let mut data = match &buffer.uri {
                 None => match (i, bin) {
                     (0, Some(b)) => b.to_vec(),
