@@ -84,7 +84,7 @@ fn compressed_doc(ext: &str, pos: &[[f32; 3]], idx: &[u32], indices: Indices) ->
         ),
     };
     let mut bin = vertex_data.clone();
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let index_offset = bin.len();

@@ -45,7 +45,7 @@ impl Doc {
 
     /// Appends bytes (4-aligned) as a buffer view of buffer 0.
     fn view(&mut self, bytes: &[u8], stride: Option<usize>) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let offset = self.bin.len();
@@ -118,11 +118,11 @@ impl Doc {
     /// `.glb` bytes, the buffer as the BIN chunk.
     fn glb(&self) -> Vec<u8> {
         let mut json = serde_json::to_vec(&self.with_buffer(None)).unwrap();
-        while json.len() % 4 != 0 {
+        while !json.len().is_multiple_of(4) {
             json.push(b' ');
         }
         let mut bin = self.bin.clone();
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let total = 12 + 8 + json.len() + 8 + bin.len();

@@ -135,7 +135,7 @@ pub fn generate_animart(p: &AnimartParams) -> String {
         let (cu, cv) = ((cellno % m) as f64, (cellno / m) as f64);
         let (u0, v0) = (-1.0 + cu * cell, -1.0 + cv * cell);
         let (u1, v1) = (u0 + cell, v0 + cell);
-        let uv = if slot % 2 == 0 {
+        let uv = if slot.is_multiple_of(2) {
             [(u0, v0), (u1, v0), (u1, v1)]
         } else {
             [(u0, v0), (u1, v1), (u0, v1)]

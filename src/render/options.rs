@@ -55,7 +55,7 @@ impl FrameSpan {
     pub fn contains(&self, frame: u32) -> bool {
         self.step != 0
             && (self.start..self.end).contains(&frame)
-            && (frame - self.start) % self.step == 0
+            && (frame - self.start).is_multiple_of(self.step)
     }
 }
 

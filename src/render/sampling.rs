@@ -62,7 +62,7 @@ pub fn stratified(i: u32, n: u32, r: Vec2) -> Vec2 {
         return r;
     }
     let mut a = (n as f64).sqrt() as u32;
-    while a > 1 && n % a != 0 {
+    while a > 1 && !n.is_multiple_of(a) {
         a -= 1;
     }
     let b = n / a.max(1);

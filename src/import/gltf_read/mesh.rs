@@ -242,7 +242,7 @@ impl Importer<'_> {
         };
         Ok(match mode {
             Mode::Triangles => {
-                if indices.len() % 3 != 0 {
+                if !indices.len().is_multiple_of(3) {
                     self.warn(format!(
                         "{at}: {} indices is not a multiple of 3; the last {} dropped",
                         indices.len(),

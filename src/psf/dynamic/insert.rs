@@ -187,7 +187,7 @@ impl DynSubfield {
         self.entries.ensure(at);
         let mut pad = |slot: &Slot| {
             let end = (slot.start + slot.count) as usize;
-            if end % LANES != 0 {
+            if !end.is_multiple_of(LANES) {
                 self.entries.pad(end);
             }
         };

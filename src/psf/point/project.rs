@@ -39,7 +39,7 @@ pub(super) fn up(x: f64) -> f32 {
 pub(super) fn face_coords(f: usize, x: DVec3) -> (f64, f64, f64) {
     let k = f / 2;
     let a = x.to_array();
-    let z = if f % 2 == 0 { a[k] } else { -a[k] };
+    let z = if f.is_multiple_of(2) { a[k] } else { -a[k] };
     (a[(k + 1) % 3], a[(k + 2) % 3], z)
 }
 
