@@ -6,6 +6,9 @@
 //! rotate a triangle's corners, never reorder triangles or flip them); a corrupted or
 //! malformed compressed view is one error line naming the file and `bufferViews[i]`.
 
+mod common;
+
+use common::base64;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -36,24 +39,6 @@ fn grid() -> (Vec<[f32; 3]>, Vec<u32>) {
 fn canonical(t: [u32; 3]) -> [u32; 3] {
     let r = (0..3).min_by_key(|&i| t[i]).unwrap_or(0);
     [t[r], t[(r + 1) % 3], t[(r + 2) % 3]]
-}
-
-fn base64(bytes: &[u8]) -> String {
-    const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut s = String::new();
-    for c in bytes.chunks(3) {
-        let n = (u32::from(c[0]) << 16)
-            | (u32::from(*c.get(1).unwrap_or(&0)) << 8)
-            | u32::from(*c.get(2).unwrap_or(&0));
-        for k in 0..4 {
-            if k <= c.len() {
-                s.push(T[(n >> (18 - 6 * k) & 63) as usize] as char);
-            } else {
-                s.push('=');
-            }
-        }
-    }
-    s
 }
 
 /// How the index data is compressed.

@@ -8,6 +8,9 @@
 //! error line naming the file and the accessor, node or extension, a non-zero exit, and
 //! nothing written.
 
+mod common;
+
+use common::base64;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -150,24 +153,6 @@ fn min_max(values: &[f32], comps: usize) -> (Vec<f32>, Vec<f32>) {
         }
     }
     (min, max)
-}
-
-fn base64(bytes: &[u8]) -> String {
-    const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut s = String::new();
-    for c in bytes.chunks(3) {
-        let n = (u32::from(c[0]) << 16)
-            | (u32::from(*c.get(1).unwrap_or(&0)) << 8)
-            | u32::from(*c.get(2).unwrap_or(&0));
-        for k in 0..4 {
-            if k <= c.len() {
-                s.push(T[(n >> (18 - 6 * k) & 63) as usize] as char);
-            } else {
-                s.push('=');
-            }
-        }
-    }
-    s
 }
 
 /// A square [-1, 1]² at z = 0 facing +z (two triangles), `uvs` per corner, a camera

@@ -413,3 +413,23 @@ pub fn max_dist(a: &[Vec3], b: &[Vec3]) -> f32 {
         .map(|(x, y)| x.distance(*y))
         .fold(0.0, f32::max)
 }
+
+/// Standard base64 with padding (a `data:` URI's payload), written here so tests that
+/// build glTF JSON by hand need not call the library's encoder.
+pub fn base64(bytes: &[u8]) -> String {
+    const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut s = String::new();
+    for c in bytes.chunks(3) {
+        let n = (u32::from(c[0]) << 16)
+            | (u32::from(*c.get(1).unwrap_or(&0)) << 8)
+            | u32::from(*c.get(2).unwrap_or(&0));
+        for k in 0..4 {
+            if k <= c.len() {
+                s.push(T[(n >> (18 - 6 * k) & 63) as usize] as char);
+            } else {
+                s.push('=');
+            }
+        }
+    }
+    s
+}
