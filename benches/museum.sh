@@ -3,7 +3,7 @@
 # frames, 640x480, Whitted with shadows and reflections), reproduced:
 #   benches/museum.sh [--frames A..B] [--out DIR]
 # BART's public museum lacks animart7.aff, so `subfield generate animart` writes one
-# (16,384 triangles, seed 1) beside links to the museum's files, and museum7.aff is
+# (16,384 triangles, seed 1) beside a copy of the museum's files, and museum7.aff is
 # rendered directly (AFF import). Prints frame-time statistics beside the paper's.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -25,7 +25,9 @@ cargo build --release --quiet
 bin=target/release/subfield
 rm -rf "$out"
 mkdir -p "$out/scene" "$out/frames"
-for f in "$museum"/*; do ln -s "$(cd "$(dirname "$f")" && pwd)/$(basename "$f")" "$out/scene/"; done
+# A copy, not links: includes that leave the scene's folder through a symbolic link are
+# refused (docs/INPUTS.md), and the museum's files are 5 MB.
+cp -R "$museum"/. "$out/scene/"
 rm -f "$out/scene/animart7.aff"
 "$bin" generate animart --triangles 16384 --seed 1 -o "$out/scene/animart7.aff" --quiet
 echo "# $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), load $(cut -d' ' -f1-3 /proc/loadavg)"
