@@ -17,7 +17,7 @@ use super::options::RenderOptions;
 use super::planning::{check_outputs, plan, skips, static_dynamic_split, CameraSource, RenderPlan};
 use super::shade::{FrameBuffers, ShadeContext};
 use super::stats::{self, FrameStats, FrameTotals, PlotBars};
-use super::wavefront::{render_frame, AovInputs};
+use super::wavefront::{render_frame_with, AovInputs, FrameScratch};
 use super::writer::{write_file, write_job, Job};
 use super::{FrameReport, RenderError, RenderEvent, RenderSummary};
 use crate::atomic::AtomicFile;
@@ -179,6 +179,8 @@ struct Written {
     plot: PlotBars,
     preview_written: Option<PathBuf>,
     first_error: Option<RenderError>,
+    /// The buffers of the last frame written, for the next frame to reuse.
+    spare: Option<FrameBuffers>,
 }
 
 impl Written {
@@ -206,6 +208,7 @@ impl Written {
                 if job.preview.is_some() {
                     self.preview_written = job.preview.clone();
                 }
+                self.spare = Some(job.frame);
                 on_event(RenderEvent::Frame(&FrameReport {
                     frame: st.frame,
                     index: job.index,
@@ -265,6 +268,7 @@ impl Frames<'_> {
             plot: PlotBars::default(),
             preview_written: None,
             first_error: None,
+            spare: None,
         };
         let mut skipped = 0usize;
         // Frames handed to the writer or skipped, and whether the loop stopped for the
@@ -290,6 +294,7 @@ impl Frames<'_> {
             let mut dl = DynamicLayer::for_triangles(plan.split.dynamic_triangles);
             let mut dyn_soup = TriangleSoup::new();
             let mut next_soup = TriangleSoup::new();
+            let mut scratch = FrameScratch::default();
             let mut preview_pending = preview_frame;
             for (index, frame) in plan.frames.iter().enumerate() {
                 while let Ok(r) = done_rx.try_recv() {
@@ -317,8 +322,18 @@ impl Frames<'_> {
                     }));
                     continue;
                 }
-                match self.render_one(static_bounds, &mut dl, &mut dyn_soup, &mut next_soup, frame)
-                {
+                // Written frames' buffers come back for the next.
+                if let Some(fb) = written.spare.take() {
+                    scratch.recycle(fb);
+                }
+                match self.render_one(
+                    static_bounds,
+                    &mut dl,
+                    &mut dyn_soup,
+                    &mut next_soup,
+                    &mut scratch,
+                    frame,
+                ) {
                     Ok((fb, header, st)) => {
                         let job = Job {
                             index,
@@ -391,6 +406,7 @@ impl Frames<'_> {
         dl: &mut DynamicLayer,
         dyn_soup: &mut TriangleSoup,
         next_soup: &mut TriangleSoup,
+        scratch: &mut FrameScratch,
         frame: u32,
     ) -> Result<(FrameBuffers, FrameHeader, FrameStats), RenderError> {
         let (scene, opts, plan) = (self.scene, self.opts, self.plan);
@@ -432,7 +448,8 @@ impl Frames<'_> {
             next,
             crypto: self.crypto.as_deref(),
         };
-        let (mut fb, work) = render_frame(
+        let (mut fb, work) = render_frame_with(
+            scratch,
             &ctx,
             &tracer,
             &camera,

@@ -907,6 +907,17 @@ pub(super) struct BlockOut {
 }
 
 impl BlockOut {
+    /// Empties every list, keeping their capacity (a frame's blocks are reused).
+    pub(super) fn clear(&mut self) {
+        self.add.clear();
+        self.cover.clear();
+        self.shadow_rays.clear();
+        self.shadow_add.clear();
+        self.shadow_light.clear();
+        self.next_rays.clear();
+        self.next_items.clear();
+    }
+
     fn add(&mut self, sample: u32, c: Vec3) {
         if c != Vec3::ZERO && c.is_finite() {
             self.add.push((sample, c));

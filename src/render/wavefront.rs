@@ -34,41 +34,119 @@ const BLOCK: usize = 1024;
 /// Samples traced together (bounds the wavefront's memory).
 const CHUNK_SAMPLES: usize = 1 << 18;
 
-/// `occluded_batch` of `rays`, one batch per light (`light[i]` is ray `i`'s): the
-/// shadow rays towards one point light all pass through it, and such a batch is traced
-/// through a point grid around it (`subfield::psf`'s point grids), which a batch mixing
-/// several lights would not get. The answers are the same either way.
-fn occluded_by_light<T: Intersector>(tracer: &T, rays: &[Ray], light: &[u16]) -> Vec<bool> {
-    let mut blocked = vec![false; rays.len()];
+/// `occluded_batch` of `rays` into `blocked`, one batch per light (`light[i]` is ray
+/// `i`'s): the shadow rays towards one point light all pass through it, and such a
+/// batch is traced through a point grid around it (`subfield::psf`'s point grids), which
+/// a batch mixing several lights would not get. The answers are the same either way.
+/// `sort`: the reordering's buffers, kept from batch to batch.
+fn occluded_by_light<T: Intersector>(
+    tracer: &T,
+    rays: &[Ray],
+    light: &[u16],
+    blocked: &mut Vec<bool>,
+    sort: &mut LightSort,
+) {
+    blocked.clear();
+    blocked.resize(rays.len(), false);
     let lights = light.iter().max().map_or(0, |&l| l as usize + 1);
     if lights <= 1 {
-        tracer.occluded_batch(rays, &mut blocked);
-        return blocked;
+        tracer.occluded_batch(rays, blocked);
+        return;
     }
     // The rays in order of their light (a stable counting sort), a batch a light.
-    let mut start = vec![0usize; lights + 1];
+    let LightSort {
+        start,
+        at,
+        index,
+        sorted,
+        out,
+    } = sort;
+    start.clear();
+    start.resize(lights + 1, 0);
     for &l in light {
         start[l as usize + 1] += 1;
     }
     for l in 0..lights {
         start[l + 1] += start[l];
     }
-    let mut index = vec![0usize; rays.len()];
-    let mut at = start.clone();
+    index.clear();
+    index.resize(rays.len(), 0);
+    at.clear();
+    at.extend_from_slice(start);
     for (i, &l) in light.iter().enumerate() {
-        index[at[l as usize]] = i;
+        index[at[l as usize]] = i as u32;
         at[l as usize] += 1;
     }
-    let sorted: Vec<Ray> = index.iter().map(|&i| rays[i]).collect();
-    let mut out = vec![false; rays.len()];
+    sorted.clear();
+    sorted.par_extend(
+        index
+            .par_iter()
+            .with_min_len(BLOCK)
+            .map(|&i| rays[i as usize]),
+    );
+    out.clear();
+    out.resize(rays.len(), false);
     for l in 0..lights {
         let (a, b) = (start[l], start[l + 1]);
         tracer.occluded_batch(&sorted[a..b], &mut out[a..b]);
     }
-    for (&i, b) in index.iter().zip(out) {
-        blocked[i] = b;
+    for (&i, &b) in index.iter().zip(out.iter()) {
+        blocked[i as usize] = b;
     }
-    blocked
+}
+
+/// The buffers of [`occluded_by_light`]'s reordering.
+#[derive(Default)]
+struct LightSort {
+    start: Vec<usize>,
+    at: Vec<usize>,
+    index: Vec<u32>,
+    sorted: Vec<Ray>,
+    out: Vec<bool>,
+}
+
+/// A frame's working buffers, kept from one frame to the next by a sequence
+/// ([`render_frame_with`]): their capacity stays, so once the first frame is done a
+/// frame's wavefront allocates nothing large, and the kernel zeroes no fresh pages for
+/// it (the page faults of a frame's 80 MB or so of fresh buffers were a tenth of the
+/// CPU time of a 640x480 frame; `benches/PERF.md`, issue 23, step 2). The frame's own image
+/// buffers are handed back through [`recycle`](Self::recycle) once written.
+#[derive(Default)]
+pub struct FrameScratch {
+    rays: Vec<Ray>,
+    items: Vec<Item>,
+    hits: Vec<Option<Hit>>,
+    radiance: Vec<Vec3>,
+    coverage: Vec<f32>,
+    outs: Vec<BlockOut>,
+    shadow_rays: Vec<Ray>,
+    shadow_add: Vec<(u32, Vec3)>,
+    shadow_light: Vec<u16>,
+    blocked: Vec<bool>,
+    sort: LightSort,
+    spare: Option<FrameBuffers>,
+}
+
+impl FrameScratch {
+    /// Keeps a written frame's buffers for the next frame of the same size and AOVs.
+    pub fn recycle(&mut self, fb: FrameBuffers) {
+        self.spare = Some(fb);
+    }
+}
+
+/// `v` as `n` copies of `x`, reusing its allocation.
+fn refill<T: Clone>(v: &mut Vec<T>, n: usize, x: T) {
+    v.clear();
+    v.resize(n, x);
+}
+
+/// `v` (`Some` when wanted) as `n` copies of `x`, reusing `old`'s allocation.
+fn refill_opt<T: Clone>(old: Option<Vec<T>>, wanted: bool, n: usize, x: T) -> Option<Vec<T>> {
+    wanted.then(|| {
+        let mut v = old.unwrap_or_default();
+        refill(&mut v, n, x);
+        v
+    })
 }
 
 /// A 64-bit mix of the inputs (SplitMix64 finaliser over a running combination).
@@ -128,21 +206,71 @@ pub fn render_frame<T: Intersector>(
     max_depth: u32,
     inputs: &AovInputs<'_>,
 ) -> (FrameBuffers, FrameWork) {
+    let mut scratch = FrameScratch::default();
+    render_frame_with(
+        &mut scratch,
+        ctx,
+        tracer,
+        camera,
+        frame,
+        spp,
+        max_depth,
+        inputs,
+    )
+}
+
+/// [`render_frame`] with working buffers kept from the frame before (a sequence's).
+/// The frame is the same whatever `scratch` held.
+#[allow(clippy::too_many_arguments)]
+pub fn render_frame_with<T: Intersector>(
+    scratch: &mut FrameScratch,
+    ctx: &ShadeContext<'_>,
+    tracer: &T,
+    camera: &CameraModel,
+    frame: u32,
+    spp: u32,
+    max_depth: u32,
+    inputs: &AovInputs<'_>,
+) -> (FrameBuffers, FrameWork) {
     let aovs = inputs.aovs;
     let (w, h) = (camera.width as usize, camera.height as usize);
     let spp = spp.max(1) as usize;
     let mut work = FrameWork::default();
+    let spare = scratch
+        .spare
+        .take()
+        .filter(|f| f.width == camera.width && f.height == camera.height);
+    let (rgba, depth, normal, albedo, position, motion) = match spare {
+        Some(f) => (f.rgba, f.depth, f.normal, f.albedo, f.position, f.motion),
+        None => Default::default(),
+    };
+    let mut rgba = rgba;
+    refill(&mut rgba, w * h, [0.0; 4]);
     let mut fb = FrameBuffers {
         width: camera.width,
         height: camera.height,
-        rgba: vec![[0.0; 4]; w * h],
-        depth: aovs.depth.then(|| vec![f32::INFINITY; w * h]),
-        normal: aovs.normal.then(|| vec![[0.0; 3]; w * h]),
-        albedo: aovs.albedo.then(|| vec![[0.0; 3]; w * h]),
-        position: aovs.position.then(|| vec![[0.0; 3]; w * h]),
-        motion: aovs.motion.then(|| vec![[0.0; 2]; w * h]),
+        rgba,
+        depth: refill_opt(depth, aovs.depth, w * h, f32::INFINITY),
+        normal: refill_opt(normal, aovs.normal, w * h, [0.0; 3]),
+        albedo: refill_opt(albedo, aovs.albedo, w * h, [0.0; 3]),
+        position: refill_opt(position, aovs.position, w * h, [0.0; 3]),
+        motion: refill_opt(motion, aovs.motion, w * h, [0.0; 2]),
         crypto: None,
     };
+    let FrameScratch {
+        rays,
+        items,
+        hits,
+        radiance,
+        coverage,
+        outs,
+        shadow_rays,
+        shadow_add,
+        shadow_light,
+        blocked,
+        sort,
+        spare: _,
+    } = scratch;
     let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
     let levels = aovs.crypto_levels.max(1) as usize;
     if crypto.is_some() {
@@ -167,44 +295,38 @@ pub fn render_frame<T: Intersector>(
 
         // Primary rays.
         let clock = Instant::now();
-        let mut rays: Vec<Ray> = (0..nsamples)
-            .into_par_iter()
-            .with_min_len(BLOCK)
-            .map(|s| {
-                let p = px0 + s / spp;
-                let (x, y) = ((p % w) as u32, (p / w) as u32);
-                let (ox, oy) = sample_offset(frame, x, y, (s % spp) as u32, spp as u32);
-                camera.ray(x as f32 + ox, y as f32 + oy)
-            })
-            .collect();
+        rays.clear();
+        rays.par_extend((0..nsamples).into_par_iter().with_min_len(BLOCK).map(|s| {
+            let p = px0 + s / spp;
+            let (x, y) = ((p % w) as u32, (p / w) as u32);
+            let (ox, oy) = sample_offset(frame, x, y, (s % spp) as u32, spp as u32);
+            camera.ray(x as f32 + ox, y as f32 + oy)
+        }));
         let cone = primary_cone(camera);
-        let mut items: Vec<Item> = (0..nsamples)
-            .map(|s| {
-                let p = px0 + s / spp;
-                let (x, y) = ((p % w) as u32, (p / w) as u32);
-                Item {
-                    sample: s as u32,
-                    weight: Vec3::ONE,
-                    coverage: 1.0,
-                    depth: 0,
-                    passes: 0,
-                    seed: Seed::camera(frame, x, y, (s % spp) as u32),
-                    cone,
-                }
-            })
-            .collect();
+        items.clear();
+        items.par_extend((0..nsamples).into_par_iter().with_min_len(BLOCK).map(|s| {
+            let p = px0 + s / spp;
+            let (x, y) = ((p % w) as u32, (p / w) as u32);
+            Item {
+                sample: s as u32,
+                weight: Vec3::ONE,
+                coverage: 1.0,
+                depth: 0,
+                passes: 0,
+                seed: Seed::camera(frame, x, y, (s % spp) as u32),
+                cone,
+            }
+        }));
         work.rays.primary += nsamples as u64;
-        let mut radiance = vec![Vec3::ZERO; nsamples];
-        let mut coverage = vec![0.0f32; nsamples];
+        refill(radiance, nsamples, Vec3::ZERO);
+        refill(coverage, nsamples, 0.0f32);
         work.shade += clock.elapsed();
 
         let mut first = true;
-        let mut hits: Vec<Option<Hit>> = Vec::new();
         while !rays.is_empty() {
             let clock = Instant::now();
-            hits.clear();
-            hits.resize(rays.len(), None);
-            tracer.intersect_batch(&rays, &mut hits);
+            refill(hits, rays.len(), None);
+            tracer.intersect_batch(rays, hits);
             work.trace += clock.elapsed();
 
             let clock = Instant::now();
@@ -212,56 +334,59 @@ pub fn render_frame<T: Intersector>(
                 // The centre rays: the primary rays themselves with one sample, else
                 // their own batch (traced below).
                 if spp == 1 {
-                    write_aovs(ctx, &aov_inputs, &mut fb, px0, &rays, &hits);
+                    write_aovs(ctx, &aov_inputs, &mut fb, px0, rays, hits);
                 }
             }
             if first {
                 if let (Some(names), Some(buf)) = (crypto, fb.crypto.as_mut()) {
                     // The primary rays are the samples in order: rank each pixel's.
-                    write_crypto(ctx, names, buf, px0, spp, &hits);
+                    write_crypto(ctx, names, buf, px0, spp, hits);
                 }
             }
             first = false;
-            let outs: Vec<BlockOut> = rays
-                .par_chunks(BLOCK)
+            let blocks = rays.len().div_ceil(BLOCK);
+            if outs.len() < blocks {
+                outs.resize_with(blocks, BlockOut::default);
+            }
+            outs[..blocks]
+                .par_iter_mut()
+                .zip(rays.par_chunks(BLOCK))
                 .zip(items.par_chunks(BLOCK))
                 .zip(hits.par_chunks(BLOCK))
-                .map(|((r, it), hs)| {
-                    let mut out = BlockOut::default();
+                .for_each(|(((out, r), it), hs)| {
+                    out.clear();
                     for ((ray, item), hit) in r.iter().zip(it).zip(hs) {
-                        ctx.shade(ray, item, *hit, max_depth, spp as u32, &mut out);
+                        ctx.shade(ray, item, *hit, max_depth, spp as u32, out);
                     }
-                    out
-                })
-                .collect();
-            let mut shadow_rays = Vec::new();
-            let mut shadow_add = Vec::new();
-            let mut shadow_light = Vec::new();
+                });
+            shadow_rays.clear();
+            shadow_add.clear();
+            shadow_light.clear();
             rays.clear();
             items.clear();
-            for o in outs {
-                for (s, c) in o.add {
+            for o in &outs[..blocks] {
+                for &(s, c) in &o.add {
                     radiance[s as usize] += c;
                 }
-                for (s, c) in o.cover {
+                for &(s, c) in &o.cover {
                     coverage[s as usize] += c;
                 }
-                shadow_rays.extend(o.shadow_rays);
-                shadow_add.extend(o.shadow_add);
-                shadow_light.extend(o.shadow_light);
-                rays.extend(o.next_rays);
-                items.extend(o.next_items);
+                shadow_rays.extend_from_slice(&o.shadow_rays);
+                shadow_add.extend_from_slice(&o.shadow_add);
+                shadow_light.extend_from_slice(&o.shadow_light);
+                rays.extend_from_slice(&o.next_rays);
+                items.extend_from_slice(&o.next_items);
             }
             work.rays.secondary += rays.len() as u64;
             work.rays.shadow += shadow_rays.len() as u64;
             work.shade += clock.elapsed();
 
             let clock = Instant::now();
-            let blocked = occluded_by_light(tracer, &shadow_rays, &shadow_light);
+            occluded_by_light(tracer, shadow_rays, shadow_light, blocked, sort);
             work.trace += clock.elapsed();
 
             let clock = Instant::now();
-            for ((s, c), b) in shadow_add.into_iter().zip(blocked) {
+            for (&(s, c), &b) in shadow_add.iter().zip(blocked.iter()) {
                 if !b {
                     radiance[s as usize] += c;
                 }
