@@ -32,6 +32,7 @@
 mod aov;
 mod camera;
 mod errors;
+mod exr_zip;
 mod lights;
 mod mips;
 mod options;

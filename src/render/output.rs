@@ -59,9 +59,11 @@ fn crypto_layer_names(aovs: Aovs) -> Vec<String> {
         .collect()
 }
 
+/// Written uncompressed by the `exr` crate, then ZIP-compressed sixteen lines a block by
+/// [`zip_scanlines`](super::exr_zip::zip_scanlines).
 fn encoding() -> Encoding {
     Encoding {
-        compression: Compression::ZIP16,
+        compression: Compression::Uncompressed,
         blocks: Blocks::ScanLines,
         line_order: LineOrder::Increasing,
     }
@@ -235,7 +237,8 @@ pub fn encode_exr(
     image.write().non_parallel().to_buffered(&mut bytes)?;
     let mut bytes = bytes.into_inner();
     sort_header_attributes(&mut bytes);
-    Ok(bytes)
+    super::exr_zip::zip_scanlines(&bytes)
+        .map_err(|e| exr::error::Error::Invalid(e.to_string().into()))
 }
 
 /// Whether `path` is a complete EXR with this size, these channels and this options

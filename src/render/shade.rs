@@ -228,6 +228,7 @@ impl<'a> ShadeContext<'a> {
     /// Samples a texture (RGBA, linearised RGB when `srgb`) at `uv` (through the slot's
     /// `KHR_texture_transform`, if any), filtered for a footprint of level
     /// `lod + log2(√(width·height))` (see [`Surface::lod`]), or `None` without one.
+    #[inline]
     fn texture(&self, slot: Option<TextureRef>, uv: Vec2, lod: f32, srgb: bool) -> Option<Vec4> {
         let slot = slot?;
         let t = slot.texture as usize;
@@ -278,10 +279,17 @@ impl<'a> ShadeContext<'a> {
         let uv = uvs.map_or(Vec2::ZERO, |t| t[0] * w + t[1] * u + t[2] * v);
         // Level of detail without the texture's size: log2 of the footprint's width in
         // uv units (Akenine-Möller et al. 2021, eq. 34, for a unit texture).
+        // Only a textured material reads it (two logarithms a hit saved elsewhere).
+        let textured = self.material(material).is_some_and(|m| {
+            m.base_color_texture.is_some()
+                || m.metallic_roughness_texture.is_some()
+                || m.emissive_texture.is_some()
+                || m.normal_texture.is_some()
+        });
         let uv_area = uvs.map_or(0.0, |t| (t[1] - t[0]).perp_dot(t[2] - t[0]).abs());
         let world_area = cross.length();
         let cos = ng.dot(dir).abs().max(1e-4);
-        let lod = if width > 0.0 && uv_area > 0.0 && world_area > 0.0 {
+        let lod = if textured && width > 0.0 && uv_area > 0.0 && world_area > 0.0 {
             (width / cos).log2() + 0.5 * (uv_area / world_area).log2()
         } else {
             f32::NEG_INFINITY
