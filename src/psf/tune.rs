@@ -12,7 +12,7 @@
 //! Only the rays a render traces through the parallel subfields are traced in the
 //! trials. A render sends most of a camera's primary rays, the shadow rays towards a
 //! point light and the reflections off a plane through point grids
-//! ([`Plan::for_batch`](super::point::Plan::for_batch)), which do not depend on the
+//! (`Plan::for_batch` in `psf::point`), which do not depend on the
 //! bake's level, tiles or layout; the sample ([`SampleRays`]) is classified batch by
 //! batch as a render's batches are, and keeps only the count of the rays the point
 //! grids take. Every trial is charged for those at one per-ray constant, the default

@@ -7,7 +7,7 @@
 //!
 //! The sample is split as a render traces it: each view's primary rays one batch, the
 //! shadow rays towards each light one batch, the view's mirror rays one batch, each
-//! planned as the render plans its batches ([`Psf::point_grids_take`], the planner of
+//! planned as the render plans its batches (`Psf::point_grids_take`, the planner of
 //! the batch queries). The rays that point grids take are only counted
 //! ([`SampleRays::point`]); the others, which the render traces through the parallel
 //! subfields, are what the trials trace. Each batch is planned once before it is
