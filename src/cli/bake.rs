@@ -154,10 +154,11 @@ pub fn bake_tuned(scene: &Scene, label: &Path, quiet: bool) -> anyhow::Result<(P
     drop(first);
     if !quiet {
         eprintln!(
-            "tuning on {} sample rays ({} closest-hit, {} shadow)",
+            "tuning on {} sample rays: {} closest-hit and {} shadow rays through the parallel subfields, {} through point grids (counted at the default's mean cost a ray)",
             rays.len(),
             rays.closest.len(),
-            rays.any.len()
+            rays.any.len(),
+            rays.point
         );
     }
     let n = std::cell::Cell::new(0u32);

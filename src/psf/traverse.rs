@@ -379,7 +379,7 @@ impl Psf {
     }
 
     /// This PSF's triangles, for a point grid.
-    fn point_sources(&self) -> Sources<'_> {
+    pub(super) fn point_sources(&self) -> Sources<'_> {
         Sources {
             statics: &self.triangles,
             moving_pre: &[],

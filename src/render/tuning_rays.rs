@@ -5,8 +5,21 @@
 //! ray's hit on the static triangles, a shadow ray towards every light (the scene's
 //! lights at that time, else the default light a render adds) and the mirror ray.
 //!
-//! Everything here is a function of the scene and the static triangles, so the sample,
-//! and the choice tuning makes on it, is the same on every machine.
+//! The sample is split as a render traces it: each view's primary rays one batch, the
+//! shadow rays towards each light one batch, the view's mirror rays one batch, each
+//! planned as the render plans its batches (`Psf::point_grids_take`, the planner of
+//! the batch queries). The rays that point grids take are only counted
+//! ([`SampleRays::point`]); the others, which the render traces through the parallel
+//! subfields, are what the trials trace. Each batch is planned once before it is
+//! classified, as a render's earlier frame would have planned it: a camera or light
+//! that stays put has its grid kept from the second frame on, and the sample is
+//! classified as those later frames are (for a point that moves, this may credit
+//! point grids with rays a render's batch of that size would not give them; the
+//! tuner then weighs the parallel subfields' share as smaller, the cautious side).
+//!
+//! Everything here is a function of the scene and the static triangles, and the batches
+//! are planned one after another in a fixed order, so the sample, and the choice tuning
+//! makes on it, is the same on every machine and thread count.
 
 use glam::Vec3;
 
@@ -28,8 +41,9 @@ enum Toward {
     Point(Vec3),
 }
 
-/// The sample rays for `scene` whose static part `psf` is (any bake of it: the hits are
-/// the same).
+/// The sample rays for `scene` whose static part `psf` is (any bake of it: the hits, and
+/// the point grids' plans, are the same; its kept point grids are used and replaced as
+/// a render's would be).
 pub fn tuning_rays(scene: &Scene, psf: &Psf) -> SampleRays {
     let sel = ClipSelection::All;
     let d = scene.duration(sel);
@@ -101,6 +115,8 @@ pub fn tuning_rays(scene: &Scene, psf: &Psf) -> SampleRays {
             .collect();
         let mut hits = vec![None; primary.len()];
         psf.intersect_batch(&primary, &mut hits);
+        let mut shadows: Vec<Vec<Ray>> = toward.iter().map(|_| Vec::new()).collect();
+        let mut mirrors = Vec::new();
         for (r, hit) in primary.iter().zip(&hits) {
             let Some(hit) = hit else { continue };
             let Some(tri) = psf.triangles().get(hit.tri as usize) else {
@@ -114,14 +130,14 @@ pub fn tuning_rays(scene: &Scene, psf: &Psf) -> SampleRays {
             let n = if n.dot(r.dir) > 0.0 { -n } else { n };
             let p = r.origin + r.dir * hit.t;
             let o = p + n * eps;
-            for l in &toward {
+            for (l, batch) in toward.iter().zip(&mut shadows) {
                 let (dir, t_max) = match *l {
                     Toward::Along(d) => (d, f32::INFINITY),
                     // Short of the light itself.
                     Toward::Point(at) => (at - o, 1.0 - 1e-4),
                 };
                 if dir.dot(n) > 0.0 && dir.is_finite() && dir != Vec3::ZERO {
-                    rays.any.push(Ray {
+                    batch.push(Ray {
                         t_max,
                         ..Ray::new(o, dir)
                     });
@@ -129,10 +145,35 @@ pub fn tuning_rays(scene: &Scene, psf: &Psf) -> SampleRays {
             }
             let m = r.dir - 2.0 * r.dir.dot(n) * n;
             if m.is_finite() && m != Vec3::ZERO {
-                rays.closest.push(Ray::new(o, m));
+                mirrors.push(Ray::new(o, m));
             }
         }
-        rays.closest.extend(primary);
+        // In the order a render traces them.
+        keep(psf, primary, false, &mut rays);
+        for batch in shadows {
+            keep(psf, batch, true, &mut rays);
+        }
+        keep(psf, mirrors, false, &mut rays);
     }
     rays
+}
+
+/// `batch` (any-hit rays when `any`) into `rays` as a render traces it: the rays its
+/// point grids take counted in `rays.point`, the others kept. Planned once to see its
+/// points, then again for the plan it is classified by (see the module docs).
+fn keep(psf: &Psf, batch: Vec<Ray>, any: bool, rays: &mut SampleRays) {
+    psf.point_grids_take(&batch, any);
+    let taken = psf.point_grids_take(&batch, any);
+    let into = if any {
+        &mut rays.any
+    } else {
+        &mut rays.closest
+    };
+    for (r, took) in batch.into_iter().zip(taken) {
+        if took {
+            rays.point += 1;
+        } else {
+            into.push(r);
+        }
+    }
 }

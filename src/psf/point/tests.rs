@@ -196,3 +196,58 @@ fn the_centre_of_shadow_rays_is_found_among_strays() {
     assert!((c - light.as_dvec3()).length() < 1e-4, "{c:?}");
     assert!(v * 10 >= sample.len() * 7, "{v} of {}", sample.len());
 }
+
+/// The rays `taken` leaves are exactly those `trace_batch` hands to its fallback (the
+/// parallel subfields), for a batch from one point mixed with rays through no point,
+/// once the batch's point has been seen (as the tuner's sample is classified).
+#[test]
+fn taken_leaves_what_trace_batch_falls_back_on() {
+    use crate::psf::{Psf, PsfParams};
+    let mut rng = Rng::new(23);
+    let tris = crate::gen::synth::soup(&mut rng, 3000, Vec3::splat(-2.0), Vec3::splat(2.0), 0.2);
+    let psf = Psf::build(&tris, &PsfParams::for_static(tris.len())).unwrap();
+    let eye = Vec3::new(0.3, 0.4, 6.0);
+    let rays: Vec<Ray> = (0..8192)
+        .map(|k| {
+            if k % 5 == 0 {
+                Ray::new(rng.in_box(Vec3::splat(-3.0), Vec3::splat(3.0)), rng.unit())
+            } else {
+                Ray::new(eye, rng.in_box(Vec3::splat(-2.0), Vec3::splat(2.0)) - eye)
+            }
+        })
+        .collect();
+    let src = psf.point_sources();
+    psf.point_grids_take(&rays, false);
+    let taken = psf.point_grids_take(&rays, false);
+    let n = taken.iter().filter(|&&t| t).count();
+    assert!(n >= rays.len() / 2 && n < rays.len(), "{n} taken");
+    let fell = std::sync::Mutex::new(Vec::new());
+    let mut out = vec![None; rays.len()];
+    super::trace_batch::<false, _>(
+        &rays,
+        &mut out,
+        &src,
+        |h| h,
+        |r, o: &mut [Option<crate::geometry::Hit>]| {
+            fell.lock().unwrap().extend_from_slice(r);
+            o.fill(None);
+        },
+    );
+    let left: Vec<Ray> = rays
+        .iter()
+        .zip(&taken)
+        .filter(|(_, &t)| !t)
+        .map(|(r, _)| *r)
+        .collect();
+    let fell = fell.into_inner().unwrap();
+    assert_eq!(left, fell);
+    // Any-hit planning likewise takes the eye's rays.
+    psf.point_grids_take(&rays, true);
+    assert!(
+        psf.point_grids_take(&rays, true)
+            .iter()
+            .filter(|&&t| t)
+            .count()
+            >= n / 2
+    );
+}

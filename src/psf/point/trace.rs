@@ -89,3 +89,37 @@ pub(crate) fn trace_batch<const ANY: bool, T: Send + Sync + Copy + Default>(
             }
         });
 }
+
+/// Which of `rays`, traced as one batch, the point grids take: `Plan::for_batch` over
+/// `src`, then a ray is taken when some plan answers it (as in [`trace_batch`], which
+/// tries every plan before the fallback). The rest are those `trace_batch` hands to the
+/// parallel subfields. The grids' answers are found and dropped (a point grid's query
+/// is what decides whether it takes a ray), and planning keeps or marks grids in
+/// `src`'s cache as a render's batch would.
+pub(crate) fn taken<const ANY: bool>(rays: &[Ray], src: &Sources) -> Vec<bool> {
+    let plans = Plan::for_batch(rays, src);
+    if plans.is_empty() {
+        return vec![false; rays.len()];
+    }
+    rays.par_iter()
+        .map(|ray| plans.iter().any(|p| p.query::<ANY>(ray).is_some()))
+        .collect()
+}
+
+impl crate::psf::Psf {
+    /// Which of `rays`, traced as one batch (closest hit, or any hit when `any`), this
+    /// PSF's batch queries ([`Intersector::intersect_batch`],
+    /// [`Intersector::occluded_batch`]) send through point grids rather than the
+    /// parallel subfields ([`taken`]).
+    ///
+    /// [`Intersector::intersect_batch`]: crate::geometry::Intersector::intersect_batch
+    /// [`Intersector::occluded_batch`]: crate::geometry::Intersector::occluded_batch
+    pub(crate) fn point_grids_take(&self, rays: &[Ray], any: bool) -> Vec<bool> {
+        let src = self.point_sources();
+        if any {
+            taken::<true>(rays, &src)
+        } else {
+            taken::<false>(rays, &src)
+        }
+    }
+}
