@@ -113,15 +113,30 @@ impl GridFrame {
             }
             return;
         }
+        // Clipping takes the rectangle's sides in the order u_lo, u_hi, v_lo, v_hi, so
+        // every tile of a column shares its first two clips: each column's strip is
+        // clipped once (`Strip`), and each tile clips that by its own v sides alone. The
+        // polygons, and so the depth ranges, are the ones a tile-by-tile clip gives, bit
+        // for bit; a bake spent most of its time here (`benches/PERF.md`, issue 23,
+        // step 5). `tests::column_clipping_is_tile_clipping_bit_for_bit` holds it to the
+        // tile-by-tile clip.
+        let columns = (f.i1 - f.i0 + 1) as usize;
+        let strip = |i: u32| Strip::of(&p, i as f32 - m, i as f32 + 1.0 + m);
+        let mut local = [Strip::EMPTY; 16];
+        let mut heap = Vec::new();
+        let strips: &[Strip] = if columns <= local.len() {
+            for (k, s) in local[..columns].iter_mut().enumerate() {
+                *s = strip(f.i0 + k as u32);
+            }
+            &local[..columns]
+        } else {
+            heap.extend((f.i0..=f.i1).map(strip));
+            &heap
+        };
         for j in f.j0..=f.j1 {
-            for i in f.i0..=f.i1 {
-                let rect = [
-                    i as f32 - m,
-                    i as f32 + 1.0 + m,
-                    j as f32 - m,
-                    j as f32 + 1.0 + m,
-                ];
-                if let Some((a, b)) = clipped_depth_range(&p, rect) {
+            let (v_lo, v_hi) = (j as f32 - m, j as f32 + 1.0 + m);
+            for (i, s) in (f.i0..=f.i1).zip(strips) {
+                if let Some((a, b)) = s.depth_range(v_lo, v_hi) {
                     emit(j * self.nu + i, a - dz, b + dz);
                 }
             }
@@ -237,56 +252,98 @@ impl Footprint {
     }
 }
 
-/// Clips the triangle (grid coordinates, depth carried along) to the rectangle
-/// `[u_lo, u_hi] × [v_lo, v_hi]` (Sutherland-Hodgman, boundaries inclusive) and returns
-/// the depth range of what is left, or `None` when nothing is. Exact clipping by the
-/// prism over the rectangle, so it also holds for triangles seen edge-on.
-fn clipped_depth_range(tri: &[[f32; 3]; 3], rect: [f32; 4]) -> Option<(f32, f32)> {
-    let mut poly = [[0f32; 3]; 9];
-    let mut n = 3;
-    poly[..3].copy_from_slice(tri);
-    let mut tmp = [[0f32; 3]; 9];
-    // (axis, bound, keep the side >= bound when sign is +1)
-    let planes = [
-        (0usize, rect[0], 1.0f32),
-        (0, rect[1], -1.0),
-        (1, rect[2], 1.0),
-        (1, rect[3], -1.0),
-    ];
-    for (axis, bound, sign) in planes {
-        let mut m = 0;
+/// A convex polygon of at most nine vertices (grid coordinates, depth carried along):
+/// a triangle clipped by up to four axis-aligned planes.
+#[derive(Clone, Copy)]
+struct Poly {
+    v: [[f32; 3]; 9],
+    n: usize,
+}
+
+impl Poly {
+    /// The part of the polygon on the kept side of one plane (Sutherland-Hodgman,
+    /// boundary inclusive): `axis` 0 (u) or 1 (v), the side `>= bound` when `sign` is
+    /// +1, `<= bound` when -1. `n == 0` when nothing is left.
+    #[inline]
+    fn clip(&self, axis: usize, bound: f32, sign: f32) -> Poly {
+        let mut out = Poly {
+            v: [[0.0; 3]; 9],
+            n: 0,
+        };
+        let n = self.n;
         for k in 0..n {
-            let a = poly[k];
-            let b = poly[(k + 1) % n];
+            let a = self.v[k];
+            let b = self.v[(k + 1) % n];
             let da = (a[axis] - bound) * sign;
             let db = (b[axis] - bound) * sign;
             if da >= 0.0 {
-                tmp[m] = a;
-                m += 1;
+                out.v[out.n] = a;
+                out.n += 1;
             }
             if (da >= 0.0) != (db >= 0.0) {
                 let s = da / (da - db);
-                tmp[m] = [
+                out.v[out.n] = [
                     a[0] + (b[0] - a[0]) * s,
                     a[1] + (b[1] - a[1]) * s,
                     a[2] + (b[2] - a[2]) * s,
                 ];
-                m += 1;
+                out.n += 1;
             }
         }
-        if m == 0 {
+        out
+    }
+
+    /// The depth range of the vertices.
+    fn depth_range(&self) -> (f32, f32) {
+        let mut lo = f32::INFINITY;
+        let mut hi = f32::NEG_INFINITY;
+        for q in &self.v[..self.n] {
+            lo = lo.min(q[2]);
+            hi = hi.max(q[2]);
+        }
+        (lo, hi)
+    }
+}
+
+/// A triangle clipped to one column of tiles, `u_lo <= u <= u_hi`: the first two of the
+/// four clips that give a tile's depth range ([`GridFrame::raster`]).
+#[derive(Clone, Copy)]
+struct Strip(Poly);
+
+impl Strip {
+    const EMPTY: Strip = Strip(Poly {
+        v: [[0.0; 3]; 9],
+        n: 0,
+    });
+
+    #[inline]
+    fn of(tri: &[[f32; 3]; 3], u_lo: f32, u_hi: f32) -> Strip {
+        let mut p = Poly {
+            v: [[0.0; 3]; 9],
+            n: 3,
+        };
+        p.v[..3].copy_from_slice(tri);
+        let p = p.clip(0, u_lo, 1.0);
+        if p.n == 0 {
+            return Strip::EMPTY;
+        }
+        Strip(p.clip(0, u_hi, -1.0))
+    }
+
+    /// The depth range of the column's part within `v_lo <= v <= v_hi`, `None` when
+    /// there is none: the last two clips.
+    #[inline]
+    fn depth_range(&self, v_lo: f32, v_hi: f32) -> Option<(f32, f32)> {
+        if self.0.n == 0 {
             return None;
         }
-        n = m;
-        poly[..n].copy_from_slice(&tmp[..n]);
+        let p = self.0.clip(1, v_lo, 1.0);
+        if p.n == 0 {
+            return None;
+        }
+        let p = p.clip(1, v_hi, -1.0);
+        (p.n > 0).then(|| p.depth_range())
     }
-    let mut lo = f32::INFINITY;
-    let mut hi = f32::NEG_INFINITY;
-    for q in &poly[..n] {
-        lo = lo.min(q[2]);
-        hi = hi.max(q[2]);
-    }
-    Some((lo, hi))
 }
 
 #[cfg(test)]
@@ -432,5 +489,104 @@ mod tests {
         let t = tiles_of(&g, tri, 1e-5);
         let ids: Vec<u32> = t.iter().map(|x| x.0).collect();
         assert_eq!(ids, vec![0, 1, 2, 3, 4]);
+    }
+
+    /// The tile-by-tile clip `raster` did before its columns were shared: the rectangle's
+    /// four sides in turn (Sutherland-Hodgman), then the depth range.
+    fn reference_clip(tri: &[[f32; 3]; 3], rect: [f32; 4]) -> Option<(f32, f32)> {
+        let mut poly = [[0f32; 3]; 9];
+        let mut n = 3;
+        poly[..3].copy_from_slice(tri);
+        let mut tmp = [[0f32; 3]; 9];
+        let planes = [
+            (0usize, rect[0], 1.0f32),
+            (0, rect[1], -1.0),
+            (1, rect[2], 1.0),
+            (1, rect[3], -1.0),
+        ];
+        for (axis, bound, sign) in planes {
+            let mut m = 0;
+            for k in 0..n {
+                let a = poly[k];
+                let b = poly[(k + 1) % n];
+                let da = (a[axis] - bound) * sign;
+                let db = (b[axis] - bound) * sign;
+                if da >= 0.0 {
+                    tmp[m] = a;
+                    m += 1;
+                }
+                if (da >= 0.0) != (db >= 0.0) {
+                    let s = da / (da - db);
+                    tmp[m] = [
+                        a[0] + (b[0] - a[0]) * s,
+                        a[1] + (b[1] - a[1]) * s,
+                        a[2] + (b[2] - a[2]) * s,
+                    ];
+                    m += 1;
+                }
+            }
+            if m == 0 {
+                return None;
+            }
+            n = m;
+            poly[..n].copy_from_slice(&tmp[..n]);
+        }
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for q in &poly[..n] {
+            lo = lo.min(q[2]);
+            hi = hi.max(q[2]);
+        }
+        Some((lo, hi))
+    }
+
+    #[test]
+    fn column_clipping_is_tile_clipping_bit_for_bit() {
+        // Triangles small and large (more columns than the stack holds), thin and
+        // edge-on, over grids of several tile counts and directions.
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for case in 0..400u32 {
+            let seed = case;
+            let d = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize_or(Vec3::Z);
+            let tiles = [1u32, 3, 16, 40, 64][case as usize % 5];
+            let b = Aabb {
+                min: Vec3::splat(-1.0),
+                max: Vec3::splat(1.0),
+            };
+            let frame = GridFrame::new(d, &b, tiles);
+            let size = [0.01f32, 0.2, 1.5][case as usize % 3];
+            let c = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
+            let mut tri =
+                [0; 3].map(|_| c + Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * size);
+            if case % 7 == 0 {
+                tri[2] = tri[0] + (tri[1] - tri[0]) * 0.5; // degenerate: a segment
+            }
+            let margin = 1e-3;
+            let mut got = Vec::new();
+            frame.raster(&tri, margin, |t, a, b| {
+                got.push((t, a.to_bits(), b.to_bits()))
+            });
+            let (p, m, dz, f) = frame.prepare(&tri, margin);
+            let mut want = Vec::new();
+            for j in f.j0..=f.j1 {
+                for i in f.i0..=f.i1 {
+                    let rect = [
+                        i as f32 - m,
+                        i as f32 + 1.0 + m,
+                        j as f32 - m,
+                        j as f32 + 1.0 + m,
+                    ];
+                    if let Some((a, b)) = reference_clip(&p, rect) {
+                        want.push((j * frame.nu + i, (a - dz).to_bits(), (b + dz).to_bits()));
+                    }
+                }
+            }
+            assert_eq!(got, want, "case {seed}");
+        }
     }
 }
