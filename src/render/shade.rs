@@ -41,7 +41,8 @@
 //!   front face, both faces when double-sided).
 //!
 //! Irradiance: directional `E = intensity` (lux), point and spot `E = intensity/d²`
-//! (candela) with the spec's range window and spot cone falloff. Without punctual lights
+//! (candela; `E = intensity` for a light without falloff, `Falloff::None`: AFF/NFF
+//! lights) with the spec's range window and spot cone falloff. Without punctual lights
 //! and emitters, the options' default light.
 
 use std::time::Duration;
@@ -55,7 +56,9 @@ use super::options::ShadingOptions;
 use super::sampling::{sample_ggx_vndf, smith_g1, stratified, Purpose, Seed};
 use crate::geometry::{Hit, Ray};
 use crate::psf::Prim;
-use crate::scene::{AlphaMode, Light, LightKind, Material, Scene, TextureRef, TriangleSoup};
+use crate::scene::{
+    AlphaMode, Falloff, Light, LightKind, Material, Scene, TextureRef, TriangleSoup,
+};
 
 /// Linear radiance and AOVs of one frame, rows top to bottom.
 #[derive(Clone, Debug, PartialEq)]
@@ -128,6 +131,7 @@ struct PreLight {
     /// Unit direction the light shines along.
     direction: Vec3,
     range: Option<f32>,
+    falloff: Falloff,
 }
 
 /// Everything shading reads during one frame.
@@ -192,6 +196,7 @@ impl<'a> ShadeContext<'a> {
                 position: l.position,
                 direction: l.direction,
                 range: l.range.filter(|r| *r > 0.0),
+                falloff: l.falloff,
             })
             .collect();
         let area = AreaLights::new(scene, static_soup, dynamic_soup);
@@ -203,6 +208,7 @@ impl<'a> ShadeContext<'a> {
                 position: camera.origin,
                 direction: -towards,
                 range: None,
+                falloff: Falloff::InverseSquare,
             });
         }
         ShadeContext {
@@ -744,7 +750,10 @@ fn light_at(l: &PreLight, origin: Vec3) -> Option<(Vec3, f32, Vec3)> {
                 return None;
             }
             let dist = d2.sqrt();
-            let mut att = 1.0 / d2;
+            let mut att = match l.falloff {
+                Falloff::None => 1.0,
+                Falloff::InverseSquare => 1.0 / d2,
+            };
             if let Some(r) = l.range {
                 att *= (1.0 - (dist / r).powi(4)).clamp(0.0, 1.0).powi(2);
             }

@@ -417,6 +417,22 @@ pub enum LightKind {
     Directional,
 }
 
+/// How the irradiance of a point or spot light changes with distance (a directional
+/// light has none).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Falloff {
+    /// `E = intensity / d²`, intensity in candela: physical, and the only falloff of
+    /// glTF's `KHR_lights_punctual`.
+    #[default]
+    InverseSquare,
+    /// `E = intensity` at any distance (intensity in lux, as for a directional light):
+    /// the positional lights of NFF and AFF (BART), whose intensity does not fall off.
+    /// glTF keeps it in the light's `extras` (`"falloff": "none"`); other glTF readers
+    /// see an inverse-square light.
+    None,
+}
+
 /// A light as defined in the file.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LightDef {
@@ -424,10 +440,13 @@ pub struct LightDef {
     pub kind: LightKind,
     /// Linear RGB.
     pub color: Vec3,
-    /// In the spec's units: candela for point and spot, lux for directional.
+    /// In the spec's units: candela for point and spot, lux for directional (and for
+    /// point and spot lights without falloff, [`Falloff::None`]).
     pub intensity: f32,
     /// Distance where the light's influence ends; `None` is infinite.
     pub range: Option<f32>,
+    /// Falloff with distance of a point or spot light (ignored for directional ones).
+    pub falloff: Falloff,
 }
 
 /// A posed light, in world space.
@@ -439,6 +458,7 @@ pub struct Light {
     pub color: Vec3,
     pub intensity: f32,
     pub range: Option<f32>,
+    pub falloff: Falloff,
     pub position: Vec3,
     /// Unit direction the light shines along (the node's world `-Z`).
     pub direction: Vec3,

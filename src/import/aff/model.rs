@@ -13,9 +13,9 @@ use serde_json::{json, Value};
 
 use super::{AffMaterial, AffScene, AffTexture, AffTransform, ImportError, MorphBatch, Tracks};
 use crate::scene::{
-    AlphaMode, Animation, CameraDef, Channel, Image, Interpolation, LightDef, LightKind, Material,
-    Mesh, MorphTarget, Node, NodeTransform, Primitive, Projection, Property, Scene, Texture,
-    TextureRef, Trs, Wrap,
+    AlphaMode, Animation, CameraDef, Channel, Falloff, Image, Interpolation, LightDef, LightKind,
+    Material, Mesh, MorphTarget, Node, NodeTransform, Primitive, Projection, Property, Scene,
+    Texture, TextureRef, Trs, Wrap,
 };
 
 /// The model's material of an AFF material (with an optional base colour texture index):
@@ -533,8 +533,11 @@ impl Conv<'_> {
                 name: l.name.clone().or_else(|| Some(format!("light {i}"))),
                 kind: LightKind::Point,
                 color: l.color,
-                intensity: 1.0,
+                // NFF/AFF shade a light as `diffuse · colour · N·L` at any distance; the
+                // renderer's `kd/π · E · cos` gives that with `E = π` and no falloff.
+                intensity: std::f32::consts::PI,
                 range: None,
+                falloff: Falloff::None,
             });
             let tracks = l
                 .name

@@ -483,6 +483,7 @@ pub(super) struct Light {
     pub intensity: f32,
     pub range: Option<f32>,
     pub spot: Option<Spot>,
+    pub extras: Option<serde_json::Value>,
 }
 
 impl Default for Light {
@@ -494,6 +495,7 @@ impl Default for Light {
             intensity: 1.0,
             range: None,
             spot: None,
+            extras: None,
         }
     }
 }

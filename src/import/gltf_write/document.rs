@@ -10,8 +10,8 @@ use serde_json::{json, Map, Value};
 
 use super::ImportError;
 use crate::scene::{
-    AlphaMode, Image, Interpolation, LightKind, Material, NodeTransform, Primitive, Projection,
-    Property, Scene, Texture, TextureRef, Wrap,
+    AlphaMode, Falloff, Image, Interpolation, LightKind, Material, NodeTransform, Primitive,
+    Projection, Property, Scene, Texture, TextureRef, Wrap,
 };
 
 /// Names of the extensions the document uses (`extensionsUsed`).
@@ -315,7 +315,8 @@ fn cameras_json(scene: &Scene) -> Vec<Value> {
         .collect()
 }
 
-/// `KHR_lights_punctual` lights.
+/// `KHR_lights_punctual` lights; a point or spot light without falloff gets
+/// `"extras": { "falloff": "none" }`.
 fn lights_json(scene: &Scene) -> Vec<Value> {
     scene
         .lights
@@ -348,6 +349,11 @@ fn lights_json(scene: &Scene) -> Vec<Value> {
                 }
             };
             o.insert("type".into(), json!(kind));
+            // KHR_lights_punctual lights always fall off with the inverse square; a light
+            // without falloff (AFF) says so in its extras, which the reader here reads back.
+            if l.falloff == Falloff::None && l.kind != LightKind::Directional {
+                o.insert("extras".into(), json!({ "falloff": "none" }));
+            }
             Value::Object(o)
         })
         .collect()
