@@ -66,6 +66,8 @@ fn soup(scene: &Scene, t: f32) -> Vec<[Vec3; 3]> {
 /// that `Scene`, imported again, are the same scene (what the reader keeps of it).
 fn same_model(aff: &Scene, glb: &Scene) {
     assert_eq!(aff.fps, glb.fps);
+    assert_eq!(aff.ambient, glb.ambient);
+    assert!(aff.ambient.is_some());
     assert_eq!(aff.materials, glb.materials);
     assert_eq!(aff.textures, glb.textures);
     assert_eq!(aff.images, glb.images);

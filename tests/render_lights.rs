@@ -70,6 +70,17 @@ fn from_above() -> LookAt {
 /// `intensity` straight above its centre at `height`, with `falloff`; written as GLB
 /// and imported back, as a user's file would be.
 fn lit_floor(dir: &Path, height: f32, intensity: f32, falloff: Falloff) -> Scene {
+    lit_floor_with(dir, height, intensity, falloff, None)
+}
+
+/// [`lit_floor`] with the scene's ambient light `ambient`.
+fn lit_floor_with(
+    dir: &Path,
+    height: f32,
+    intensity: f32,
+    falloff: Falloff,
+    ambient: Option<Vec3>,
+) -> Scene {
     let mut b = SceneBuilder::new();
     let grey = b.add_material(Material {
         base_color: Vec4::new(0.8, 0.8, 0.8, 1.0),
@@ -101,8 +112,10 @@ fn lit_floor(dir: &Path, height: f32, intensity: f32, falloff: Falloff) -> Scene
         ..Default::default()
     });
     b.add_root(n);
-    let path = dir.join(format!("floor-{height}-{falloff:?}.glb"));
-    import::write_gltf(&b.finish(), &path).unwrap();
+    let path = dir.join(format!("floor-{height}-{falloff:?}-{ambient:?}.glb"));
+    let mut scene = b.finish();
+    scene.ambient = ambient;
+    import::write_gltf(&scene, &path).unwrap();
     import::load(&path).unwrap()
 }
 
@@ -202,6 +215,7 @@ up 0 0 1
 angle 20
 hither 0.1
 resolution 32 32
+%AM%
 l 0 1000 0 1 1 1
 f 1 1 1 0.8 0 0 0 0
 p 4
@@ -215,7 +229,7 @@ p 4
 fn an_aff_light_far_away_lights_the_floor() {
     let dir = temp_dir("lights-aff");
     let path = dir.join("floor.aff");
-    std::fs::write(&path, AFF_FLOOR).unwrap();
+    std::fs::write(&path, AFF_FLOOR.replace("%AM%", "am 0 0 0")).unwrap();
     let scene = import::load(&path).unwrap();
     assert_eq!(scene.lights.len(), 1);
     assert_eq!(scene.lights[0].falloff, Falloff::None);
@@ -229,4 +243,82 @@ fn an_aff_light_far_away_lights_the_floor() {
     let (a, _) = render_rgb(&scene, &dir, "aff-full", None, Vec3::ZERO);
     let (b, _) = render_rgb(&back, &dir, "glb-full", None, Vec3::ZERO);
     assert_eq!(a, b);
+}
+
+/// AFF `am` is the scene's ambient light: `kd · am` added to the direct light, in place
+/// of the options' ambient term; without `am`, the format's default 1 1 1.
+#[test]
+fn aff_ambient_lights_the_floor_and_survives_the_conversion() {
+    let dir = temp_dir("lights-aff-ambient");
+    let path = dir.join("floor.aff");
+    std::fs::write(&path, AFF_FLOOR.replace("%AM%", "am 0.5 0.25 0")).unwrap();
+    let scene = import::load(&path).unwrap();
+    assert_eq!(scene.ambient, Some(Vec3::new(0.5, 0.25, 0.0)));
+    // The options' ambient (here 0.3) gives way to the scene's.
+    let c = centre(&scene, &dir, "am", None, Vec3::splat(0.3));
+    let want = Vec3::splat(0.8) + 0.8 * Vec3::new(0.5, 0.25, 0.0);
+    for i in 0..3 {
+        assert!(close(c[i], want[i], 0.05), "{c} against {want}");
+    }
+    let glb = dir.join("floor.glb");
+    import::write_gltf(&scene, &glb).unwrap();
+    let back = import::load(&glb).unwrap();
+    assert_eq!(back.ambient, scene.ambient);
+    let (a, _) = render_rgb(&scene, &dir, "am-aff", None, Vec3::splat(0.3));
+    let (b, _) = render_rgb(&back, &dir, "am-glb", None, Vec3::splat(0.3));
+    assert_eq!(a, b);
+
+    std::fs::write(&path, AFF_FLOOR.replace("%AM%", "")).unwrap();
+    let scene = import::load(&path).unwrap();
+    assert_eq!(scene.ambient, Some(Vec3::ONE));
+    let c = centre(&scene, &dir, "am-default", None, Vec3::ZERO);
+    assert!(close(c.x, 1.6, 0.05), "{c}");
+}
+
+/// A glTF scene's `extras.ambient` (as subfield writes it) replaces the options'
+/// ambient term; a scene without one keeps the options' term; a malformed one is
+/// ignored with a warning.
+#[test]
+fn a_gltf_scene_ambient_replaces_the_options_term() {
+    let dir = temp_dir("lights-gltf-ambient");
+    let pi = std::f32::consts::PI;
+    let lit = lit_floor_with(&dir, 3.0, pi, Falloff::None, Some(Vec3::splat(0.5)));
+    assert_eq!(lit.ambient, Some(Vec3::splat(0.5)));
+    let c = centre(
+        &lit,
+        &dir,
+        "scene-ambient",
+        Some(from_above()),
+        Vec3::splat(0.1),
+    );
+    assert!(close(c.x, 0.8 + 0.8 * 0.5, 0.05), "{c}");
+    let plain = lit_floor(&dir, 3.0, pi, Falloff::None);
+    assert_eq!(plain.ambient, None);
+    let c = centre(
+        &plain,
+        &dir,
+        "options-ambient",
+        Some(from_above()),
+        Vec3::splat(0.1),
+    );
+    assert!(close(c.x, 0.8 + 0.8 * 0.1, 0.05), "{c}");
+
+    let path = dir.join("ambient.gltf");
+    import::write_gltf(&lit, &path).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(
+        json["scenes"][0]["extras"]["ambient"],
+        serde_json::json!([0.5, 0.5, 0.5])
+    );
+    let odd = dir.join("odd.gltf");
+    std::fs::write(
+        &odd,
+        text.replace("\"ambient\":[0.5,0.5,0.5]", "\"ambient\":[0.5,-1,0.5]"),
+    )
+    .unwrap();
+    let s = import::load(&odd).unwrap();
+    assert_eq!(s.ambient, None);
+    let w: Vec<String> = s.warnings.iter().map(|w| w.to_string()).collect();
+    assert!(w.iter().any(|w| w.contains("extras.ambient")), "{w:?}");
 }

@@ -37,7 +37,8 @@
 //!   one deeper, each to a point drawn by power and area, as
 //!   `kd/π·Le·cos·cos'/d²/pdf` (their highlight only without a reflection ray: with one,
 //!   the reflection ray finds the emitter itself, so nothing is counted twice); an
-//!   ambient term `kd·ambient` and the emission `emissive·strength·texture` (from the
+//!   ambient term `kd·ambient` (the scene's ambient light, AFF `am`, where it has one,
+//!   else the options') and the emission `emissive·strength·texture` (from the
 //!   front face, both faces when double-sided).
 //!
 //! Irradiance: directional `E = intensity` (lux), point and spot `E = intensity/d²`
@@ -210,6 +211,11 @@ impl<'a> ShadeContext<'a> {
                 range: None,
                 falloff: Falloff::InverseSquare,
             });
+        }
+        let mut options = options;
+        if let Some(a) = scene.ambient {
+            // The scene's own ambient light (AFF `am`) replaces the options' term.
+            options.ambient = a;
         }
         ShadeContext {
             scene,

@@ -55,6 +55,10 @@ pub struct Scene {
     pub animations: Vec<Animation>,
     /// Frames per second recorded by the scene (`scenes[i].extras.fps` in glTF).
     pub fps: Option<f32>,
+    /// Ambient light of the scene (linear RGB; AFF's `am`, `scenes[i].extras.ambient` in
+    /// glTF): where set, it replaces the render options' ambient term
+    /// ([`ShadingOptions::ambient`](crate::render::ShadingOptions::ambient)).
+    pub ambient: Option<Vec3>,
     /// Application data carried beside the model, which the glTF writer passes on.
     pub extras: Extras,
     pub warnings: Vec<Warning>,

@@ -132,6 +132,13 @@ pub(super) fn to_scene(aff: &AffScene) -> Result<Scene, ImportError> {
         },
         None => None,
     };
+    // `am` (default 1 1 1) is the scene's ambient light: the renderer's ambient term
+    // `kd · ambient` (NFF's is the material's ambient colour times it; see the module).
+    s.ambient = Some(if aff.ambient.is_finite() {
+        aff.ambient.max(Vec3::ZERO)
+    } else {
+        Vec3::ZERO
+    });
     s.extras.scene.insert(
         "aff".into(),
         json!({

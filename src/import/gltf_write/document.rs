@@ -573,6 +573,9 @@ fn scene_json(scene: &Scene) -> Value {
     if let Some(fps) = scene.fps {
         extras.insert("fps".into(), json!(fps));
     }
+    if let Some(a) = scene.ambient {
+        extras.insert("ambient".into(), json!(a.to_array()));
+    }
     if !extras.is_empty() {
         o.insert("extras".into(), Value::Object(extras));
     }
