@@ -273,6 +273,50 @@ fn aff_ambient_lights_the_floor_and_survives_the_conversion() {
     assert_eq!(scene.ambient, Some(Vec3::ONE));
     let c = centre(&scene, &dir, "am-default", None, Vec3::ZERO);
     assert!(close(c.x, 1.6, 0.05), "{c}");
+
+    // `fm`: the ambient light is reflected with the material's ambient colour (0.2,
+    // 0.1, 0.05 here), not its diffuse one (0.8), as NFF and BART do.
+    let fm = AFF_FLOOR.replace("%AM%", "am 1 1 1").replace(
+        "f 1 1 1 0.8 0 0 0 0",
+        "fm 0.2 0.1 0.05  0.8 0.8 0.8  0 0 0  1 0 0",
+    );
+    std::fs::write(&path, fm).unwrap();
+    let scene = import::load(&path).unwrap();
+    let floor = scene
+        .materials
+        .iter()
+        .find(|m| m.ambient.is_some())
+        .unwrap();
+    assert_eq!(floor.ambient, Some(Vec3::new(0.2, 0.1, 0.05)));
+    let c = centre(&scene, &dir, "fm", None, Vec3::ZERO);
+    let want = Vec3::splat(0.8) + Vec3::new(0.2, 0.1, 0.05);
+    for i in 0..3 {
+        assert!(close(c[i], want[i], 0.05), "{c} against {want}");
+    }
+    import::write_gltf(&scene, &glb).unwrap();
+    let back = import::load(&glb).unwrap();
+    assert_eq!(back.materials, scene.materials);
+    let (a, _) = render_rgb(&scene, &dir, "fm-aff", None, Vec3::ZERO);
+    let (b, _) = render_rgb(&back, &dir, "fm-glb", None, Vec3::ZERO);
+    assert_eq!(a, b);
+    // A malformed material ambient: ignored (the diffuse colour), with a warning.
+    let text_path = dir.join("fm.gltf");
+    import::write_gltf(&scene, &text_path).unwrap();
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&text_path).unwrap()).unwrap();
+    let a = &mut json["materials"][0]["extras"]["ambient"];
+    assert_eq!(a.as_array().map(Vec::len), Some(3), "{a}");
+    *a = serde_json::json!("grey");
+    let odd = dir.join("fm-odd.gltf");
+    std::fs::write(&odd, json.to_string()).unwrap();
+    let s = import::load(&odd).unwrap();
+    assert!(s.materials.iter().all(|m| m.ambient.is_none()));
+    let w: Vec<String> = s.warnings.iter().map(|w| w.to_string()).collect();
+    assert!(
+        w.iter()
+            .any(|w| w.contains("materials[") && w.contains("extras.ambient")),
+        "{w:?}"
+    );
 }
 
 /// A glTF scene's `extras.ambient` (as subfield writes it) replaces the options'

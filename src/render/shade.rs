@@ -38,7 +38,8 @@
 //!   `kd/π·Le·cos·cos'/d²/pdf` (their highlight only without a reflection ray: with one,
 //!   the reflection ray finds the emitter itself, so nothing is counted twice); an
 //!   ambient term `kd·ambient` (the scene's ambient light, AFF `am`, where it has one,
-//!   else the options') and the emission `emissive·strength·texture` (from the
+//!   else the options'; a material's own ambient colour, AFF's, times its base colour
+//!   texture in place of `kd` where it has one) and the emission `emissive·strength·texture` (from the
 //!   front face, both faces when double-sided).
 //!
 //! Irradiance: directional `E = intensity` (lux), point and spot `E = intensity/d²`
@@ -447,9 +448,19 @@ impl<'a> ShadeContext<'a> {
         } else {
             Vec3::ZERO
         };
+        // The ambient light is reflected with the diffuse colour, or with the material's
+        // own ambient colour (AFF) times its base colour texture.
+        let ambient = match m.ambient {
+            None => lobes.kd,
+            Some(a) => {
+                a * self
+                    .texture(m.base_color_texture, s.uv, s.lod, true)
+                    .map_or(Vec3::ONE, |t| t.truncate())
+            }
+        };
         out.add(
             item.sample,
-            weight * (emitted + lobes.kd * self.options.ambient),
+            weight * (emitted + ambient * self.options.ambient),
         );
 
         // Direct light through shadow rays.

@@ -200,6 +200,10 @@ pub struct Material {
     pub ior: f32,
     pub double_sided: bool,
     pub alpha_mode: AlphaMode,
+    /// The colour the ambient light is reflected with (AFF's per-material ambient colour;
+    /// glTF `materials[i].extras.ambient`), times the base colour texture; `None`: the
+    /// diffuse colour, as for every glTF material.
+    pub ambient: Option<Vec3>,
 }
 
 impl Default for Material {
@@ -222,6 +226,7 @@ impl Default for Material {
             ior: 1.5,
             double_sided: false,
             alpha_mode: AlphaMode::Opaque,
+            ambient: None,
         }
     }
 }

@@ -47,13 +47,10 @@
 //! * Textures: each AFF image becomes an opaque RGBA8 image with the default sampler
 //!   (linear, repeat); the converted file embeds it as PNG.
 //! * Ambient `am` (default 1 1 1) is the scene's ambient light ([`Scene::ambient`],
-//!   `scenes[0].extras.ambient` in the converted file): the renderer's ambient term,
-//!   `kd · am` with `kd` the diffuse colour, in place of its default. NFF and BART
-//!   multiply `am` by the material's own ambient colour, which the model has no place
-//!   for (it is kept in the material's extras): for `f` materials the two are the same
-//!   (ambient = diffuse = colour·Kd); `fm` materials whose ambient colour differs from
-//!   their diffuse one (the kitchen's are a fifth of it) get a different ambient light
-//!   than in BART's own renderer.
+//!   `scenes[0].extras.ambient` in the converted file), reflected with each material's
+//!   ambient colour ([`Material::ambient`](crate::scene::Material::ambient),
+//!   `materials[i].extras.ambient`; `f`: colour·Kd, `fm`: its first three numbers) as
+//!   NFF and BART shade: the renderer's ambient term, in place of its default.
 //! * Background `b` (not used by the renderer) and ambient `am` have no glTF
 //!   equivalent: they are kept as read in [`Scene::extras`] (`scene.aff`: `background`,
 //!   `ambient`, `t0`, `frames`), which the converted file carries as

@@ -29,8 +29,11 @@ use crate::scene::{
 /// | `ior` (`KHR_materials_ior`) | `ior` when ≥ 1 (AFF files write 0 for opaque surfaces: the glTF default 1.5 is kept) |
 /// | `double_sided` | when `T > 0` (AFF: transmissive surfaces are two-sided) |
 ///
+/// | `ambient` | the ambient colour (`f`: colour·Kd, the diffuse colour), negatives as 0: the scene's ambient light `am` is reflected with it |
+///
 /// The exact AFF numbers (ambient, diffuse, specular, shine, T, ior) are kept by
-/// [`material_extras`]: AFF's per-material ambient colour has no glTF counterpart.
+/// [`material_extras`]: AFF's per-material ambient colour has no glTF counterpart (the
+/// converted file carries it as the material's `extras.ambient`).
 pub fn material(m: &AffMaterial, texture: Option<u32>) -> Material {
     let clamp01 = |x: f32| {
         if x.is_finite() {
@@ -69,6 +72,11 @@ pub fn material(m: &AffMaterial, texture: Option<u32>) -> Material {
         ior: if m.ior >= 1.0 { m.ior } else { 1.5 },
         double_sided: m.transmittance > 0.0,
         alpha_mode: AlphaMode::Opaque,
+        ambient: Some(if m.ambient.is_finite() {
+            m.ambient.max(Vec3::ZERO)
+        } else {
+            Vec3::ZERO
+        }),
     }
 }
 

@@ -207,6 +207,7 @@ pub(super) struct Material {
     pub alpha_cutoff: Option<f32>,
     pub double_sided: bool,
     pub extensions: Option<MaterialExtensions>,
+    pub extras: Option<serde_json::Value>,
 }
 
 impl Default for Material {
@@ -222,6 +223,7 @@ impl Default for Material {
             alpha_cutoff: None,
             double_sided: false,
             extensions: None,
+            extras: None,
         }
     }
 }

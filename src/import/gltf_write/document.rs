@@ -117,8 +117,20 @@ fn material_json(m: &Material, extras: Option<&Option<Value>>, used: &mut Used) 
         pbr["metallicRoughnessTexture"] = texture_info(t, used);
     }
     o.insert("pbrMetallicRoughness".into(), pbr);
-    if let Some(Some(e)) = extras {
-        o.insert("extras".into(), e.clone());
+    let mut extras = match extras {
+        Some(Some(e)) => e.clone(),
+        _ => Value::Null,
+    };
+    if let Some(a) = m.ambient {
+        // The ambient colour (AFF's) beside the application's extras, read back by
+        // subfield's reader.
+        if !extras.is_object() {
+            extras = json!({});
+        }
+        extras["ambient"] = json!(a.to_array());
+    }
+    if !extras.is_null() {
+        o.insert("extras".into(), extras);
     }
     // The factor must stay in [0, 1]: a brighter emission is carried by the strength.
     let peak = m.emissive.max_element();
