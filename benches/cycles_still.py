@@ -14,6 +14,9 @@
 #                      a camera at glTF coordinates (else the file's first camera)
 #   --sun              subfield's default light: directional, irradiance π, from over the
 #                      camera's shoulder (for files with no light)
+#   --specular S       set every Principled BSDF's Specular to S (the importer's is 0.5)
+#   --lambert          replace every non-emissive Principled BSDF by a Lambertian Diffuse
+#                      BSDF of its base colour (subfield's diffuse lobe; docs/IMAGES.md)
 # Square pixels with the vertical field of view kept, as subfield does.
 import bpy, sys, json, math, struct
 import numpy
@@ -26,8 +29,8 @@ scene_path, out = a[0], a[1]
 W, H, spp, frame = int(a[2]), int(a[3]), int(a[4]), int(a[5])
 opts, i = {}, 6
 while i < len(a):
-    if a[i] == "--sun":
-        opts["sun"] = True
+    if a[i] in ("--sun", "--lambert"):
+        opts[a[i].lstrip("-")] = True
         i += 1
     else:
         opts[a[i].lstrip("-")] = a[i + 1]
@@ -115,6 +118,22 @@ if opts.get("sun"):
     lo = bpy.data.objects.new("sun", ld)
     sc.collection.objects.link(lo)
     lo.rotation_euler = towards.to_track_quat("Z", "Y").to_euler()
+for mat in bpy.data.materials:
+    if not mat.use_nodes:
+        continue
+    nt = mat.node_tree
+    for nd in list(nt.nodes):
+        if nd.type != "BSDF_PRINCIPLED":
+            continue
+        if "specular" in opts:
+            nd.inputs["Specular"].default_value = float(opts["specular"])
+        emits = max(nd.inputs["Emission"].default_value[:3]) > 0
+        if opts.get("lambert") and not emits and not nd.inputs["Base Color"].is_linked:
+            d = nt.nodes.new("ShaderNodeBsdfDiffuse")
+            d.inputs["Color"].default_value = nd.inputs["Base Color"].default_value
+            d.inputs["Roughness"].default_value = 0.0  # Lambert, not Oren-Nayar
+            for o in [n for n in nt.nodes if n.type == "OUTPUT_MATERIAL"]:
+                nt.links.new(d.outputs[0], o.inputs["Surface"])
 sc.frame_set(frame)
 sc.render.filepath = out
 bpy.ops.render.render(write_still=True)

@@ -18,7 +18,7 @@ use std::process::Command;
 use glam::Vec3;
 use subfield::import;
 use subfield::import::aff::AffScene;
-use subfield::scene::{ClipSelection, Scene, TriangleSoup};
+use subfield::scene::{ClipSelection, Falloff, Scene, TriangleSoup};
 
 fn out_dir(name: &str) -> PathBuf {
     let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("aff-bart-{name}"));
@@ -66,10 +66,14 @@ fn soup(scene: &Scene, t: f32) -> Vec<[Vec3; 3]> {
 /// that `Scene`, imported again, are the same scene (what the reader keeps of it).
 fn same_model(aff: &Scene, glb: &Scene) {
     assert_eq!(aff.fps, glb.fps);
+    assert_eq!(aff.ambient, glb.ambient);
+    assert!(aff.ambient.is_some());
     assert_eq!(aff.materials, glb.materials);
     assert_eq!(aff.textures, glb.textures);
     assert_eq!(aff.images, glb.images);
     assert_eq!(aff.cameras, glb.cameras);
+    // Falloff included: AFF lights do not fall off, and the light's extras keep that.
+    assert!(aff.lights.iter().all(|l| l.falloff == Falloff::None));
     assert_eq!(aff.lights, glb.lights);
     assert_eq!(aff.animations, glb.animations);
     assert_eq!(aff.roots, glb.roots);

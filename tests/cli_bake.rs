@@ -316,7 +316,7 @@ fn writers_create_folders_and_check_outputs_first() {
 /// looking at them and a point light.
 fn write_tuning_scene(path: &Path) {
     use common::build::perspective;
-    use subfield::scene::{LightDef, LightKind, Material};
+    use subfield::scene::{Falloff, LightDef, LightKind, Material};
     let mut b = SceneBuilder::new();
     let mut rng = Rng::new(7);
     let mut tris = synth::soup(&mut rng, 400, Vec3::splat(-1.0), Vec3::splat(1.0), 0.15);
@@ -345,6 +345,7 @@ fn write_tuning_scene(path: &Path) {
         color: Vec3::ONE,
         intensity: 10.0,
         range: None,
+        falloff: Falloff::InverseSquare,
     });
     let n_light = b.add_node(Node {
         light: Some(light),

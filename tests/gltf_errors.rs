@@ -12,8 +12,8 @@ use serde_json::{json, Value};
 use subfield::import;
 use subfield::import::ImportError;
 use subfield::scene::{
-    Animation, Channel, ClipSelection, Interpolation, LightDef, LightKind, Material, Mesh, Node,
-    Primitive, Property, Scene, TriangleSoup,
+    Animation, Channel, ClipSelection, Falloff, Interpolation, LightDef, LightKind, Material, Mesh,
+    Node, Primitive, Property, Scene, TriangleSoup,
 };
 
 fn temp_dir(name: &str) -> PathBuf {
@@ -328,6 +328,7 @@ fn sample_scene() -> Scene {
         color: Vec3::ONE,
         intensity: 10.0,
         range: Some(5.0),
+        falloff: Falloff::InverseSquare,
     });
     let child = b.add_node(Node {
         mesh: Some(mesh),

@@ -11,9 +11,9 @@ use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
 use serde_json::{json, Value};
 use subfield::import::{self, ImportError};
 use subfield::scene::{
-    AlphaMode, Animation, Channel, ClipSelection, Image, Interpolation, LightDef, LightKind,
-    Material, Mesh, MorphTarget, Node, NodeTransform, Primitive, Projection, Property, Scene, Skin,
-    Texture, TextureRef, Wrap,
+    AlphaMode, Animation, Channel, ClipSelection, Falloff, Image, Interpolation, LightDef,
+    LightKind, Material, Mesh, MorphTarget, Node, NodeTransform, Primitive, Projection, Property,
+    Scene, Skin, Texture, TextureRef, Wrap,
 };
 
 fn temp_dir(name: &str) -> std::path::PathBuf {
@@ -183,6 +183,7 @@ fn scene() -> Scene {
         color: Vec3::new(1.0, 0.9, 0.8),
         intensity: 3.0,
         range: None,
+        falloff: Falloff::InverseSquare,
     });
     let spot = b.add_light(LightDef {
         name: Some("spot".into()),
@@ -193,6 +194,7 @@ fn scene() -> Scene {
         color: Vec3::ONE,
         intensity: 500.0,
         range: Some(20.0),
+        falloff: Falloff::InverseSquare,
     });
     let child = b.add_node(Node {
         name: Some("child".into()),

@@ -358,7 +358,7 @@ fn rgb(chans: &[(String, Vec<f32>)], i: usize) -> Vec3 {
 #[test]
 fn shading_follows_the_model() {
     use common::build::{diffuse, placed, SceneBuilder};
-    use subfield::scene::{LightDef, LightKind, Material, Mesh, Node};
+    use subfield::scene::{Falloff, LightDef, LightKind, Material, Mesh, Node};
     let dir = temp_dir("shading");
     // A floor lit by a directional light straight down (E = 2 lux), a blocker casting
     // a shadow, a mirror facing the camera with a red emitter behind the camera.
@@ -407,6 +407,7 @@ fn shading_follows_the_model() {
         color: Vec3::ONE,
         intensity: 2.0,
         range: None,
+        falloff: Falloff::InverseSquare,
     });
     let n = b.add_node(Node {
         mesh: Some(mesh),

@@ -540,9 +540,10 @@ fn a_full_disk_names_the_file_and_resume_carries_on() {
 /// Issue 24: Ctrl-C killed the run without a word. Now it stops after the frame in
 /// flight, writes nothing partial, says how many frames were written and that
 /// `--resume` carries on, and exits with 130; the resumed run completes the set of an
-/// uninterrupted run, byte for byte.
+/// uninterrupted run, byte for byte. SIGTERM (how Slurm's `scancel`, its time limit and
+/// most farm managers stop a task) and SIGHUP do the same, exiting with 143 and 129.
 #[test]
-fn ctrl_c_stops_after_the_frame_in_flight_and_resume_completes() {
+fn a_stopping_signal_stops_after_the_frame_in_flight_and_resume_completes() {
     let dir = temp_dir("ctrl-c");
     let scene = write_scene(&dir);
     let args = |out: &Path| -> Vec<String> {
@@ -555,9 +556,78 @@ fn ctrl_c_stops_after_the_frame_in_flight_and_resume_completes() {
     let want = frames_in(&dir.join("full"));
     assert_eq!(want.len(), 48);
 
-    let part = dir.join("part");
-    let mut child = Command::new(exe())
-        .args(args(&part.join("f.####.exr")))
+    for (signal, code, said) in [
+        ("INT", 130, "interrupt: stopping after the frame in flight"),
+        ("TERM", 143, "SIGTERM): stopping after the frame in flight"),
+        ("HUP", 129, "SIGHUP): stopping after the frame in flight"),
+    ] {
+        let part = dir.join(format!("part-{signal}"));
+        let mut child = Command::new(exe())
+            .args(args(&part.join("f.####.exr")))
+            .stderr(Stdio::piped())
+            .stdout(Stdio::null())
+            .spawn()
+            .unwrap();
+        let t = Instant::now();
+        while frames_in(&part).is_empty() {
+            assert!(t.elapsed() < Duration::from_secs(120), "no frame written");
+            assert!(child.try_wait().unwrap().is_none(), "ended before frame 0");
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        let sent = Command::new("kill")
+            .args([format!("-{signal}"), child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(sent.success());
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(code), "SIG{signal}: {err}");
+        let written = frames_in(&part);
+        let n = written.len();
+        assert!(n < 48, "all frames were written before SIG{signal}: {err}");
+        let last = err.lines().last().unwrap_or_default();
+        let frames = if n == 1 { "frame" } else { "frames" };
+        assert_eq!(
+            last,
+            format!(
+                "interrupted: {n} {frames} written by this run (0 complete before it), {} left; the same command with --resume carries on",
+                48 - n
+            ),
+            "SIG{signal}: {err}"
+        );
+        assert!(err.contains(said), "SIG{signal}: {err}");
+        assert!(hidden_in(&part).is_empty(), "{:?}", hidden_in(&part));
+        for (p, bytes) in &written {
+            let (_, b) = want.iter().find(|(q, _)| q == p).unwrap();
+            assert_eq!(bytes, b, "{}", p.display());
+        }
+        let mut resume = args(&part.join("f.####.exr"));
+        resume.push("--resume".into());
+        let o = ok(&strs(&resume));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(&format!("({n} skipped as complete)")), "{err}");
+        assert_eq!(frames_in(&part), want, "SIG{signal}");
+    }
+}
+
+/// A stopping signal the render inherited as ignored stays ignored: `nohup` (SIGHUP
+/// ignored) keeps rendering through a closed terminal. Here the shell ignores SIGHUP
+/// (`trap '' HUP`) before it execs the render, and the render finishes every frame (the
+/// signal is sent once frame 0 is written, well before frame 47).
+#[test]
+fn an_inherited_ignored_sighup_stays_ignored() {
+    let dir = temp_dir("nohup");
+    let scene = write_scene(&dir);
+    let part = dir.join("out");
+    let mut args = render_args(&scene, &part.join("f.####.exr"), "0..48");
+    args.extend(["--spp".into(), "2".into()]);
+    args.retain(|x| x != "--quiet");
+    let mut line = format!("trap '' HUP; exec '{}'", exe());
+    for a in &args {
+        line.push_str(&format!(" '{a}'"));
+    }
+    let mut child = Command::new("sh")
+        .args(["-c", &line])
         .stderr(Stdio::piped())
         .stdout(Stdio::null())
         .spawn()
@@ -569,36 +639,14 @@ fn ctrl_c_stops_after_the_frame_in_flight_and_resume_completes() {
         std::thread::sleep(Duration::from_millis(2));
     }
     let sent = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
+        .args(["-HUP", &child.id().to_string()])
         .status()
         .unwrap();
     assert!(sent.success());
     let o = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(130), "{err}");
-    let written = frames_in(&part);
-    let n = written.len();
-    assert!(n < 48, "all frames were written before the signal: {err}");
-    let last = err.lines().last().unwrap_or_default();
-    let frames = if n == 1 { "frame" } else { "frames" };
-    assert_eq!(
-        last,
-        format!(
-            "interrupted: {n} {frames} written by this run (0 complete before it), {} left; the same command with --resume carries on",
-            48 - n
-        ),
-        "{err}"
-    );
-    assert!(err.contains("stopping after the frame in flight"), "{err}");
-    assert!(hidden_in(&part).is_empty(), "{:?}", hidden_in(&part));
-    for (p, bytes) in &written {
-        let (_, b) = want.iter().find(|(q, _)| q == p).unwrap();
-        assert_eq!(bytes, b, "{}", p.display());
-    }
-    let mut resume = args(&part.join("f.####.exr"));
-    resume.push("--resume".into());
-    let o = ok(&strs(&resume));
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains(&format!("({n} skipped as complete)")), "{err}");
-    assert_eq!(frames_in(&part), want);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(!err.contains("SIGHUP"), "{err}");
+    assert!(err.contains("rendered 48 frames"), "{err}");
+    assert_eq!(frames_in(&part).len(), 48, "{err}");
 }

@@ -14,7 +14,8 @@ use glam::{Quat, Vec3, Vec4};
 use subfield::import;
 use subfield::render::{self, FrameRange, LookAt, PixelType, RenderOptions};
 use subfield::scene::{
-    Image, LightDef, LightKind, Material, Mesh, Node, Primitive, Scene, Texture, TextureRef, Wrap,
+    Falloff, Image, LightDef, LightKind, Material, Mesh, Node, Primitive, Scene, Texture,
+    TextureRef, Wrap,
 };
 
 /// Luminance-free view of a render: one RGB triple per pixel, rows top to bottom.
@@ -92,6 +93,7 @@ fn add_sun(b: &mut SceneBuilder, dir: Vec3, lux: f32) {
         color: Vec3::ONE,
         intensity: lux,
         range: None,
+        falloff: Falloff::InverseSquare,
     });
     let n = b.add_node(Node {
         light: Some(sun),

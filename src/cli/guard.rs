@@ -1,8 +1,9 @@
-//! Signals turned into words. **SIGINT** (Ctrl-C) during a render: the first stops the
-//! run after the frame in flight (the render's cancel flag; the CLI then says what was
-//! written, that `--resume` carries on, and exits with 130), a second stops at once
-//! (exit 130; a frame being written is lost, its hidden temporary removed by the next
-//! run). **SIGBUS**: one clear line instead of a bare signal when a baked file mapped
+//! Signals turned into words. **SIGINT** (Ctrl-C), **SIGTERM** (Slurm's `scancel`, time
+//! limit and preemption; most farm managers) and **SIGHUP** during a render: the first
+//! stops the run after the frame in flight (the render's cancel flag; the CLI then says
+//! what was written, that `--resume` carries on, and exits with 128 + the signal: 130,
+//! 143, 129), a second stops at once (exit 128 + the second signal; a frame being
+//! written is lost, its hidden temporary removed by the next run). **SIGBUS**: one clear line instead of a bare signal when a baked file mapped
 //! by this process is truncated under it. A raw (`--codec none`) bake is used in place from its memory
 //! mapping; if another process cuts the file short (`cp new.psf scene.psf` over it), the
 //! next touch of a lost page raises SIGBUS, which by default kills the render with exit
@@ -12,15 +13,10 @@
 
 use std::path::Path;
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use subfield::render::CancelFlag;
-
-/// The exit status of a run stopped by Ctrl-C (128 + SIGINT, as shells report it).
-pub fn interrupted_exit() -> ExitCode {
-    ExitCode::from(130)
-}
 
 /// The whole line, made before the handler is installed (the handler must not allocate).
 static MESSAGE: OnceLock<Vec<u8>> = OnceLock::new();
@@ -65,16 +61,47 @@ fn install() {
     }
 }
 
-/// The cancel flag of the render in progress; set by the first SIGINT.
+/// The cancel flag of the render in progress; set by the first stopping signal.
 static INTERRUPT: OnceLock<Arc<AtomicBool>> = OnceLock::new();
 
-const STOPPING: &[u8] =
-    b"\ninterrupt: stopping after the frame in flight (Ctrl-C again stops at once)\n";
+/// The signal that set [`INTERRUPT`] (0 while none has): the exit status is 128 + it.
+static SIGNAL: AtomicI32 = AtomicI32::new(0);
+
+/// The signals that stop a render after the frame in flight, each with the line the
+/// first one writes. SIGTERM is how Slurm (`scancel`, a time limit, preemption) and most
+/// farm managers stop a task before they SIGKILL it; SIGHUP is a closed terminal or ssh
+/// session.
+const STOP_SIGNALS: [(libc::c_int, &[u8]); 3] = [
+    (
+        libc::SIGINT,
+        b"\ninterrupt: stopping after the frame in flight (Ctrl-C again stops at once)\n",
+    ),
+    (
+        libc::SIGTERM,
+        b"\nterminated (SIGTERM): stopping after the frame in flight (a second signal stops at once)\n",
+    ),
+    (
+        libc::SIGHUP,
+        b"\nhangup (SIGHUP): stopping after the frame in flight (a second signal stops at once)\n",
+    ),
+];
 const STOPPED: &[u8] =
     b"\ninterrupt: stopped at once; the frame in flight is lost, run again with --resume\n";
 
-/// A cancel flag that SIGINT sets, with the handler installed (once per process; later
-/// calls share the flag).
+/// The exit status of a run stopped by a signal: 128 + the signal, as shells report it
+/// (130 for Ctrl-C, 143 for SIGTERM, 129 for SIGHUP).
+pub fn interrupted_exit() -> ExitCode {
+    let sig = match SIGNAL.load(Ordering::SeqCst) {
+        0 => libc::SIGINT,
+        s => s,
+    };
+    ExitCode::from(u8::try_from(128 + sig).unwrap_or(130))
+}
+
+/// A cancel flag that SIGINT, SIGTERM and SIGHUP set, with the handlers installed (once
+/// per process; later calls share the flag). A signal this process inherited as ignored
+/// (`nohup` ignores SIGHUP; a shell ignores SIGINT for a background job of a script)
+/// stays ignored.
 pub fn stop_on_interrupt() -> CancelFlag {
     let mut first = false;
     let flag = INTERRUPT.get_or_init(|| {
@@ -82,17 +109,24 @@ pub fn stop_on_interrupt() -> CancelFlag {
         Arc::new(AtomicBool::new(false))
     });
     if first {
-        install_sigint();
+        for (signal, _) in STOP_SIGNALS {
+            install_stop(signal);
+        }
     }
     CancelFlag::new(flag.clone())
 }
 
-extern "C" fn on_sigint(_signal: libc::c_int) {
+extern "C" fn on_stop(signal: libc::c_int) {
     if let Some(flag) = INTERRUPT.get() {
         if !flag.swap(true, Ordering::SeqCst) {
-            // SAFETY: write(2) is async-signal-safe; STOPPING is a static byte string.
+            SIGNAL.store(signal, Ordering::SeqCst);
+            let line = STOP_SIGNALS
+                .iter()
+                .find(|(s, _)| *s == signal)
+                .map_or(STOP_SIGNALS[0].1, |(_, l)| *l);
+            // SAFETY: write(2) is async-signal-safe; `line` is a static byte string.
             unsafe {
-                libc::write(2, STOPPING.as_ptr().cast(), STOPPING.len());
+                libc::write(2, line.as_ptr().cast(), line.len());
             }
             return;
         }
@@ -101,21 +135,28 @@ extern "C" fn on_sigint(_signal: libc::c_int) {
     // handler or destructor (what a handler must do to stop the process).
     unsafe {
         libc::write(2, STOPPED.as_ptr().cast(), STOPPED.len());
-        libc::_exit(130)
+        libc::_exit(128 + signal)
     }
 }
 
-fn install_sigint() {
+fn install_stop(signal: libc::c_int) {
     // SAFETY: as in `install`: a zero-initialised `sigaction` with an empty mask and an
     // `extern "C" fn(c_int)` handler (no SA_SIGINFO); SA_RESTART so that reads and writes
-    // in flight are restarted, not failed with EINTR. `on_sigint` touches only an atomic
-    // (`OnceLock::get` is an atomic load once set, and it is set before the handler is
-    // installed) and async-signal-safe calls.
+    // in flight are restarted, not failed with EINTR. The first call only reads the
+    // current action into `old` (a null new action is allowed). `on_stop` touches only
+    // atomics (`OnceLock::get` is an atomic load once set, and it is set before the
+    // handler is installed) and async-signal-safe calls.
     unsafe {
+        let mut old: libc::sigaction = std::mem::zeroed();
+        if libc::sigaction(signal, std::ptr::null(), &mut old) == 0
+            && old.sa_sigaction == libc::SIG_IGN
+        {
+            return;
+        }
         let mut sa: libc::sigaction = std::mem::zeroed();
-        sa.sa_sigaction = on_sigint as extern "C" fn(libc::c_int) as libc::sighandler_t;
+        sa.sa_sigaction = on_stop as extern "C" fn(libc::c_int) as libc::sighandler_t;
         sa.sa_flags = libc::SA_RESTART;
         libc::sigemptyset(&mut sa.sa_mask);
-        libc::sigaction(libc::SIGINT, &sa, std::ptr::null_mut());
+        libc::sigaction(signal, &sa, std::ptr::null_mut());
     }
 }

@@ -1,6 +1,7 @@
 //! `subfield render SCENE [--baked FILE.psf] -o PATTERN [...]`: a thin shell over
 //! `subfield::render::render_sequence` (flags as DESIGN.md §4 fixes them).
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -273,9 +274,10 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Renders with progress and a closing report (shared with `subfield demo`). Ctrl-C
-/// stops the run after the frame in flight: a line says what was written and how to
-/// carry on, and the answer is `None` (the command then exits with 130).
+/// Renders with progress and a closing report (shared with `subfield demo`). Ctrl-C,
+/// SIGTERM or SIGHUP stops the run after the frame in flight: a line says what was
+/// written and how to carry on, and the answer is `None` (the command then exits with
+/// 128 + the signal).
 pub fn drive(
     scene: &Scene,
     label: &Path,
@@ -361,8 +363,9 @@ pub fn drive(
             if let Some(b) = &bar {
                 b.finish();
             }
-            // Said even with --quiet: it is the outcome of the run.
-            eprintln!("{e}");
+            // Said even with --quiet: it is the outcome of the run. Not `eprintln!`,
+            // which panics when stderr is gone (a terminal closed: SIGHUP).
+            let _ = writeln!(std::io::stderr().lock(), "{e}");
             return Ok(None);
         }
         r => r?,

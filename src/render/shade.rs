@@ -37,11 +37,14 @@
 //!   one deeper, each to a point drawn by power and area, as
 //!   `kd/π·Le·cos·cos'/d²/pdf` (their highlight only without a reflection ray: with one,
 //!   the reflection ray finds the emitter itself, so nothing is counted twice); an
-//!   ambient term `kd·ambient` and the emission `emissive·strength·texture` (from the
+//!   ambient term `kd·ambient` (the scene's ambient light, AFF `am`, where it has one,
+//!   else the options'; a material's own ambient colour, AFF's, times its base colour
+//!   texture in place of `kd` where it has one) and the emission `emissive·strength·texture` (from the
 //!   front face, both faces when double-sided).
 //!
 //! Irradiance: directional `E = intensity` (lux), point and spot `E = intensity/d²`
-//! (candela) with the spec's range window and spot cone falloff. Without punctual lights
+//! (candela; `E = intensity` for a light without falloff, `Falloff::None`: AFF/NFF
+//! lights) with the spec's range window and spot cone falloff. Without punctual lights
 //! and emitters, the options' default light.
 
 use std::time::Duration;
@@ -55,7 +58,9 @@ use super::options::ShadingOptions;
 use super::sampling::{sample_ggx_vndf, smith_g1, stratified, Purpose, Seed};
 use crate::geometry::{Hit, Ray};
 use crate::psf::Prim;
-use crate::scene::{AlphaMode, Light, LightKind, Material, Scene, TextureRef, TriangleSoup};
+use crate::scene::{
+    AlphaMode, Falloff, Light, LightKind, Material, Scene, TextureRef, TriangleSoup,
+};
 
 /// Linear radiance and AOVs of one frame, rows top to bottom.
 #[derive(Clone, Debug, PartialEq)]
@@ -128,6 +133,7 @@ struct PreLight {
     /// Unit direction the light shines along.
     direction: Vec3,
     range: Option<f32>,
+    falloff: Falloff,
 }
 
 /// Everything shading reads during one frame.
@@ -192,6 +198,7 @@ impl<'a> ShadeContext<'a> {
                 position: l.position,
                 direction: l.direction,
                 range: l.range.filter(|r| *r > 0.0),
+                falloff: l.falloff,
             })
             .collect();
         let area = AreaLights::new(scene, static_soup, dynamic_soup);
@@ -203,7 +210,13 @@ impl<'a> ShadeContext<'a> {
                 position: camera.origin,
                 direction: -towards,
                 range: None,
+                falloff: Falloff::InverseSquare,
             });
+        }
+        let mut options = options;
+        if let Some(a) = scene.ambient {
+            // The scene's own ambient light (AFF `am`) replaces the options' term.
+            options.ambient = a;
         }
         ShadeContext {
             scene,
@@ -443,9 +456,19 @@ impl<'a> ShadeContext<'a> {
         } else {
             Vec3::ZERO
         };
+        // The ambient light is reflected with the diffuse colour, or with the material's
+        // own ambient colour (AFF) times its base colour texture.
+        let ambient = match m.ambient {
+            None => lobes.kd,
+            Some(a) => {
+                a * self
+                    .texture(m.base_color_texture, s.uv, s.lod, true)
+                    .map_or(Vec3::ONE, |t| t.truncate())
+            }
+        };
         out.add(
             item.sample,
-            weight * (emitted + lobes.kd * self.options.ambient),
+            weight * (emitted + ambient * self.options.ambient),
         );
 
         // Direct light through shadow rays.
@@ -752,7 +775,10 @@ fn light_at(l: &PreLight, origin: Vec3) -> Option<(Vec3, f32, Vec3)> {
                 return None;
             }
             let dist = d2.sqrt();
-            let mut att = 1.0 / d2;
+            let mut att = match l.falloff {
+                Falloff::None => 1.0,
+                Falloff::InverseSquare => 1.0 / d2,
+            };
             if let Some(r) = l.range {
                 att *= (1.0 - (dist / r).powi(4)).clamp(0.0, 1.0).powi(2);
             }

@@ -305,6 +305,7 @@ impl Scene {
                     color: def.color,
                     intensity: def.intensity,
                     range: def.range,
+                    falloff: def.falloff,
                     position: world.w_axis.truncate(),
                     direction: if direction == Vec3::ZERO {
                         Vec3::NEG_Z

@@ -55,6 +55,10 @@ pub struct Scene {
     pub animations: Vec<Animation>,
     /// Frames per second recorded by the scene (`scenes[i].extras.fps` in glTF).
     pub fps: Option<f32>,
+    /// Ambient light of the scene (linear RGB; AFF's `am`, `scenes[i].extras.ambient` in
+    /// glTF): where set, it replaces the render options' ambient term
+    /// ([`ShadingOptions::ambient`](crate::render::ShadingOptions::ambient)).
+    pub ambient: Option<Vec3>,
     /// Application data carried beside the model, which the glTF writer passes on.
     pub extras: Extras,
     pub warnings: Vec<Warning>,
@@ -196,6 +200,10 @@ pub struct Material {
     pub ior: f32,
     pub double_sided: bool,
     pub alpha_mode: AlphaMode,
+    /// The colour the ambient light is reflected with (AFF's per-material ambient colour;
+    /// glTF `materials[i].extras.ambient`), times the base colour texture; `None`: the
+    /// diffuse colour, as for every glTF material.
+    pub ambient: Option<Vec3>,
 }
 
 impl Default for Material {
@@ -218,6 +226,7 @@ impl Default for Material {
             ior: 1.5,
             double_sided: false,
             alpha_mode: AlphaMode::Opaque,
+            ambient: None,
         }
     }
 }
@@ -417,6 +426,22 @@ pub enum LightKind {
     Directional,
 }
 
+/// How the irradiance of a point or spot light changes with distance (a directional
+/// light has none).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Falloff {
+    /// `E = intensity / d²`, intensity in candela: physical, and the only falloff of
+    /// glTF's `KHR_lights_punctual`.
+    #[default]
+    InverseSquare,
+    /// `E = intensity` at any distance (intensity in lux, as for a directional light):
+    /// the positional lights of NFF and AFF (BART), whose intensity does not fall off.
+    /// glTF keeps it in the light's `extras` (`"falloff": "none"`); other glTF readers
+    /// see an inverse-square light.
+    None,
+}
+
 /// A light as defined in the file.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LightDef {
@@ -424,10 +449,13 @@ pub struct LightDef {
     pub kind: LightKind,
     /// Linear RGB.
     pub color: Vec3,
-    /// In the spec's units: candela for point and spot, lux for directional.
+    /// In the spec's units: candela for point and spot, lux for directional (and for
+    /// point and spot lights without falloff, [`Falloff::None`]).
     pub intensity: f32,
     /// Distance where the light's influence ends; `None` is infinite.
     pub range: Option<f32>,
+    /// Falloff with distance of a point or spot light (ignored for directional ones).
+    pub falloff: Falloff,
 }
 
 /// A posed light, in world space.
@@ -439,6 +467,7 @@ pub struct Light {
     pub color: Vec3,
     pub intensity: f32,
     pub range: Option<f32>,
+    pub falloff: Falloff,
     pub position: Vec3,
     /// Unit direction the light shines along (the node's world `-Z`).
     pub direction: Vec3,

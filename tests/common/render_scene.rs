@@ -6,7 +6,9 @@
 use std::path::{Path, PathBuf};
 
 use glam::{Quat, Vec3, Vec4};
-use subfield::scene::{Animation, LightDef, LightKind, Material, Node, Primitive, Property, Scene};
+use subfield::scene::{
+    Animation, Falloff, LightDef, LightKind, Material, Node, Primitive, Property, Scene,
+};
 
 use super::build::{diffuse, linear, mesh, perspective, placed, tris, SceneBuilder};
 
@@ -120,6 +122,7 @@ pub fn scene() -> Scene {
         color: Vec3::new(1.0, 0.95, 0.9),
         intensity: 40.0,
         range: None,
+        falloff: Falloff::InverseSquare,
     });
     let sun = b.add_light(LightDef {
         name: Some("sun".into()),
@@ -127,6 +130,7 @@ pub fn scene() -> Scene {
         color: Vec3::ONE,
         intensity: 1.5,
         range: None,
+        falloff: Falloff::InverseSquare,
     });
     let room = b.add_node(Node {
         name: Some("room".into()),

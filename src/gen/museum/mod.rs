@@ -42,8 +42,8 @@ use glam::{Quat, Vec2, Vec3, Vec4};
 use super::synth::Rng;
 use crate::import::ImportError;
 use crate::scene::{
-    Animation, CameraDef, Channel, Interpolation, LightDef, LightKind, Material, Mesh, MorphTarget,
-    Node, NodeTransform, Primitive, Projection, Property, Scene, Trs,
+    Animation, CameraDef, Channel, Falloff, Interpolation, LightDef, LightKind, Material, Mesh,
+    MorphTarget, Node, NodeTransform, Primitive, Projection, Property, Scene, Trs,
 };
 use geometry::*;
 use layout::*;
@@ -231,6 +231,7 @@ fn build_camera_and_lights(b: &mut Scene) {
         color: Vec3::new(1.0, 0.95, 0.85),
         intensity: 200.0,
         range: None,
+        falloff: Falloff::InverseSquare,
     });
     b.lights.push(LightDef {
         name: Some("spot".into()),
@@ -241,6 +242,7 @@ fn build_camera_and_lights(b: &mut Scene) {
         color: Vec3::new(0.85, 0.9, 1.0),
         intensity: 600.0,
         range: None,
+        falloff: Falloff::InverseSquare,
     });
     let (lamp, spot) = (b.lights.len() - 2, b.lights.len() - 1);
     let lamp_at = Vec3::new(0.0, 7.2, 2.0);

@@ -38,15 +38,23 @@
 //!   `v` line's vertical field of view and `w/h` aspect; `hither` is `znear` (values below
 //!   1e-4 become 1, as BART does); yon is infinite.
 //! * Lights: `l` / `la` become point lights (`KHR_lights_punctual` in the converted file)
-//!   of intensity 1 and the AFF colour (white when absent). AFF lights do not fall off with
-//!   distance, glTF point lights do (inverse square): an approximation renderers must know
-//!   about. `la` lights named by a `k` block follow its translation track (the light's
-//!   position).
+//!   of the AFF colour (white when absent) without falloff ([`Falloff::None`](crate::scene::Falloff::None): NFF and AFF
+//!   lights are as bright at any distance) and intensity π (so a white diffuse surface
+//!   facing a white light has radiance 1, NFF's `diffuse · colour · N·L`). The converted
+//!   file keeps the falloff in the light's `extras` (`"falloff": "none"`), which subfield
+//!   reads back; other glTF readers see an inverse-square light. `la` lights named by a
+//!   `k` block follow its translation track (the light's position).
 //! * Textures: each AFF image becomes an opaque RGBA8 image with the default sampler
 //!   (linear, repeat); the converted file embeds it as PNG.
-//! * Background `b` and ambient `am` have no glTF equivalent: they are kept in
-//!   [`Scene::extras`] (`scene.aff`: `background`, `ambient`, `t0`, `frames`), which the
-//!   converted file carries as `scenes[0].extras.aff`.
+//! * Ambient `am` (default 1 1 1) is the scene's ambient light ([`Scene::ambient`],
+//!   `scenes[0].extras.ambient` in the converted file), reflected with each material's
+//!   ambient colour ([`Material::ambient`](crate::scene::Material::ambient),
+//!   `materials[i].extras.ambient`; `f`: colour·Kd, `fm`: its first three numbers) as
+//!   NFF and BART shade: the renderer's ambient term, in place of its default.
+//! * Background `b` (not used by the renderer) and ambient `am` have no glTF
+//!   equivalent: they are kept as read in [`Scene::extras`] (`scene.aff`: `background`,
+//!   `ambient`, `t0`, `frames`), which the converted file carries as
+//!   `scenes[0].extras.aff`.
 //! * Materials (`f`, `fm`) map to metallic-roughness (see [`material`]); the exact AFF
 //!   numbers are kept in the material's extras (`extras.aff` in the converted file, see
 //!   [`material_extras`]).

@@ -13,9 +13,9 @@ use serde_json::{json, Value};
 
 use super::{AffMaterial, AffScene, AffTexture, AffTransform, ImportError, MorphBatch, Tracks};
 use crate::scene::{
-    AlphaMode, Animation, CameraDef, Channel, Image, Interpolation, LightDef, LightKind, Material,
-    Mesh, MorphTarget, Node, NodeTransform, Primitive, Projection, Property, Scene, Texture,
-    TextureRef, Trs, Wrap,
+    AlphaMode, Animation, CameraDef, Channel, Falloff, Image, Interpolation, LightDef, LightKind,
+    Material, Mesh, MorphTarget, Node, NodeTransform, Primitive, Projection, Property, Scene,
+    Texture, TextureRef, Trs, Wrap,
 };
 
 /// The model's material of an AFF material (with an optional base colour texture index):
@@ -29,8 +29,11 @@ use crate::scene::{
 /// | `ior` (`KHR_materials_ior`) | `ior` when ≥ 1 (AFF files write 0 for opaque surfaces: the glTF default 1.5 is kept) |
 /// | `double_sided` | when `T > 0` (AFF: transmissive surfaces are two-sided) |
 ///
+/// | `ambient` | the ambient colour (`f`: colour·Kd, the diffuse colour), negatives as 0: the scene's ambient light `am` is reflected with it |
+///
 /// The exact AFF numbers (ambient, diffuse, specular, shine, T, ior) are kept by
-/// [`material_extras`]: AFF's per-material ambient colour has no glTF counterpart.
+/// [`material_extras`]: AFF's per-material ambient colour has no glTF counterpart (the
+/// converted file carries it as the material's `extras.ambient`).
 pub fn material(m: &AffMaterial, texture: Option<u32>) -> Material {
     let clamp01 = |x: f32| {
         if x.is_finite() {
@@ -69,6 +72,11 @@ pub fn material(m: &AffMaterial, texture: Option<u32>) -> Material {
         ior: if m.ior >= 1.0 { m.ior } else { 1.5 },
         double_sided: m.transmittance > 0.0,
         alpha_mode: AlphaMode::Opaque,
+        ambient: Some(if m.ambient.is_finite() {
+            m.ambient.max(Vec3::ZERO)
+        } else {
+            Vec3::ZERO
+        }),
     }
 }
 
@@ -132,6 +140,13 @@ pub(super) fn to_scene(aff: &AffScene) -> Result<Scene, ImportError> {
         },
         None => None,
     };
+    // `am` (default 1 1 1) is the scene's ambient light: the renderer's ambient term
+    // `kd · ambient` (NFF's is the material's ambient colour times it; see the module).
+    s.ambient = Some(if aff.ambient.is_finite() {
+        aff.ambient.max(Vec3::ZERO)
+    } else {
+        Vec3::ZERO
+    });
     s.extras.scene.insert(
         "aff".into(),
         json!({
@@ -533,8 +548,11 @@ impl Conv<'_> {
                 name: l.name.clone().or_else(|| Some(format!("light {i}"))),
                 kind: LightKind::Point,
                 color: l.color,
-                intensity: 1.0,
+                // NFF/AFF shade a light as `diffuse · colour · N·L` at any distance; the
+                // renderer's `kd/π · E · cos` gives that with `E = π` and no falloff.
+                intensity: std::f32::consts::PI,
                 range: None,
+                falloff: Falloff::None,
             });
             let tracks = l
                 .name

@@ -207,6 +207,7 @@ pub(super) struct Material {
     pub alpha_cutoff: Option<f32>,
     pub double_sided: bool,
     pub extensions: Option<MaterialExtensions>,
+    pub extras: Option<serde_json::Value>,
 }
 
 impl Default for Material {
@@ -222,6 +223,7 @@ impl Default for Material {
             alpha_cutoff: None,
             double_sided: false,
             extensions: None,
+            extras: None,
         }
     }
 }
@@ -483,6 +485,7 @@ pub(super) struct Light {
     pub intensity: f32,
     pub range: Option<f32>,
     pub spot: Option<Spot>,
+    pub extras: Option<serde_json::Value>,
 }
 
 impl Default for Light {
@@ -494,6 +497,7 @@ impl Default for Light {
             intensity: 1.0,
             range: None,
             spot: None,
+            extras: None,
         }
     }
 }

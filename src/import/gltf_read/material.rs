@@ -102,6 +102,32 @@ impl Importer<'_> {
                     "materials[{mi}]: transmission texture ignored (factor used)"
                 ));
             }
+            // `extras.ambient`: the colour the ambient light is reflected with (AFF's, as
+            // subfield's writer puts it).
+            let ambient = match m.extras.as_ref().and_then(|e| e.get("ambient")) {
+                None => None,
+                Some(v) => {
+                    let rgb = v.as_array().and_then(|a| {
+                        a.iter()
+                            .map(|x| x.as_f64().map(|x| x as f32))
+                            .collect::<Option<Vec<f32>>>()
+                    });
+                    match rgb.as_deref() {
+                        Some(&[r, g, b])
+                            if [r, g, b].iter().all(|x| x.is_finite() && *x >= 0.0) =>
+                        {
+                            Some(Vec3::new(r, g, b))
+                        }
+                        _ => {
+                            self.warn(format!(
+                                "materials[{mi}]: extras.ambient {v} is not three numbers of \
+                                 at least 0; ignored"
+                            ));
+                            None
+                        }
+                    }
+                }
+            };
             out.push(Material {
                 name: m.name.clone(),
                 base_color: Vec4::from_array(pbr.base_color_factor),
@@ -126,6 +152,7 @@ impl Importer<'_> {
                     Some("BLEND") => AlphaMode::Blend,
                     _ => AlphaMode::Opaque,
                 },
+                ambient,
             });
         }
         if !occluded.is_empty() {

@@ -26,6 +26,8 @@ mod uri;
 
 use std::path::Path;
 
+use glam::Vec3;
+
 use super::ImportError;
 use crate::scene::{Scene, Warning};
 
@@ -259,9 +261,37 @@ impl Importer<'_> {
             }
         }
         scene.fps = self.fps(shown);
+        scene.ambient = self.ambient(shown);
         scene.warnings = std::mem::take(&mut self.warnings);
         super::validate(&scene)?;
         Ok(scene)
+    }
+
+    /// The scene's ambient light, `extras.ambient` (three numbers, none negative), as
+    /// subfield writes it for AFF's `am`.
+    fn ambient(&mut self, shown: Option<&json::Scene>) -> Option<Vec3> {
+        let read = |s: &json::Scene| -> Option<serde_json::Value> {
+            s.extras.as_ref()?.get("ambient").cloned()
+        };
+        let v = shown
+            .and_then(read)
+            .or_else(|| self.root.scenes.first().and_then(read))?;
+        let rgb: Option<Vec<f32>> = v.as_array().and_then(|a| {
+            a.iter()
+                .map(|x| x.as_f64().map(|x| x as f32))
+                .collect::<Option<Vec<f32>>>()
+        });
+        match rgb.as_deref() {
+            Some(&[r, g, b]) if [r, g, b].iter().all(|x| x.is_finite() && *x >= 0.0) => {
+                Some(Vec3::new(r, g, b))
+            }
+            _ => {
+                self.warn(format!(
+                    "scene extras.ambient {v} is not three numbers of at least 0; ignored"
+                ));
+                None
+            }
+        }
     }
 
     fn fps(&mut self, shown: Option<&json::Scene>) -> Option<f32> {

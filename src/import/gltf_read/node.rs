@@ -5,7 +5,9 @@
 use glam::{Mat4, Quat, Vec3};
 
 use super::{ImportError, Importer};
-use crate::scene::{CameraDef, LightDef, LightKind, Node, NodeTransform, Projection, Skin, Trs};
+use crate::scene::{
+    CameraDef, Falloff, LightDef, LightKind, Node, NodeTransform, Projection, Skin, Trs,
+};
 
 impl Importer<'_> {
     /// `light_slots` maps the file's light indices to the imported lights.
@@ -167,6 +169,20 @@ impl Importer<'_> {
                     continue;
                 }
             };
+            // KHR_lights_punctual is inverse-square; subfield's writer records a light
+            // without falloff (from AFF) as `extras.falloff: "none"`.
+            let falloff = match l.extras.as_ref().and_then(|e| e.get("falloff")) {
+                None => Falloff::InverseSquare,
+                Some(v) if v == "none" => Falloff::None,
+                Some(v) if v == "inverseSquare" => Falloff::InverseSquare,
+                Some(v) => {
+                    self.warn(format!(
+                        "KHR_lights_punctual lights[{li}]: extras.falloff {v} is not \"none\" \
+                         or \"inverseSquare\"; the light falls off with the inverse square"
+                    ));
+                    Falloff::InverseSquare
+                }
+            };
             slots.push(Some(out.len()));
             out.push(LightDef {
                 name: l.name.clone(),
@@ -174,6 +190,7 @@ impl Importer<'_> {
                 color: Vec3::from_array(l.color),
                 intensity: l.intensity,
                 range: l.range,
+                falloff,
             });
         }
         (out, slots)

@@ -10,8 +10,8 @@ use serde_json::{json, Map, Value};
 
 use super::ImportError;
 use crate::scene::{
-    AlphaMode, Image, Interpolation, LightKind, Material, NodeTransform, Primitive, Projection,
-    Property, Scene, Texture, TextureRef, Wrap,
+    AlphaMode, Falloff, Image, Interpolation, LightKind, Material, NodeTransform, Primitive,
+    Projection, Property, Scene, Texture, TextureRef, Wrap,
 };
 
 /// Names of the extensions the document uses (`extensionsUsed`).
@@ -117,8 +117,20 @@ fn material_json(m: &Material, extras: Option<&Option<Value>>, used: &mut Used) 
         pbr["metallicRoughnessTexture"] = texture_info(t, used);
     }
     o.insert("pbrMetallicRoughness".into(), pbr);
-    if let Some(Some(e)) = extras {
-        o.insert("extras".into(), e.clone());
+    let mut extras = match extras {
+        Some(Some(e)) => e.clone(),
+        _ => Value::Null,
+    };
+    if let Some(a) = m.ambient {
+        // The ambient colour (AFF's) beside the application's extras, read back by
+        // subfield's reader.
+        if !extras.is_object() {
+            extras = json!({});
+        }
+        extras["ambient"] = json!(a.to_array());
+    }
+    if !extras.is_null() {
+        o.insert("extras".into(), extras);
     }
     // The factor must stay in [0, 1]: a brighter emission is carried by the strength.
     let peak = m.emissive.max_element();
@@ -315,7 +327,8 @@ fn cameras_json(scene: &Scene) -> Vec<Value> {
         .collect()
 }
 
-/// `KHR_lights_punctual` lights.
+/// `KHR_lights_punctual` lights; a point or spot light without falloff gets
+/// `"extras": { "falloff": "none" }`.
 fn lights_json(scene: &Scene) -> Vec<Value> {
     scene
         .lights
@@ -348,6 +361,11 @@ fn lights_json(scene: &Scene) -> Vec<Value> {
                 }
             };
             o.insert("type".into(), json!(kind));
+            // KHR_lights_punctual lights always fall off with the inverse square; a light
+            // without falloff (AFF) says so in its extras, which the reader here reads back.
+            if l.falloff == Falloff::None && l.kind != LightKind::Directional {
+                o.insert("extras".into(), json!({ "falloff": "none" }));
+            }
             Value::Object(o)
         })
         .collect()
@@ -566,6 +584,9 @@ fn scene_json(scene: &Scene) -> Value {
     let mut extras = scene.extras.scene.clone();
     if let Some(fps) = scene.fps {
         extras.insert("fps".into(), json!(fps));
+    }
+    if let Some(a) = scene.ambient {
+        extras.insert("ambient".into(), json!(a.to_array()));
     }
     if !extras.is_empty() {
         o.insert("extras".into(), Value::Object(extras));
