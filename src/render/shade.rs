@@ -147,6 +147,8 @@ pub struct ShadeContext<'a> {
     lights: Vec<PreLight>,
     area: AreaLights,
     mips: &'a TextureMips,
+    /// glTF's default material, for triangles without one (made once, not a hit).
+    default_material: Material,
 }
 
 /// Passes through alpha-cut surfaces a ray may make.
@@ -231,6 +233,7 @@ impl<'a> ShadeContext<'a> {
             lights: pre,
             area,
             mips,
+            default_material: Material::default(),
         }
     }
 
@@ -431,8 +434,7 @@ impl<'a> ShadeContext<'a> {
         let Some(s) = self.surface(ray, &hit, width) else {
             return;
         };
-        let default = Material::default();
-        let m = self.material(s.material).unwrap_or(&default);
+        let m = self.material(s.material).unwrap_or(&self.default_material);
         let base = self.base_color(m, s.uv, s.lod);
         let alpha = alpha_of(m, base);
         let eps = self.eps(s.point);

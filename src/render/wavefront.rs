@@ -359,24 +359,35 @@ pub fn render_frame_with<T: Intersector>(
                         ctx.shade(ray, item, *hit, max_depth, spp as u32, out);
                     }
                 });
-            shadow_rays.clear();
-            shadow_add.clear();
-            shadow_light.clear();
-            rays.clear();
-            items.clear();
-            for o in &outs[..blocks] {
-                for &(s, c) in &o.add {
-                    radiance[s as usize] += c;
-                }
-                for &(s, c) in &o.cover {
-                    coverage[s as usize] += c;
-                }
-                shadow_rays.extend_from_slice(&o.shadow_rays);
-                shadow_add.extend_from_slice(&o.shadow_add);
-                shadow_light.extend_from_slice(&o.shadow_light);
-                rays.extend_from_slice(&o.next_rays);
-                items.extend_from_slice(&o.next_items);
-            }
+            // The blocks' lists gathered in block order, the shadow side and the rest
+            // as two tasks (each list in the same order either way).
+            let outs = &outs[..blocks];
+            rayon::join(
+                || {
+                    shadow_rays.clear();
+                    shadow_add.clear();
+                    shadow_light.clear();
+                    for o in outs {
+                        shadow_rays.extend_from_slice(&o.shadow_rays);
+                        shadow_add.extend_from_slice(&o.shadow_add);
+                        shadow_light.extend_from_slice(&o.shadow_light);
+                    }
+                },
+                || {
+                    rays.clear();
+                    items.clear();
+                    for o in outs {
+                        for &(s, c) in &o.add {
+                            radiance[s as usize] += c;
+                        }
+                        for &(s, c) in &o.cover {
+                            coverage[s as usize] += c;
+                        }
+                        rays.extend_from_slice(&o.next_rays);
+                        items.extend_from_slice(&o.next_items);
+                    }
+                },
+            );
             work.rays.secondary += rays.len() as u64;
             work.rays.shadow += shadow_rays.len() as u64;
             work.shade += clock.elapsed();
