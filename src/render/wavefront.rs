@@ -303,8 +303,10 @@ pub fn render_frame_with<T: Intersector>(
             camera.ray(x as f32 + ox, y as f32 + oy)
         }));
         let cone = primary_cone(camera);
-        items.clear();
-        items.par_extend((0..nsamples).into_par_iter().with_min_len(BLOCK).map(|s| {
+        // A camera ray's bookkeeping, made where it is shaded rather than stored: a
+        // frame's 300,000 of them were 15 MB written and read again for values that
+        // follow from the sample's number (`benches/PERF.md`, issue 23, step 6).
+        let primary_item = |s: usize| {
             let p = px0 + s / spp;
             let (x, y) = ((p % w) as u32, (p / w) as u32);
             Item {
@@ -316,7 +318,8 @@ pub fn render_frame_with<T: Intersector>(
                 seed: Seed::camera(frame, x, y, (s % spp) as u32),
                 cone,
             }
-        }));
+        };
+        items.clear();
         work.rays.primary += nsamples as u64;
         refill(radiance, nsamples, Vec3::ZERO);
         refill(coverage, nsamples, 0.0f32);
@@ -343,22 +346,38 @@ pub fn render_frame_with<T: Intersector>(
                     write_crypto(ctx, names, buf, px0, spp, hits);
                 }
             }
-            first = false;
             let blocks = rays.len().div_ceil(BLOCK);
             if outs.len() < blocks {
                 outs.resize_with(blocks, BlockOut::default);
             }
-            outs[..blocks]
-                .par_iter_mut()
-                .zip(rays.par_chunks(BLOCK))
-                .zip(items.par_chunks(BLOCK))
-                .zip(hits.par_chunks(BLOCK))
-                .for_each(|(((out, r), it), hs)| {
-                    out.clear();
-                    for ((ray, item), hit) in r.iter().zip(it).zip(hs) {
-                        ctx.shade(ray, item, *hit, max_depth, spp as u32, out);
-                    }
-                });
+            if first {
+                // The camera rays: ray `i` is sample `i`.
+                outs[..blocks]
+                    .par_iter_mut()
+                    .zip(rays.par_chunks(BLOCK))
+                    .zip(hits.par_chunks(BLOCK))
+                    .enumerate()
+                    .for_each(|(b, ((out, r), hs))| {
+                        out.clear();
+                        for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
+                            let item = primary_item(b * BLOCK + k);
+                            ctx.shade(ray, &item, *hit, max_depth, spp as u32, out);
+                        }
+                    });
+            } else {
+                outs[..blocks]
+                    .par_iter_mut()
+                    .zip(rays.par_chunks(BLOCK))
+                    .zip(items.par_chunks(BLOCK))
+                    .zip(hits.par_chunks(BLOCK))
+                    .for_each(|(((out, r), it), hs)| {
+                        out.clear();
+                        for ((ray, item), hit) in r.iter().zip(it).zip(hs) {
+                            ctx.shade(ray, item, *hit, max_depth, spp as u32, out);
+                        }
+                    });
+            }
+            first = false;
             // The blocks' lists gathered in block order, the shadow side and the rest
             // as two tasks (each list in the same order either way).
             let outs = &outs[..blocks];
