@@ -262,6 +262,7 @@ impl<'a> ShadeContext<'a> {
 
     /// Geometry at a hit, `None` for a triangle index out of range. `width`: the ray
     /// cone's width at the hit (0: the finest texture level).
+    #[inline(always)]
     fn surface(&self, ray: &Ray, hit: &Hit, width: f32) -> Option<Surface> {
         let (soup, i) = match Prim::from_index(hit.tri, self.static_soup.len()) {
             Prim::Static(i) => (self.static_soup, i as usize),

@@ -180,6 +180,44 @@ pub fn sample_offset(frame: u32, x: u32, y: u32, k: u32, spp: u32) -> (f32, f32)
     )
 }
 
+/// Where sample `s` of a chunk is: pixel `(x, y)` and its sample `k`, stepped forward
+/// one sample at a time (the samples of a pixel, then the pixels of a row, then rows).
+struct PixelWalk {
+    x: u32,
+    y: u32,
+    k: u32,
+    w: u32,
+    spp: u32,
+}
+
+impl PixelWalk {
+    /// Sample `s` of the chunk whose first pixel is `px0`, in an image `w` wide with
+    /// `spp` samples a pixel.
+    fn at(px0: usize, s: usize, w: usize, spp: usize) -> PixelWalk {
+        let p = px0 + s / spp;
+        PixelWalk {
+            x: (p % w) as u32,
+            y: (p / w) as u32,
+            k: (s % spp) as u32,
+            w: w as u32,
+            spp: spp as u32,
+        }
+    }
+
+    #[inline]
+    fn advance(&mut self) {
+        self.k += 1;
+        if self.k == self.spp {
+            self.k = 0;
+            self.x += 1;
+            if self.x == self.w {
+                self.x = 0;
+                self.y += 1;
+            }
+        }
+    }
+}
+
 /// The cone of a camera ray: a pixel wide, from a point (perspective: the angle a pixel
 /// spans at the image centre) or a pixel wide and parallel (orthographic).
 fn primary_cone(camera: &CameraModel) -> Cone {
@@ -295,29 +333,32 @@ pub fn render_frame_with<T: Intersector>(
 
         // Primary rays.
         let clock = Instant::now();
-        rays.clear();
-        rays.par_extend((0..nsamples).into_par_iter().with_min_len(BLOCK).map(|s| {
-            let p = px0 + s / spp;
-            let (x, y) = ((p % w) as u32, (p / w) as u32);
-            let (ox, oy) = sample_offset(frame, x, y, (s % spp) as u32, spp as u32);
-            camera.ray(x as f32 + ox, y as f32 + oy)
-        }));
+        // A block at a time, each stepping through its pixels and samples without
+        // dividing (four integer divisions a ray were half the rays' making).
+        let walk = |s: usize| PixelWalk::at(px0, s, w, spp);
+        refill(rays, nsamples, Ray::new(Vec3::ZERO, Vec3::ZERO));
+        rays.par_chunks_mut(BLOCK)
+            .enumerate()
+            .for_each(|(b, chunk)| {
+                let mut at = walk(b * BLOCK);
+                for r in chunk {
+                    let (ox, oy) = sample_offset(frame, at.x, at.y, at.k, spp as u32);
+                    *r = camera.ray(at.x as f32 + ox, at.y as f32 + oy);
+                    at.advance();
+                }
+            });
         let cone = primary_cone(camera);
         // A camera ray's bookkeeping, made where it is shaded rather than stored: a
         // frame's 300,000 of them were 15 MB written and read again for values that
-        // follow from the sample's number (`benches/PERF.md`, issue 23, step 6).
-        let primary_item = |s: usize| {
-            let p = px0 + s / spp;
-            let (x, y) = ((p % w) as u32, (p / w) as u32);
-            Item {
-                sample: s as u32,
-                weight: Vec3::ONE,
-                coverage: 1.0,
-                depth: 0,
-                passes: 0,
-                seed: Seed::camera(frame, x, y, (s % spp) as u32),
-                cone,
-            }
+        // follow from the sample's number (`benches/PERF.md`, issue 23, step 7).
+        let primary_item = |s: usize, at: &PixelWalk| Item {
+            sample: s as u32,
+            weight: Vec3::ONE,
+            coverage: 1.0,
+            depth: 0,
+            passes: 0,
+            seed: Seed::camera(frame, at.x, at.y, at.k),
+            cone,
         };
         items.clear();
         work.rays.primary += nsamples as u64;
@@ -359,9 +400,11 @@ pub fn render_frame_with<T: Intersector>(
                     .enumerate()
                     .for_each(|(b, ((out, r), hs))| {
                         out.clear();
+                        let mut at = walk(b * BLOCK);
                         for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
-                            let item = primary_item(b * BLOCK + k);
+                            let item = primary_item(b * BLOCK + k, &at);
                             ctx.shade(ray, &item, *hit, max_depth, spp as u32, out);
+                            at.advance();
                         }
                     });
             } else {
