@@ -931,14 +931,21 @@ pub(super) struct Item {
     pub(super) cone: Cone,
 }
 
+/// A block's shadow rays towards one light, each with what it adds to which sample
+/// when unblocked.
+#[derive(Default)]
+pub(super) struct ShadowList {
+    pub(super) rays: Vec<Ray>,
+    pub(super) add: Vec<(u32, Vec3)>,
+}
+
 #[derive(Default)]
 pub(super) struct BlockOut {
     pub(super) add: Vec<(u32, Vec3)>,
     pub(super) cover: Vec<(u32, f32)>,
-    pub(super) shadow_rays: Vec<Ray>,
-    pub(super) shadow_add: Vec<(u32, Vec3)>,
-    /// The light each shadow ray goes to.
-    pub(super) shadow_light: Vec<u16>,
+    /// The shadow rays a light at a time (index: the light's batch, see
+    /// [`ShadeContext::shade`]'s lights and the area lights' batch after them).
+    pub(super) shadow: Vec<ShadowList>,
     pub(super) next_rays: Vec<Ray>,
     pub(super) next_items: Vec<Item>,
 }
@@ -948,9 +955,10 @@ impl BlockOut {
     pub(super) fn clear(&mut self) {
         self.add.clear();
         self.cover.clear();
-        self.shadow_rays.clear();
-        self.shadow_add.clear();
-        self.shadow_light.clear();
+        for l in &mut self.shadow {
+            l.rays.clear();
+            l.add.clear();
+        }
         self.next_rays.clear();
         self.next_items.clear();
     }
@@ -966,9 +974,12 @@ impl BlockOut {
         }
     }
     fn shadow(&mut self, ray: Ray, light: usize, sample: u32, c: Vec3) {
-        self.shadow_rays.push(ray);
-        self.shadow_add.push((sample, c));
-        self.shadow_light.push(light.min(u16::MAX as usize) as u16);
+        if self.shadow.len() <= light {
+            self.shadow.resize_with(light + 1, ShadowList::default);
+        }
+        let l = &mut self.shadow[light];
+        l.rays.push(ray);
+        l.add.push((sample, c));
     }
     fn next(&mut self, ray: Ray, item: Item) {
         self.next_rays.push(ray);

@@ -34,77 +34,6 @@ const BLOCK: usize = 1024;
 /// Samples traced together (bounds the wavefront's memory).
 const CHUNK_SAMPLES: usize = 1 << 18;
 
-/// `occluded_batch` of `rays` into `blocked`, one batch per light (`light[i]` is ray
-/// `i`'s): the shadow rays towards one point light all pass through it, and such a
-/// batch is traced through a point grid around it (`subfield::psf`'s point grids), which
-/// a batch mixing several lights would not get. The answers are the same either way.
-/// `sort`: the reordering's buffers, kept from batch to batch.
-fn occluded_by_light<T: Intersector>(
-    tracer: &T,
-    rays: &[Ray],
-    light: &[u16],
-    blocked: &mut Vec<bool>,
-    sort: &mut LightSort,
-) {
-    blocked.clear();
-    blocked.resize(rays.len(), false);
-    let lights = light.iter().max().map_or(0, |&l| l as usize + 1);
-    if lights <= 1 {
-        tracer.occluded_batch(rays, blocked);
-        return;
-    }
-    // The rays in order of their light (a stable counting sort), a batch a light.
-    let LightSort {
-        start,
-        at,
-        index,
-        sorted,
-        out,
-    } = sort;
-    start.clear();
-    start.resize(lights + 1, 0);
-    for &l in light {
-        start[l as usize + 1] += 1;
-    }
-    for l in 0..lights {
-        start[l + 1] += start[l];
-    }
-    index.clear();
-    index.resize(rays.len(), 0);
-    at.clear();
-    at.extend_from_slice(start);
-    for (i, &l) in light.iter().enumerate() {
-        index[at[l as usize]] = i as u32;
-        at[l as usize] += 1;
-    }
-    sorted.clear();
-    sorted.par_extend(
-        index
-            .par_iter()
-            .with_min_len(BLOCK)
-            .map(|&i| rays[i as usize]),
-    );
-    out.clear();
-    out.resize(rays.len(), false);
-    for l in 0..lights {
-        let (a, b) = (start[l], start[l + 1]);
-        tracer.occluded_batch(&sorted[a..b], &mut out[a..b]);
-    }
-    for (&i, &b) in index.iter().zip(out.iter()) {
-        blocked[i as usize] = b;
-    }
-}
-
-/// The buffers of [`occluded_by_light`]'s reordering.
-#[derive(Default)]
-struct LightSort {
-    start: Vec<usize>,
-    at: Vec<usize>,
-    index: Vec<u32>,
-    sorted: Vec<Ray>,
-    out: Vec<bool>,
-}
-
 /// A frame's working buffers, kept from one frame to the next by a sequence
 /// ([`render_frame_with`]): their capacity stays, so once the first frame is done a
 /// frame's wavefront allocates nothing large, and the kernel zeroes no fresh pages for
@@ -121,9 +50,9 @@ pub struct FrameScratch {
     outs: Vec<BlockOut>,
     shadow_rays: Vec<Ray>,
     shadow_add: Vec<(u32, Vec3)>,
-    shadow_light: Vec<u16>,
+    /// Where each light's shadow rays start in `shadow_rays` (and end: one more).
+    light_start: Vec<usize>,
     blocked: Vec<bool>,
-    sort: LightSort,
     spare: Option<FrameBuffers>,
 }
 
@@ -304,9 +233,8 @@ pub fn render_frame_with<T: Intersector>(
         outs,
         shadow_rays,
         shadow_add,
-        shadow_light,
+        light_start,
         blocked,
-        sort,
         spare: _,
     } = scratch;
     let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
@@ -426,14 +354,21 @@ pub fn render_frame_with<T: Intersector>(
             let outs = &outs[..blocks];
             rayon::join(
                 || {
+                    // A light's rays together, in block order: each light's rays are
+                    // one batch through its point grid (which a batch mixing lights
+                    // would not get).
                     shadow_rays.clear();
                     shadow_add.clear();
-                    shadow_light.clear();
-                    for o in outs {
-                        shadow_rays.extend_from_slice(&o.shadow_rays);
-                        shadow_add.extend_from_slice(&o.shadow_add);
-                        shadow_light.extend_from_slice(&o.shadow_light);
+                    light_start.clear();
+                    let lights = outs.iter().map(|o| o.shadow.len()).max().unwrap_or(0);
+                    for l in 0..lights {
+                        light_start.push(shadow_rays.len());
+                        for list in outs.iter().filter_map(|o| o.shadow.get(l)) {
+                            shadow_rays.extend_from_slice(&list.rays);
+                            shadow_add.extend_from_slice(&list.add);
+                        }
                     }
+                    light_start.push(shadow_rays.len());
                 },
                 || {
                     rays.clear();
@@ -455,7 +390,13 @@ pub fn render_frame_with<T: Intersector>(
             work.shade += clock.elapsed();
 
             let clock = Instant::now();
-            occluded_by_light(tracer, shadow_rays, shadow_light, blocked, sort);
+            refill(blocked, shadow_rays.len(), false);
+            for w in light_start.windows(2) {
+                let (a, b) = (w[0], w[1]);
+                if a < b {
+                    tracer.occluded_batch(&shadow_rays[a..b], &mut blocked[a..b]);
+                }
+            }
             work.trace += clock.elapsed();
 
             let clock = Instant::now();
