@@ -84,6 +84,17 @@ fn frames_in(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
         .collect()
 }
 
+/// Waits until the render `child` has written its first frame into `dir` (two
+/// minutes at most; the child must still be running meanwhile).
+fn wait_for_first_frame(dir: &Path, child: &mut std::process::Child) {
+    let t = Instant::now();
+    while frames_in(dir).is_empty() {
+        assert!(t.elapsed() < Duration::from_secs(120), "no frame written");
+        assert!(child.try_wait().unwrap().is_none(), "ended before frame 0");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
 /// Hidden files (temporaries) under `dir`.
 fn hidden_in(dir: &Path) -> Vec<PathBuf> {
     files_under(dir)
@@ -568,12 +579,7 @@ fn a_stopping_signal_stops_after_the_frame_in_flight_and_resume_completes() {
             .stdout(Stdio::null())
             .spawn()
             .unwrap();
-        let t = Instant::now();
-        while frames_in(&part).is_empty() {
-            assert!(t.elapsed() < Duration::from_secs(120), "no frame written");
-            assert!(child.try_wait().unwrap().is_none(), "ended before frame 0");
-            std::thread::sleep(Duration::from_millis(2));
-        }
+        wait_for_first_frame(&part, &mut child);
         let sent = Command::new("kill")
             .args([format!("-{signal}"), child.id().to_string()])
             .status()
@@ -632,12 +638,7 @@ fn an_inherited_ignored_sighup_stays_ignored() {
         .stdout(Stdio::null())
         .spawn()
         .unwrap();
-    let t = Instant::now();
-    while frames_in(&part).is_empty() {
-        assert!(t.elapsed() < Duration::from_secs(120), "no frame written");
-        assert!(child.try_wait().unwrap().is_none(), "ended before frame 0");
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    wait_for_first_frame(&part, &mut child);
     let sent = Command::new("kill")
         .args(["-HUP", &child.id().to_string()])
         .status()
