@@ -514,31 +514,18 @@ fn shading_follows_the_model() {
 
 #[test]
 fn textures_glass_and_alpha() {
-    use subfield::scene::{AlphaMode, Image, Texture, TextureRef, Wrap};
+    use subfield::scene::{AlphaMode, TextureRef};
     let dir = temp_dir("texture");
     let mut scene = import::load(&write_scene(&dir)).unwrap();
     // A 2×2 checker (sRGB 255 / 0) on the floor, nearest filtering, repeated 1×.
-    scene.images.push(Image {
-        name: None,
-        width: 2,
-        height: 2,
-        rgba8: vec![
-            255, 255, 255, 255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255, 255,
-        ],
-    });
-    scene.textures.push(Texture {
-        image: 0,
-        wrap_s: Wrap::Repeat,
-        wrap_t: Wrap::Repeat,
-        nearest: true,
-    });
+    let checker = common::build::add_checker(&mut scene);
     let floor = scene
         .materials
         .iter()
         .position(|m| m.name.as_deref() == Some("floor"))
         .unwrap();
     scene.materials[floor].base_color_texture = Some(TextureRef {
-        texture: 0,
+        texture: checker,
         tex_coord: 0,
         transform: None,
     });

@@ -500,23 +500,9 @@ fn a_checkerboard_to_the_horizon_averages_to_grey_at_one_spp() {
     // Straight down at π lux: radiance = albedo for a white rough diffuse floor.
     add_sun(&mut b, -Vec3::Y, std::f32::consts::PI);
     let mut scene = load(b, &dir);
-    scene.images.push(Image {
-        name: None,
-        width: 2,
-        height: 2,
-        rgba8: vec![
-            255, 255, 255, 255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255, 255,
-        ],
-    });
-    scene.textures.push(Texture {
-        image: 0,
-        wrap_s: Wrap::Repeat,
-        wrap_t: Wrap::Repeat,
-        // Crisp texels where they are magnified; minified, the lookup is trilinear.
-        nearest: true,
-    });
+    let checker = common::build::add_checker(&mut scene);
     scene.materials[board as usize].base_color_texture = Some(TextureRef {
-        texture: 0,
+        texture: checker,
         tex_coord: 0,
         transform: None,
     });

@@ -6,7 +6,7 @@
 use glam::{Quat, Vec3, Vec4};
 use subfield::scene::{
     Animation, CameraDef, Channel, Image, Interpolation, LightDef, Material, Mesh, MorphTarget,
-    Node, NodeTransform, Primitive, Projection, Property, Scene, Texture, Trs,
+    Node, NodeTransform, Primitive, Projection, Property, Scene, Texture, Trs, Wrap,
 };
 
 /// A scene under construction: `add_*` return the index of what they add; [`finish`]
@@ -181,4 +181,24 @@ pub fn linear(node: usize, property: Property, times: Vec<f32>, values: Vec<f32>
         times,
         values,
     }
+}
+
+/// Adds a 2×2 checker (sRGB 255 / 0 texels, repeated, nearest filtering where it is
+/// magnified) to `scene` as an image and a texture; returns the texture's index.
+pub fn add_checker(scene: &mut Scene) -> u32 {
+    scene.images.push(Image {
+        name: None,
+        width: 2,
+        height: 2,
+        rgba8: vec![
+            255, 255, 255, 255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255, 255,
+        ],
+    });
+    scene.textures.push(Texture {
+        image: (scene.images.len() - 1) as u32,
+        wrap_s: Wrap::Repeat,
+        wrap_t: Wrap::Repeat,
+        nearest: true,
+    });
+    (scene.textures.len() - 1) as u32
 }
