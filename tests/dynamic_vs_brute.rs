@@ -10,7 +10,7 @@
 use glam::Vec3;
 use proptest::prelude::*;
 use subfield::gen::synth::{self, Rng};
-use subfield::geometry::{BruteForce, Intersector, Ray};
+use subfield::geometry::{closest_of, BruteForce, Intersector, Ray};
 use subfield::{DynamicLayer, Psf, PsfParams};
 
 #[derive(Clone, Debug)]
@@ -285,7 +285,92 @@ fn check_with(c: &Case, frame_tris: FrameGen) -> Result<(), TestCaseError> {
                 c.seed
             );
         }
+        check_layers(&both, &brute, &stat, &rs, frame, mode, c.seed)?;
+        // A camera's rays and a light's shadow rays, enough of them through one point
+        // that the split's point grids over the moving triangles alone are built.
+        let eye = rng.in_box(LO, HI);
+        let light = rng.in_box(LO, HI);
+        let mut pointed: Vec<Ray> = (0..600)
+            .map(|_| Ray::new(eye, rng.in_box(LO - 1.0, HI + 1.0) - eye))
+            .collect();
+        pointed.extend((0..600).map(|_| {
+            let o = rng.in_box(LO, HI);
+            Ray::segment(o, light - o, 0.0, 1.0 - 1e-4)
+        }));
+        check_layers(&both, &brute, &stat, &pointed[..600], frame, mode, c.seed)?;
+        check_layers(&both, &brute, &stat, &pointed[600..], frame, mode, c.seed)?;
         before = moving;
+    }
+    Ok(())
+}
+
+/// The static and moving parts traced apart ([`Layers`], as the renderer's memo of
+/// static hits does) give brute force's hits: the closer of the static hit and the
+/// moving one up to it, and blocked when either part blocks.
+fn check_layers(
+    both: &impl Intersector,
+    brute: &BruteForce,
+    stat: &[[Vec3; 3]],
+    rs: &[Ray],
+    frame: usize,
+    mode: &str,
+    seed: u64,
+) -> Result<(), TestCaseError> {
+    let layers = both.layers().expect("a layered query has layers");
+    prop_assert_eq!(layers.static_count(), stat.len());
+    let n = rs.len();
+    let (mut want, mut wany) = (vec![None; n], vec![false; n]);
+    brute.intersect_batch(rs, &mut want);
+    brute.occluded_batch(rs, &mut wany);
+    let (mut s, mut sany) = (vec![None; n], vec![false; n]);
+    layers.static_batch(rs, &mut s);
+    layers.static_occluded_batch(rs, &mut sany);
+    let clipped: Vec<Ray> = rs
+        .iter()
+        .zip(&s)
+        .map(|(r, h)| {
+            let mut r = *r;
+            if let Some(h) = h {
+                r.t_max = h.t;
+            }
+            r
+        })
+        .collect();
+    let (mut m, mut many) = (vec![None; n], vec![false; n]);
+    layers.moving_batch(&clipped, &mut m);
+    layers.moving_occluded_batch(rs, &mut many);
+    let static_brute = BruteForce::new(stat);
+    for i in 0..n {
+        prop_assert_eq!(
+            s[i],
+            static_brute.intersect(&rs[i]),
+            "static part's hit differs: frame {} ({}), ray {} {:?}, seed {}",
+            frame,
+            mode,
+            i,
+            rs[i],
+            seed
+        );
+        prop_assert_eq!(
+            closest_of(s[i], m[i]),
+            want[i],
+            "split closest hit differs: frame {} ({}), ray {} {:?}, seed {}",
+            frame,
+            mode,
+            i,
+            rs[i],
+            seed
+        );
+        prop_assert_eq!(
+            sany[i] || many[i],
+            wany[i],
+            "split any hit differs: frame {} ({}), ray {} {:?}, seed {}",
+            frame,
+            mode,
+            i,
+            rs[i],
+            seed
+        );
     }
     Ok(())
 }

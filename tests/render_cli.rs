@@ -83,6 +83,59 @@ fn frames_do_not_depend_on_the_thread_count() {
     assert_eq!(snapshot(&dir.join("t1")), a);
 }
 
+/// A camera that stays put (the side camera) at one sample a pixel: from the second
+/// frame on, the camera rays' static hits and the shadow rays' static answers are the
+/// ones kept from the frame before, and only the moving cube is traced again. Every
+/// frame must be the bytes it is when rendered alone (nothing kept to reuse), AOVs
+/// included, whatever the thread count; and a camera that moves in some frames and stays
+/// in others changes nothing either.
+#[test]
+fn a_still_camera_reuses_static_hits_and_frames_stay_the_same() {
+    let dir = temp_dir("memo");
+    let scene = write_scene(&dir);
+    let render = |sub: &str, frames: &str, camera: &str, threads: &str| {
+        let out = dir.join(format!("{sub}/f.##.exr"));
+        ok(&[
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--frames",
+            frames,
+            "--size",
+            "96x72",
+            "--camera",
+            camera,
+            "--max-depth",
+            "2",
+            "--aov",
+            ALL_AOVS,
+            "--threads",
+            threads,
+            "--quiet",
+        ]);
+    };
+    let frame = |sub: &str, k: u32| std::fs::read(dir.join(format!("{sub}/f.{k:02}.exr"))).unwrap();
+    for (camera, name) in [("side camera", "still"), ("main", "moving")] {
+        render(name, "0..8", camera, "2");
+        render(&format!("{name}1"), "0..8", camera, "1");
+        for k in [0, 1, 4, 7] {
+            let alone = format!("{name}-alone{k}");
+            render(&alone, &k.to_string(), camera, "2");
+            assert!(
+                frame(name, k) == frame(&alone, k),
+                "{name} camera: frame {k} of a sequence differs from the frame rendered alone"
+            );
+            assert!(
+                frame(name, k) == frame(&format!("{name}1"), k),
+                "{name} camera: frame {k} differs between 1 and 2 threads"
+            );
+        }
+    }
+    // The cube moves in front of the still camera: the frames are not all one picture.
+    assert!(frame("still", 0) != frame("still", 7));
+}
+
 #[test]
 fn resume_completes_an_interrupted_run_and_redoes_broken_frames() {
     let dir = temp_dir("resume");

@@ -103,4 +103,39 @@ pub trait Intersector: Sync {
             .with_min_len(64)
             .for_each(|(r, o)| *o = self.occluded(r));
     }
+
+    /// The structure's static and moving triangles traced apart ([`Layers`]), where it
+    /// has the two; `None` (the default) where it is one set.
+    fn layers(&self) -> Option<&dyn Layers> {
+        None
+    }
+}
+
+/// A set of triangles made of a static part, which stays from frame to frame, and a
+/// moving part, traced apart: what a ray meets in the static part can then be kept for
+/// the same ray in a later frame, and only the moving part traced again.
+///
+/// Hits are numbered as the whole structure numbers them, every static triangle before
+/// every moving one, so the closest hit of the whole is [`closest_of`] the two parts' (the moving part traced up to the static hit), and a ray is blocked when
+/// either part blocks it: the same hits, ties included, as the structure's own queries.
+pub trait Layers: Sync {
+    /// The static triangles' count: hits below it name static triangles.
+    fn static_count(&self) -> usize;
+    /// The closest static hit of each ray.
+    fn static_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]);
+    /// Whether a static triangle blocks each ray.
+    fn static_occluded_batch(&self, rays: &[Ray], out: &mut [bool]);
+    /// The closest moving hit of each ray.
+    fn moving_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]);
+    /// Whether a moving triangle blocks each ray.
+    fn moving_occluded_batch(&self, rays: &[Ray], out: &mut [bool]);
+}
+
+/// The closer of two hits under [`Hit::is_closer_than`] (either, where one is `None`).
+#[inline]
+pub fn closest_of(a: Option<Hit>, b: Option<Hit>) -> Option<Hit> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(if b.is_closer_than(&a) { b } else { a }),
+        (a, b) => a.or(b),
+    }
 }

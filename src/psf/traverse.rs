@@ -387,6 +387,7 @@ impl Psf {
             margin: self.margin,
             bounds: self.bounds,
             cache: &self.points,
+            within: false,
         }
     }
 

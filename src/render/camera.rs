@@ -34,6 +34,45 @@ pub struct CameraModel {
 }
 
 impl CameraModel {
+    /// How many 32-bit words [`bits`](Self::bits) gives.
+    pub const BITS: usize = 19;
+
+    /// Every field's bits: two models with the same bits make the same rays, to the bit
+    /// (`PartialEq` would take `-0.0` for `0.0`).
+    pub fn bits(&self) -> [u32; Self::BITS] {
+        let r = self.rotation.to_cols_array();
+        let (has, (ox, oy)) = match self.ortho {
+            Some(o) => (1, o),
+            None => (0, (0.0, 0.0)),
+        };
+        let mut b = [0u32; Self::BITS];
+        let floats = [
+            self.origin.x,
+            self.origin.y,
+            self.origin.z,
+            r[0],
+            r[1],
+            r[2],
+            r[3],
+            r[4],
+            r[5],
+            r[6],
+            r[7],
+            r[8],
+            self.tan_half,
+            self.aspect,
+            ox,
+            oy,
+        ];
+        for (d, f) in b.iter_mut().zip(floats) {
+            *d = f.to_bits();
+        }
+        b[16] = has;
+        b[17] = self.width;
+        b[18] = self.height;
+        b
+    }
+
     /// The model of a scene camera: `yfov` (or `ymag`) vertical, the horizontal extent
     /// from the image, whatever the camera's own aspect ratio.
     pub fn from_scene(cam: &Camera, width: u32, height: u32) -> CameraModel {

@@ -34,6 +34,7 @@ mod camera;
 mod errors;
 mod exr_zip;
 mod lights;
+mod memo;
 mod mips;
 mod options;
 mod output;

@@ -237,6 +237,12 @@ impl<'a> ShadeContext<'a> {
         }
     }
 
+    /// The punctual lights' count: their shadow rays are batches `0..count`, the area
+    /// lights' the batch after.
+    pub(super) fn punctual_lights(&self) -> usize {
+        self.lights.len()
+    }
+
     fn material(&self, i: u32) -> Option<&Material> {
         self.scene.materials.get(i as usize)
     }

@@ -10,6 +10,7 @@ use rayon::prelude::*;
 
 use super::aov::{project, rank, CryptoNames};
 use super::camera::CameraModel;
+use super::memo::{Mode, StaticMemo, MAX_LIGHTS};
 use super::options::Aovs;
 use super::sampling::Seed;
 use super::shade::{BlockOut, Cone, CryptoBuffers, FrameBuffers, FrameWork, Item, ShadeContext};
@@ -54,6 +55,8 @@ pub struct FrameScratch {
     light_start: Vec<usize>,
     blocked: Vec<bool>,
     spare: Option<FrameBuffers>,
+    /// The static answers of the last frame's camera and shadow rays.
+    memo: StaticMemo,
 }
 
 impl FrameScratch {
@@ -237,7 +240,10 @@ pub fn render_frame_with<T: Intersector>(
         light_start,
         blocked,
         spare: _,
+        memo,
     } = scratch;
+    let layers = tracer.layers();
+    let mode = memo.begin(camera, spp, w * h, layers.is_some());
     let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
     let levels = aovs.crypto_levels.max(1) as usize;
     if crypto.is_some() {
@@ -312,7 +318,16 @@ pub fn render_frame_with<T: Intersector>(
                     .with_min_len(4 * BLOCK)
                     .map(|_| None),
             );
-            tracer.intersect_batch(rays, hits);
+            // The camera rays and their shadow rays, through what the memo keeps where
+            // it serves; any other batch through the whole.
+            let memo_layers = layers.filter(|_| first && mode != Mode::Off);
+            match memo_layers {
+                Some(l) => {
+                    let whole = |r: &[Ray], h: &mut [Option<Hit>]| tracer.intersect_batch(r, h);
+                    memo.primary(mode, l, &whole, px0, rays, hits)
+                }
+                None => tracer.intersect_batch(rays, hits),
+            }
             work.trace += clock.elapsed();
 
             let clock = Instant::now();
@@ -405,10 +420,23 @@ pub fn render_frame_with<T: Intersector>(
 
             let clock = Instant::now();
             refill(blocked, shadow_rays.len(), false);
-            for w in light_start.windows(2) {
-                let (a, b) = (w[0], w[1]);
-                if a < b {
-                    tracer.occluded_batch(&shadow_rays[a..b], &mut blocked[a..b]);
+            for (l, span) in light_start.windows(2).enumerate() {
+                let (a, b) = (span[0], span[1]);
+                if a >= b {
+                    continue;
+                }
+                match memo_layers {
+                    Some(layers) if l < ctx.punctual_lights().min(MAX_LIGHTS) => memo.shadows(
+                        layers,
+                        &|r: &[Ray], b: &mut [bool]| tracer.occluded_batch(r, b),
+                        l,
+                        px0,
+                        w * h,
+                        &shadow_rays[a..b],
+                        &shadow_add[a..b],
+                        &mut blocked[a..b],
+                    ),
+                    _ => tracer.occluded_batch(&shadow_rays[a..b], &mut blocked[a..b]),
                 }
             }
             work.trace += clock.elapsed();
@@ -462,6 +490,7 @@ pub fn render_frame_with<T: Intersector>(
         work.shade += clock.elapsed();
         y0 = y1;
     }
+    memo.end(mode);
     (fb, work)
 }
 

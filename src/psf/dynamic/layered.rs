@@ -1,10 +1,13 @@
 //! The static PSF and a dynamic layer queried together ([`Layered`]).
 
+use rayon::prelude::*;
+
 use super::DynamicLayer;
-use crate::geometry::{Hit, Intersector, Ray, RayPre};
+use crate::geometry::{closest_of, Hit, Intersector, Layers, Ray, RayPre};
 use crate::psf::batch::binned;
 use crate::psf::point::{trace_batch, Plan, Sources};
 use crate::psf::stats::{Counter, NoCount, RayStats};
+use crate::psf::traverse::clipped_span;
 use crate::psf::Psf;
 
 /// The static PSF and a dynamic layer queried together.
@@ -102,10 +105,96 @@ impl Layered<'_> {
                 h.tri += offset;
                 h
             });
-        match (s, d) {
-            (Some(a), Some(b)) => Some(if b.is_closer_than(&a) { b } else { a }),
-            (a, b) => a.or(b),
+        closest_of(s, d)
+    }
+
+    /// The moving triangles alone (numbered after the static ones), `sub`: the static
+    /// subfield when a batch knows it.
+    fn trace_moving<const ANY: bool>(&self, ray: &Ray, sub: Option<usize>) -> Option<Hit> {
+        if !ray.is_valid() {
+            return None;
         }
+        let pre = RayPre::new(ray.origin, ray.dir);
+        let dyn_sub = sub.and_then(|k| self.dyn_of.get(k)).map(|&k| k as usize);
+        let offset = self.psf.triangles().len() as u32;
+        self.dynamic
+            .trace_pre::<ANY, _>(ray, &pre, dyn_sub, &mut NoCount)
+            .map(|mut h| {
+                h.tri += offset;
+                h
+            })
+    }
+
+    /// A batch through the moving triangles alone: point grids over them where the
+    /// batch pays for one (the grids the layered batch would build over them, with the
+    /// same margin and bounds, but no static grid beside), the rest binned.
+    fn moving_batch_of<const ANY: bool, T: Send + Sync + Copy + Default>(
+        &self,
+        rays: &[Ray],
+        out: &mut [T],
+        wrap: impl Fn(Option<Hit>) -> T + Sync,
+    ) {
+        let d = self.dynamic;
+        if d.is_empty() {
+            out.fill(wrap(None));
+            return;
+        }
+        // Rays that miss the moving triangles' bounds (grown by their rounding
+        // allowance, as the layer's own walk clips them) meet none of them: only the
+        // others are traced, which in a clustered frame is a few of them.
+        let near: Vec<u32> = rays
+            .par_iter()
+            .enumerate()
+            .with_min_len(1024)
+            .filter(|(_, r)| clipped_span(&d.clip, r).is_some())
+            .map(|(i, _)| i as u32)
+            .collect();
+        if near.len() < rays.len() {
+            out.par_iter_mut().for_each(|o| *o = wrap(None));
+            if near.is_empty() {
+                return;
+            }
+            let some: Vec<Ray> = near.par_iter().map(|&i| rays[i as usize]).collect();
+            let mut answers = vec![wrap(None); some.len()];
+            self.moving_traced::<ANY, T>(&some, &mut answers, wrap);
+            for (&i, a) in near.iter().zip(answers) {
+                out[i as usize] = a;
+            }
+            return;
+        }
+        self.moving_traced::<ANY, T>(rays, out, wrap);
+    }
+
+    /// [`moving_batch_of`](Self::moving_batch_of) for rays that may meet the moving
+    /// triangles' bounds.
+    fn moving_traced<const ANY: bool, T: Send + Sync + Copy + Default>(
+        &self,
+        rays: &[Ray],
+        out: &mut [T],
+        wrap: impl Fn(Option<Hit>) -> T + Sync,
+    ) {
+        let d = self.dynamic;
+        let offset = self.psf.triangles().len() as u32;
+        let number: Vec<u32> = d.order.iter().map(|&k| k + offset).collect();
+        let all = self.sources();
+        let src = Sources {
+            statics: &[],
+            moving_number: &number,
+            cache: &d.moving_points,
+            within: true,
+            ..all
+        };
+        let bins = self.psf.subfields().len().max(1);
+        let walk = |rays: &[Ray], out: &mut [T]| {
+            binned(
+                rays,
+                out,
+                bins,
+                |r| self.psf.bin_of(r),
+                |r, k| wrap(self.trace_moving::<ANY>(r, Some(k))),
+            )
+        };
+        trace_batch::<ANY, _>(rays, out, &src, &wrap, walk);
     }
 
     /// Whether [`intersect_batch`](Intersector::intersect_batch) and
@@ -139,6 +228,7 @@ impl Layered<'_> {
                 self.psf.bounds().union(&d.clip)
             },
             cache: self.psf.point_cache(),
+            within: false,
         }
     }
 
@@ -194,5 +284,31 @@ impl Intersector for Layered<'_> {
             )
         };
         trace_batch::<true, _>(rays, out, &self.sources(), |h| h.is_some(), walk);
+    }
+
+    fn layers(&self) -> Option<&dyn Layers> {
+        Some(self)
+    }
+}
+
+impl Layers for Layered<'_> {
+    fn static_count(&self) -> usize {
+        self.psf.triangles().len()
+    }
+
+    fn static_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        self.psf.intersect_batch(rays, out);
+    }
+
+    fn static_occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
+        self.psf.occluded_batch(rays, out);
+    }
+
+    fn moving_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        self.moving_batch_of::<false, _>(rays, out, |h| h);
+    }
+
+    fn moving_occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
+        self.moving_batch_of::<true, _>(rays, out, |h| h.is_some());
     }
 }

@@ -40,6 +40,7 @@ use rayon::prelude::*;
 pub use layered::{Layered, Prim};
 
 use super::bsp::LANES;
+use super::point::PointCache;
 use super::stats::{Counter, NoCount, RayStats};
 use super::traverse::{block_window, clipped_span, scan_blocks, walk_tiles};
 use super::{
@@ -72,6 +73,10 @@ pub struct DynamicLayer {
     keys: Vec<u32>,
     counts: Vec<u32>,
     subfields: Vec<DynSubfield>,
+    /// The cache of the point grids over the moving triangles alone
+    /// ([`Layers`](crate::geometry::Layers)): it keeps none (they move), but planning
+    /// needs one.
+    pub(super) moving_points: PointCache,
 }
 
 /// Occupancy and memory of the layer after an update.
@@ -179,6 +184,11 @@ impl DynamicLayer {
             keys: Vec::new(),
             counts: Vec::new(),
             subfields,
+            moving_points: {
+                let c = PointCache::default();
+                c.set_capacity(0);
+                c
+            },
         })
     }
 

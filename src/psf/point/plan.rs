@@ -12,7 +12,7 @@ use super::cache::{static_pre, Keep};
 use super::center::center;
 use super::project::aim;
 use super::spread::{spread, Spread};
-use super::types::{grown, union, Around, PointGrid, Sources, StaticGrid};
+use super::types::{grown, union, Around, PointGrid, Sources, StaticGrid, WITHIN};
 use crate::geometry::{Ray, TriPre};
 
 /// A kept static grid has at least a tile for this many of its triangles (and
@@ -236,7 +236,7 @@ impl<'a> Plan<'a> {
         // and face: 12 for camera and shadow rays; rays that pass the point on their way
         // elsewhere (reflections off a plane) saved about a quarter of that, and pay
         // for half of what that would.
-        let saves = if 2 * spread.ends >= n { 12 } else { 2 };
+        let saves = if 2 * spread.ends >= n { 12 } else { 2 } * if src.within { WITHIN } else { 1 };
         let faces = rects.iter().filter(|b| b.4 > 0).count();
         let nmov = src.moving_pre.len();
         // The kept grid serves when the batch's rectangles and origins lie within its

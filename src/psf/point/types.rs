@@ -74,7 +74,18 @@ pub(crate) struct Sources<'a> {
     pub bounds: Aabb,
     /// The static PSF's grids over `statics`, kept from batch to batch.
     pub cache: &'a PointCache,
+    /// Whether every ray of the batch is known to meet the triangles' bounds (the
+    /// moving triangles traced apart, the rays that miss them left out): such a ray
+    /// walks through them in the parallel subfields, which costs [`WITHIN`] times the
+    /// planner's usual figure or more.
+    pub within: bool,
 }
+
+/// What a ray that meets the (moving) triangles' bounds costs in the parallel subfields,
+/// over the planner's usual figure: 17 µs a ray of two threads' time where the moving
+/// triangles are clustered (the first frames of the museum-class scene), against the
+/// 0.4–0.6 µs the planner takes (`benches/PERF.md`, issue 23, step 12).
+pub(super) const WITHIN: usize = 8;
 
 /// A grid's point and the numbers fixed with it: the near cube's half size `r`, how
 /// closely a line must pass `c` to qualify (`rho_max`), the furthest squared distance

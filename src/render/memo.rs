@@ -1,0 +1,300 @@
+//! What a frame's rays met in the static part, kept for the next frame: a camera that
+//! stays put sends the same camera rays every frame (one sample a pixel: the pixel
+//! centres), and where they hit static triangles the same shadow rays, whose static
+//! answers cannot change either (the static triangles do not move). A frame then
+//! traces those rays through the moving triangles alone ([`Layers`]).
+//!
+//! The hits are those of tracing the whole each frame: the static hit kept is the one
+//! the static part gives that very ray (a camera ray is the same ray when the camera is
+//! the same to the bit; a shadow ray is compared to the bit with the one kept), and the
+//! whole's answer follows from the two parts' ([`closest_of`], or either blocking).
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::camera::CameraModel;
+use crate::geometry::{closest_of, Hit, Layers, Ray};
+
+/// Lights whose shadow rays' static answers are kept, the first so many of a frame's
+/// punctual lights (each costs 36 bytes a pixel).
+pub(super) const MAX_LIGHTS: usize = 8;
+
+/// A batch's closest hits through the whole structure.
+pub(super) type Whole<'a> = &'a dyn Fn(&[Ray], &mut [Option<Hit>]);
+
+/// What a frame does with the memo.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Mode {
+    /// The whole traced as one, nothing kept: the structure has no static part of its
+    /// own, pixels take several samples (jittered anew each frame), or the camera has
+    /// just moved (a camera that moves every frame gains nothing).
+    Off,
+    /// The camera rays' static hits traced and kept, the moving part traced apart.
+    Fill,
+    /// The camera rays' static hits are those kept.
+    Reuse,
+}
+
+/// The static answers kept from frame to frame, and the buffers of the split trace.
+#[derive(Default)]
+pub(super) struct StaticMemo {
+    /// The camera whose rays `primary` answers (its bits), and whether it holds a whole
+    /// frame's.
+    camera: Option<[u32; CameraModel::BITS]>,
+    filled: bool,
+    /// The closest static hit of each pixel's camera ray.
+    primary: Vec<Option<Hit>>,
+    /// Per punctual light, per pixel: the last shadow ray from the pixel's camera hit
+    /// towards the light, and whether a static triangle blocks it.
+    shadow: Vec<Vec<(Ray, bool)>>,
+    clipped: Vec<Ray>,
+    moving: Vec<Option<Hit>>,
+    need: Vec<u32>,
+    gathered: Vec<Ray>,
+    answers: Vec<bool>,
+}
+
+/// The bits of a ray, for an exact comparison (`-0.0` is not `0.0` here, and a NaN is
+/// itself).
+#[inline]
+fn same(a: &Ray, b: &Ray) -> bool {
+    let bits = |r: &Ray| {
+        [
+            r.origin.x.to_bits(),
+            r.origin.y.to_bits(),
+            r.origin.z.to_bits(),
+            r.dir.x.to_bits(),
+            r.dir.y.to_bits(),
+            r.dir.z.to_bits(),
+            r.t_min.to_bits(),
+            r.t_max.to_bits(),
+        ]
+    };
+    bits(a) == bits(b)
+}
+
+/// A slot no shadow ray has filled: a ray of zero direction, which every query answers
+/// "not blocked", so that an equal ray would get the right answer from it.
+const EMPTY: (Ray, bool) = (
+    Ray {
+        origin: Vec3::ZERO,
+        dir: Vec3::ZERO,
+        t_min: 0.0,
+        t_max: 0.0,
+    },
+    false,
+);
+
+impl StaticMemo {
+    /// What this frame does: `pixels` of one sample each (`spp`), through a structure
+    /// with (`layered`) or without a static part of its own.
+    pub(super) fn begin(
+        &mut self,
+        camera: &CameraModel,
+        spp: usize,
+        pixels: usize,
+        layered: bool,
+    ) -> Mode {
+        if !layered || spp != 1 {
+            self.camera = None;
+            self.filled = false;
+            return Mode::Off;
+        }
+        let bits = camera.bits();
+        let mode = match self.camera {
+            Some(b) if b == bits && self.filled && self.primary.len() == pixels => Mode::Reuse,
+            Some(b) if b == bits => Mode::Fill,
+            None => Mode::Fill,
+            Some(_) => Mode::Off,
+        };
+        self.camera = Some(bits);
+        self.filled = false;
+        if mode == Mode::Fill {
+            self.primary.clear();
+            self.primary.resize(pixels, None);
+        }
+        mode
+    }
+
+    /// The frame is done: what it filled serves the next.
+    pub(super) fn end(&mut self, mode: Mode) {
+        self.filled = matches!(mode, Mode::Fill | Mode::Reuse);
+    }
+
+    /// The closest hits of a chunk's camera rays (`rays`, from pixel `base` on, one
+    /// sample each) into `hits`. `Fill`: traced through the whole (`whole`), the static
+    /// hit kept where the hit is static or there is none, and traced through the static
+    /// part where a moving triangle is in front. `Reuse`: the moving triangles traced up
+    /// to the static hits kept.
+    pub(super) fn primary(
+        &mut self,
+        mode: Mode,
+        layers: &dyn Layers,
+        whole: Whole<'_>,
+        base: usize,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+    ) {
+        let n = rays.len();
+        let kept = &mut self.primary[base..base + n];
+        if mode == Mode::Fill {
+            whole(rays, hits);
+            let statics = layers.static_count();
+            kept.par_iter_mut()
+                .zip(hits.par_iter())
+                .with_min_len(1024)
+                .for_each(|(k, h)| *k = h.filter(|h| (h.tri as usize) < statics));
+            self.need.clear();
+            self.need.par_extend(
+                hits.par_iter()
+                    .enumerate()
+                    .with_min_len(1024)
+                    .filter(|(_, h)| h.is_some_and(|h| h.tri as usize >= statics))
+                    .map(|(i, _)| i as u32),
+            );
+            if self.need.is_empty() {
+                return;
+            }
+            self.gathered.clear();
+            self.gathered
+                .par_extend(self.need.par_iter().map(|&i| rays[i as usize]));
+            self.moving.clear();
+            self.moving.resize(self.need.len(), None);
+            layers.static_batch(&self.gathered, &mut self.moving);
+            for (&i, &h) in self.need.iter().zip(&self.moving) {
+                kept[i as usize] = h;
+            }
+            return;
+        }
+        self.clipped.clear();
+        self.clipped
+            .par_extend(rays.par_iter().zip(kept.par_iter()).map(|(r, h)| {
+                let mut r = *r;
+                if let Some(h) = h {
+                    // A moving triangle beyond the static hit cannot be the closest;
+                    // one at the same `t` loses the tie.
+                    r.t_max = h.t;
+                }
+                r
+            }));
+        self.moving.clear();
+        self.moving.resize(n, None);
+        layers.moving_batch(&self.clipped, &mut self.moving);
+        hits.par_iter_mut()
+            .zip(kept.par_iter().zip(self.moving.par_iter()))
+            .with_min_len(1024)
+            .for_each(|(o, (s, m))| *o = closest_of(*s, *m));
+    }
+
+    /// Whether each of a chunk's shadow rays towards punctual light `light` (below
+    /// [`MAX_LIGHTS`]) is blocked, into `blocked`: `rays[i]` leaves the camera hit of
+    /// pixel `base + pixel[i].0` (of `pixels`). A static answer is kept per pixel with its
+    /// ray and reused for the same ray, the moving triangles traced for the rays no
+    /// static one blocks. Where most rays are new (a first frame), the batch is traced
+    /// through the whole (`whole`) and the static part traced for the blocked new ones
+    /// alone (an unblocked ray is blocked by nothing static).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn shadows(
+        &mut self,
+        layers: &dyn Layers,
+        whole: &dyn Fn(&[Ray], &mut [bool]),
+        light: usize,
+        base: usize,
+        pixels: usize,
+        rays: &[Ray],
+        pixel: &[(u32, Vec3)],
+        blocked: &mut [bool],
+    ) {
+        if self.shadow.len() <= light {
+            self.shadow.resize_with(light + 1, Vec::new);
+        }
+        let kept = &mut self.shadow[light];
+        if kept.len() != pixels {
+            kept.clear();
+            kept.resize(pixels, EMPTY);
+        }
+        // Each ray's kept static answer, and the rays that have none.
+        {
+            let kept = &*kept;
+            let slot = |s: u32| &kept[base + s as usize];
+            blocked
+                .par_iter_mut()
+                .zip(rays.par_iter().zip(pixel.par_iter()))
+                .with_min_len(1024)
+                .for_each(|(b, (r, &(s, _)))| {
+                    let (k, answer) = slot(s);
+                    // Not blocked and not kept read the same here; `need` tells them
+                    // apart.
+                    *b = same(k, r) && *answer;
+                });
+            self.need.clear();
+            self.need.par_extend(
+                rays.par_iter()
+                    .zip(pixel.par_iter())
+                    .enumerate()
+                    .with_min_len(1024)
+                    .filter(|(_, (r, &(s, _)))| !same(&slot(s).0, r))
+                    .map(|(i, _)| i as u32),
+            );
+        }
+        if 2 * self.need.len() > rays.len() {
+            whole(rays, blocked);
+            // The new rays' static answers: false where nothing blocks them, else
+            // traced.
+            let mut traced = std::mem::take(&mut self.answers);
+            self.gathered.clear();
+            self.gathered.par_extend(
+                self.need
+                    .par_iter()
+                    .filter(|&&i| blocked[i as usize])
+                    .map(|&i| rays[i as usize]),
+            );
+            traced.clear();
+            traced.resize(self.gathered.len(), false);
+            layers.static_occluded_batch(&self.gathered, &mut traced);
+            let mut answers = traced.iter();
+            for &i in &self.need {
+                let i = i as usize;
+                let a = blocked[i] && answers.next().copied().unwrap_or(true);
+                kept[base + pixel[i].0 as usize] = (rays[i], a);
+            }
+            self.answers = traced;
+            return;
+        }
+        if !self.need.is_empty() {
+            self.gathered.clear();
+            self.gathered
+                .par_extend(self.need.par_iter().map(|&i| rays[i as usize]));
+            self.answers.clear();
+            self.answers.resize(self.need.len(), false);
+            layers.static_occluded_batch(&self.gathered, &mut self.answers);
+            for (&i, &a) in self.need.iter().zip(&self.answers) {
+                let i = i as usize;
+                kept[base + pixel[i].0 as usize] = (rays[i], a);
+                blocked[i] = a;
+            }
+        }
+        // The moving triangles, for the rays no static one blocks.
+        self.need.clear();
+        self.need.par_extend(
+            blocked
+                .par_iter()
+                .enumerate()
+                .with_min_len(1024)
+                .filter(|(_, &b)| !b)
+                .map(|(i, _)| i as u32),
+        );
+        if self.need.is_empty() {
+            return;
+        }
+        self.gathered.clear();
+        self.gathered
+            .par_extend(self.need.par_iter().map(|&i| rays[i as usize]));
+        self.answers.clear();
+        self.answers.resize(self.need.len(), false);
+        layers.moving_occluded_batch(&self.gathered, &mut self.answers);
+        for (&i, &a) in self.need.iter().zip(&self.answers) {
+            blocked[i as usize] = a;
+        }
+    }
+}
