@@ -15,9 +15,22 @@ use rayon::prelude::*;
 use super::camera::CameraModel;
 use crate::geometry::{closest_of, Hit, Layers, Ray};
 
-/// Lights whose shadow rays' static answers are kept, the first so many of a frame's
-/// punctual lights (each costs 36 bytes a pixel).
-pub(super) const MAX_LIGHTS: usize = 8;
+/// Lights whose shadow rays' static answers are kept, at most: the first so many of a
+/// frame's punctual lights, fewer where [`SHADOW_BYTES`] would not hold them.
+const MAX_LIGHTS: usize = 8;
+
+/// The memory the kept shadow answers may take (36 bytes a pixel and light): eight
+/// lights at 640x480, three at 1920x1080, none at 4096x2160.
+const SHADOW_BYTES: usize = 256 << 20;
+
+/// The memory the kept camera-ray hits may take (20 bytes a pixel): beyond it (some 26
+/// million pixels) nothing is kept.
+const PRIMARY_BYTES: usize = 512 << 20;
+
+/// How many punctual lights' shadow answers a frame of `pixels` keeps.
+pub(super) fn lights_kept(pixels: usize) -> usize {
+    (SHADOW_BYTES / (std::mem::size_of::<(Ray, bool)>() * pixels.max(1))).min(MAX_LIGHTS)
+}
 
 /// A batch's closest hits through the whole structure.
 pub(super) type Whole<'a> = &'a dyn Fn(&[Ray], &mut [Option<Hit>]);
@@ -95,7 +108,7 @@ impl StaticMemo {
         pixels: usize,
         layered: bool,
     ) -> Mode {
-        if !layered || spp != 1 {
+        if !layered || spp != 1 || pixels * std::mem::size_of::<Option<Hit>>() > PRIMARY_BYTES {
             self.camera = None;
             self.filled = false;
             return Mode::Off;
@@ -187,7 +200,7 @@ impl StaticMemo {
     }
 
     /// Whether each of a chunk's shadow rays towards punctual light `light` (below
-    /// [`MAX_LIGHTS`]) is blocked, into `blocked`: `rays[i]` leaves the camera hit of
+    /// [`lights_kept`]) is blocked, into `blocked`: `rays[i]` leaves the camera hit of
     /// pixel `base + pixel[i].0` (of `pixels`). A static answer is kept per pixel with its
     /// ray and reused for the same ray, the moving triangles traced for the rays no
     /// static one blocks. Where most rays are new (a first frame), the batch is traced

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use super::aov::{project, rank, CryptoNames};
 use super::camera::CameraModel;
-use super::memo::{Mode, StaticMemo, MAX_LIGHTS};
+use super::memo::{lights_kept, Mode, StaticMemo};
 use super::options::Aovs;
 use super::sampling::Seed;
 use super::shade::{BlockOut, Cone, CryptoBuffers, FrameBuffers, FrameWork, Item, ShadeContext};
@@ -426,16 +426,17 @@ pub fn render_frame_with<T: Intersector>(
                     continue;
                 }
                 match memo_layers {
-                    Some(layers) if l < ctx.punctual_lights().min(MAX_LIGHTS) => memo.shadows(
-                        layers,
-                        &|r: &[Ray], b: &mut [bool]| tracer.occluded_batch(r, b),
-                        l,
-                        px0,
-                        w * h,
-                        &shadow_rays[a..b],
-                        &shadow_add[a..b],
-                        &mut blocked[a..b],
-                    ),
+                    Some(layers) if l < ctx.punctual_lights().min(lights_kept(w * h)) => memo
+                        .shadows(
+                            layers,
+                            &|r: &[Ray], b: &mut [bool]| tracer.occluded_batch(r, b),
+                            l,
+                            px0,
+                            w * h,
+                            &shadow_rays[a..b],
+                            &shadow_add[a..b],
+                            &mut blocked[a..b],
+                        ),
                     _ => tracer.occluded_batch(&shadow_rays[a..b], &mut blocked[a..b]),
                 }
             }
