@@ -98,6 +98,24 @@ const EMPTY: (Ray, bool) = (
     false,
 );
 
+/// `need` as the indices of the `xs` that `pick` picks, in order.
+fn select<T: Sync>(need: &mut Vec<u32>, xs: &[T], pick: impl Fn(&T) -> bool + Sync) {
+    need.clear();
+    need.par_extend(
+        xs.par_iter()
+            .enumerate()
+            .with_min_len(1024)
+            .filter(|(_, x)| pick(x))
+            .map(|(i, _)| i as u32),
+    );
+}
+
+/// `gathered` as the rays `need` names, in its order.
+fn gather(gathered: &mut Vec<Ray>, need: &[u32], rays: &[Ray]) {
+    gathered.clear();
+    gathered.par_extend(need.par_iter().map(|&i| rays[i as usize]));
+}
+
 impl StaticMemo {
     /// What this frame does: `pixels` of one sample each (`spp`), through a structure
     /// with (`layered`) or without a static part of its own.
@@ -157,20 +175,13 @@ impl StaticMemo {
                 .zip(hits.par_iter())
                 .with_min_len(1024)
                 .for_each(|(k, h)| *k = h.filter(|h| (h.tri as usize) < statics));
-            self.need.clear();
-            self.need.par_extend(
-                hits.par_iter()
-                    .enumerate()
-                    .with_min_len(1024)
-                    .filter(|(_, h)| h.is_some_and(|h| h.tri as usize >= statics))
-                    .map(|(i, _)| i as u32),
-            );
+            select(&mut self.need, hits, |h| {
+                h.is_some_and(|h| h.tri as usize >= statics)
+            });
             if self.need.is_empty() {
                 return;
             }
-            self.gathered.clear();
-            self.gathered
-                .par_extend(self.need.par_iter().map(|&i| rays[i as usize]));
+            gather(&mut self.gathered, &self.need, rays);
             self.moving.clear();
             self.moving.resize(self.need.len(), None);
             layers.static_batch(&self.gathered, &mut self.moving);
@@ -275,9 +286,7 @@ impl StaticMemo {
             return;
         }
         if !self.need.is_empty() {
-            self.gathered.clear();
-            self.gathered
-                .par_extend(self.need.par_iter().map(|&i| rays[i as usize]));
+            gather(&mut self.gathered, &self.need, rays);
             self.answers.clear();
             self.answers.resize(self.need.len(), false);
             layers.static_occluded_batch(&self.gathered, &mut self.answers);
@@ -288,21 +297,11 @@ impl StaticMemo {
             }
         }
         // The moving triangles, for the rays no static one blocks.
-        self.need.clear();
-        self.need.par_extend(
-            blocked
-                .par_iter()
-                .enumerate()
-                .with_min_len(1024)
-                .filter(|(_, &b)| !b)
-                .map(|(i, _)| i as u32),
-        );
+        select(&mut self.need, blocked, |&b| !b);
         if self.need.is_empty() {
             return;
         }
-        self.gathered.clear();
-        self.gathered
-            .par_extend(self.need.par_iter().map(|&i| rays[i as usize]));
+        gather(&mut self.gathered, &self.need, rays);
         self.answers.clear();
         self.answers.resize(self.need.len(), false);
         layers.moving_occluded_batch(&self.gathered, &mut self.answers);
