@@ -264,9 +264,20 @@ fn aff_ambient_lights_the_floor_and_survives_the_conversion() {
     import::write_gltf(&scene, &glb).unwrap();
     let back = import::load(&glb).unwrap();
     assert_eq!(back.ambient, scene.ambient);
-    let (a, _) = render_rgb(&scene, &dir, "am-aff", None, Vec3::splat(0.3));
+    let (a, out) = render_rgb(&scene, &dir, "am-aff", None, Vec3::splat(0.3));
     let (b, _) = render_rgb(&back, &dir, "am-glb", None, Vec3::splat(0.3));
     assert_eq!(a, b);
+    // The frame's options string records the ambient light used, the scene's.
+    let header = std::fs::read(&out).unwrap();
+    let has = |s: &str| header.windows(s.len()).any(|w| w == s.as_bytes());
+    assert!(
+        has("ambient=scene:0.5,0.25,0 "),
+        "the header records the scene's ambient"
+    );
+    assert!(
+        !has("ambient=0.3,"),
+        "the header records the options' ambient"
+    );
 
     std::fs::write(&path, AFF_FLOOR.replace("%AM%", "")).unwrap();
     let scene = import::load(&path).unwrap();

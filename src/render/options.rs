@@ -458,8 +458,11 @@ impl Default for RenderOptions {
 impl RenderOptions {
     /// The options that change pixels, as one string: it goes into every frame's header
     /// (`subfield/options`) and `--resume` re-renders a frame whose string differs.
-    /// `fps` is the resolved rate (the plan's). Deterministic: no time stamps, no paths.
-    pub fn options_string(&self, fps: f32) -> String {
+    /// `fps` is the resolved rate (the plan's); `scene_ambient`, the scene's own ambient
+    /// light where it has one (the plan's), is written in place of the options' ambient
+    /// term, which it replaces (`ambient=scene:R,G,B`). Deterministic: no time stamps,
+    /// no paths.
+    pub fn options_string(&self, fps: f32, scene_ambient: Option<Vec3>) -> String {
         let mut s = format!(
             "size={}x{} spp={} max-depth={} pixel={} fps={} animation={}",
             self.width,
@@ -498,15 +501,13 @@ impl RenderOptions {
             s += &format!(" crypto-levels={}", self.aovs.crypto_levels.max(1));
         }
         let sh = &self.shading;
+        let (from, a) = match scene_ambient {
+            Some(a) => ("scene:", a),
+            None => ("", sh.ambient),
+        };
         s += &format!(
-            " ambient={},{},{} background={},{},{} default-light={}",
-            sh.ambient.x,
-            sh.ambient.y,
-            sh.ambient.z,
-            sh.background.x,
-            sh.background.y,
-            sh.background.z,
-            sh.default_light
+            " ambient={from}{},{},{} background={},{},{} default-light={}",
+            a.x, a.y, a.z, sh.background.x, sh.background.y, sh.background.z, sh.default_light
         );
         s += &format!(" exposure={}", self.exposure);
         s

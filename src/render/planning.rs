@@ -195,6 +195,9 @@ pub struct RenderPlan {
     pub pattern: OutputPattern,
     pub camera: CameraSource,
     pub split: SplitSummary,
+    /// The scene's own ambient light (AFF `am`), which replaces the options' ambient
+    /// term; the options string records it in its place.
+    pub ambient: Option<Vec3>,
 }
 
 impl RenderPlan {
@@ -357,6 +360,7 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
         pattern,
         camera,
         split: static_dynamic_split(scene, selection).summary(),
+        ambient: scene.ambient,
     })
 }
 

@@ -64,7 +64,7 @@ pub fn render_sequence(
         split: &split,
         psf: &psf,
         static_soup: &static_soup,
-        options: opts.options_string(plan.fps),
+        options: opts.options_string(plan.fps, plan.ambient),
         crypto: opts
             .aovs
             .cryptomatte
