@@ -87,7 +87,6 @@ impl Layered<'_> {
         // One shear for both layers: the dynamic walk's ray differs in `t_max` alone.
         let pre = RayPre::new(ray.origin, ray.dir);
         let s = self.psf.trace_pre::<ANY, C>(ray, &pre, sub, count);
-        let dyn_sub = sub.and_then(|k| self.dyn_of.get(k)).map(|&k| k as usize);
         if ANY && s.is_some() {
             return s;
         }
@@ -97,15 +96,28 @@ impl Layered<'_> {
         if let Some(h) = &s {
             r.t_max = h.t;
         }
+        let d = self.moving_pre::<ANY, C>(&r, &pre, sub, count);
+        closest_of(s, d)
+    }
+
+    /// The moving triangles' hit of a valid ray with its shear `pre` (numbered after
+    /// the static ones); `sub`: the static subfield when a batch knows it.
+    #[inline]
+    fn moving_pre<const ANY: bool, C: Counter>(
+        &self,
+        ray: &Ray,
+        pre: &RayPre,
+        sub: Option<usize>,
+        count: &mut C,
+    ) -> Option<Hit> {
+        let dyn_sub = sub.and_then(|k| self.dyn_of.get(k)).map(|&k| k as usize);
         let offset = self.psf.triangles().len() as u32;
-        let d = self
-            .dynamic
-            .trace_pre::<ANY, C>(&r, &pre, dyn_sub, count)
+        self.dynamic
+            .trace_pre::<ANY, C>(ray, pre, dyn_sub, count)
             .map(|mut h| {
                 h.tri += offset;
                 h
-            });
-        closest_of(s, d)
+            })
     }
 
     /// The moving triangles alone (numbered after the static ones), `sub`: the static
@@ -115,14 +127,7 @@ impl Layered<'_> {
             return None;
         }
         let pre = RayPre::new(ray.origin, ray.dir);
-        let dyn_sub = sub.and_then(|k| self.dyn_of.get(k)).map(|&k| k as usize);
-        let offset = self.psf.triangles().len() as u32;
-        self.dynamic
-            .trace_pre::<ANY, _>(ray, &pre, dyn_sub, &mut NoCount)
-            .map(|mut h| {
-                h.tri += offset;
-                h
-            })
+        self.moving_pre::<ANY, _>(ray, &pre, sub, &mut NoCount)
     }
 
     /// A batch through the moving triangles alone: point grids over them where the
