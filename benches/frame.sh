@@ -7,7 +7,17 @@
 #
 #   benches/frame.sh [--quick] [--frames A:B] [--size WxH] [--threads T]
 #                    [--configs STATIC:DYNAMIC:SEED,...] [--skinned JOINTS:TRIS|none]
+#                    [--camera still|dolly] [--own-materials]
 #                    [--repeat N] [--no-blender] [--out DIR]
+#
+# Equal work (issue 38; ../shared/peers/README.md): every generated scene is made a half
+# mirror everywhere (glb_material.py SCENE 0.5 0.0) and Embree runs with --whitted, so both
+# sides trace a camera ray, a shadow ray and a mirror ray at every pixel and a shadow ray at
+# each mirror hit. The headline ratio is the WHOLE subfield process (import, bake, every
+# frame, EXRs on disk: wall time / frames) against Embree's frame. --own-materials keeps the
+# generator's materials (diffuse room, mirror movers) and runs Embree without --whitted: the
+# unequal comparison of earlier tables, kept only to reproduce them. --camera dolly keys the
+# camera on an arc (gen_scene.py --camera-path dolly): no camera ray repeats a frame's.
 #
 # Defaults: scenes of ../shared/peers/gen_scene.py (31 morph keys, one-hot LINEAR weights;
 # frames 0 and 150 are its dense clusters) 10284:16384:1, 10284:16384:2, 10284:4096:3,
@@ -37,6 +47,8 @@ CONFIGS=10284:16384:1,10284:16384:2,10284:4096:3,10284:65536:4
 SKINNED=128:16384
 REPEAT=2
 BLENDER=1
+CAMERA=still
+EQUAL=1
 OUT=target/frame-bench
 while [ $# -gt 0 ]; do
     case "$1" in
@@ -48,14 +60,17 @@ while [ $# -gt 0 ]; do
         --skinned) SKINNED=${2:?--skinned needs a value}; shift ;;
         --repeat) REPEAT=${2:?--repeat needs a value}; shift ;;
         --no-blender) BLENDER=0 ;;
+        --camera) CAMERA=${2:?--camera needs still or dolly}; shift ;;
+        --own-materials) EQUAL=0 ;;
         --out) OUT=${2:?--out needs a value}; shift ;;
-        -h|--help) sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -h|--help) sed -n '2,39p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) die "unknown option $1 (see --help)" ;;
     esac
     shift
 done
 
 PEERS=${PEERS:-../shared/peers}
+[[ "$CAMERA" =~ ^(still|dolly)$ ]] || die "--camera takes still or dolly (got $CAMERA)"
 [[ "$FRAMES" =~ ^([0-9]+):([0-9]+)$ ]] || die "--frames needs A:B, whole numbers (got $FRAMES)"
 F0=${BASH_REMATCH[1]}; F1=${BASH_REMATCH[2]}
 ((F1 > F0)) || die "--frames A:B needs B > A (got $FRAMES)"
@@ -73,7 +88,7 @@ if ((BLENDER)) && ! command -v blender >/dev/null; then
     echo >&2 "benches/frame.sh: no blender: the Cycles column is left out (apt-get install blender)"
     BLENDER=0
 fi
-for f in gen_scene.py embree_anchor.py blender_peer.py; do
+for f in gen_scene.py embree_anchor.py blender_peer.py glb_material.py; do
     [ -f "$PEERS/$f" ] || die "$PEERS/$f is not there (set PEERS)"
 done
 mkdir -p "$OUT"
@@ -90,7 +105,12 @@ echo "* machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d:
 echo "* load before the run: $(uptime | sed 's/.*load average/load average/')"
 echo "* frames $F0..$F1 (Embree: plus one untimed warm-up), ${W}x${H}, $THREADS threads, $REPEAT run(s) a side, alternating"
 echo "* subfield: $SUBFIELD ($("$SUBFIELD" --version 2>/dev/null || echo '?')), \`subfield render SCENE --frames $F0..$F1 --size ${W}x${H} --max-depth 1 --threads $THREADS --stats\` (static part baked in memory; frame = update + trace + shade of the CSV; wall = the whole command / frames, import and bake included)"
-((EMBREE)) && echo "* Embree: $(python3 -c 'import embreex; print("embreex", embreex.__version__)'), embree_anchor.py (two-level, per-frame rebuild; frame = eval + update + trace, no shading, no image)"
+((EMBREE)) && echo "* Embree: $(python3 -c 'import embreex; print("embreex", embreex.__version__)'), embree_anchor.py$( ((EQUAL)) && echo ' --whitted') (two-level, per-frame rebuild; frame = eval + update + trace, no shading, no image)"
+if ((EQUAL)); then
+    echo "* equal work: every material a half mirror (glb_material.py 0.5 0.0), Embree --whitted; camera $CAMERA"
+else
+    echo "* UNEQUAL work (--own-materials): the generator's materials, Embree without --whitted traces more rays than subfield; camera $CAMERA"
+fi
 ((BLENDER)) && echo "* Blender: $(blender --version 2>/dev/null | head -n1), Cycles CPU, 1 spp, 1 glossy/transmission bounce, no diffuse bounce, no denoising, persistent data, EXR with Z (blender_peer.py; per-frame time of bpy.ops.render.render)"
 
 
@@ -99,11 +119,14 @@ scenes=()
 IFS=, read -r -a configs <<< "$CONFIGS"
 for c in "${configs[@]}"; do
     [[ "$c" =~ ^([0-9]+):([0-9]+):([0-9]+)$ ]] || die "--configs takes STATIC:DYNAMIC:SEED (got $c)"
-    scene="$OUT/gen_${BASH_REMATCH[1]}_${BASH_REMATCH[2]}_s${BASH_REMATCH[3]}.glb"
+    mat=own; ((EQUAL)) && mat=halfmirror
+    scene="$OUT/gen_${BASH_REMATCH[1]}_${BASH_REMATCH[2]}_s${BASH_REMATCH[3]}_${CAMERA}_${mat}.glb"
     if [ ! -f "$scene" ]; then
         python3 "$PEERS/gen_scene.py" --static-tris "${BASH_REMATCH[1]}" \
             --dynamic-tris "${BASH_REMATCH[2]}" --frames 300 --fps 30 --seed "${BASH_REMATCH[3]}" \
-            --out "$scene" >"$scene.log" 2>&1 || { echo "skipped $c: gen_scene.py failed: $(tail -n1 "$scene.log")"; status=1; continue; }
+            --camera-path "$CAMERA" --out "$scene.tmp.glb" >"$scene.log" 2>&1 &&
+        { ((EQUAL == 0)) || python3 "$PEERS/glb_material.py" "$scene.tmp.glb" 0.5 0.0 >>"$scene.log" 2>&1; } &&
+        mv "$scene.tmp.glb" "$scene" || { echo "skipped $c: gen_scene.py or glb_material.py failed: $(tail -n1 "$scene.log")"; status=1; continue; }
     fi
     scenes+=("$scene:morph")
 done
@@ -137,8 +160,9 @@ for entry in "${scenes[@]}"; do
     run_embree() {
         [ "$kind" = morph ] && ((EMBREE)) || return 0
         echo >&2 "$tag: Embree (run $1 of $REPEAT) ..."
+        local whitted=(); ((EQUAL)) && whitted=(--whitted)
         python3 "$PEERS/embree_anchor.py" "$scene" --frames "$F0:$F1:1" --width "$W" --height "$H" \
-            --threads "$THREADS" >"$OUT/$tag.embree.$1.jsonl" 2>"$OUT/$tag.embree.err" ||
+            --threads "$THREADS" "${whitted[@]}" >"$OUT/$tag.embree.$1.jsonl" 2>"$OUT/$tag.embree.err" ||
             { echo "skipped: the Embree harness failed: $(tail -n1 "$OUT/$tag.embree.err")"; return 1; }
     }
     run_blender() {
@@ -223,6 +247,9 @@ r = lambda a, b: f"{a / b:.2f}" if b else "n/a"
 line = lambda side, key, f: ", ".join(r(f(a[key]), f(b[key])) for a, b in zip(S, side))
 print()
 if E:
+    whole = ", ".join(r(a["wall"], mean(b["frame"])) for a, b in zip(S, E))
+    print(f"**Whole subfield process (wall / frames) / Embree frame mean, run by run: {whole}** "
+          "(the figure a user waits for; <= 1.0: subfield as fast or faster).")
     print(f"subfield / Embree, run by run: frame mean {line(E, 'frame', mean)}; frame worst {line(E, 'frame', worst)}; "
           f"update mean {line(E, 'update', mean)}; update worst {line(E, 'update', worst)} "
           "(<= 1.0: subfield as fast or faster; Embree's frame has no shading and no EXR).")
