@@ -51,6 +51,34 @@ pub struct Args {
         allow_negative_numbers = true
     )]
     pub exposure: f32,
+    /// Radiance seen by rays that leave the scene (linear RGB; primary misses keep alpha
+    /// 0). Default 0,0,0. Not with --environment.
+    #[arg(long, value_name = "R,G,B")]
+    pub background: Option<String>,
+    /// An equirectangular environment map (.hdr or .exr, linear RGB) seen by rays that
+    /// leave the scene; its centre looks along +X, its top straight up (+Y), as Blender
+    /// shows an HDRI behind an imported glTF scene.
+    #[arg(long, value_name = "FILE.hdr|FILE.exr")]
+    pub environment: Option<PathBuf>,
+    /// Turn the environment map about +Y by DEG degrees (counter-clockwise seen from
+    /// above).
+    #[arg(
+        long,
+        value_name = "DEG",
+        default_value_t = 0.0,
+        allow_negative_numbers = true,
+        requires = "environment"
+    )]
+    pub environment_rotation: f32,
+    /// Scale the environment map's radiance by X.
+    #[arg(
+        long,
+        value_name = "X",
+        default_value_t = 1.0,
+        allow_negative_numbers = true,
+        requires = "environment"
+    )]
+    pub environment_intensity: f32,
     /// Also write the first frame this run renders as a tone-mapped sRGB PNG.
     #[arg(long, value_name = "FILE.png")]
     pub preview: Option<PathBuf>,
@@ -199,6 +227,36 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         .transpose()?
         .unwrap_or_default();
     aovs.crypto_levels = a.crypto_levels;
+    let mut shading = render::ShadingOptions::default();
+    match (&a.background, &a.environment) {
+        (Some(_), Some(_)) => {
+            bail!(
+                "--background and --environment both say what rays leaving the scene see: give one"
+            )
+        }
+        (Some(b), None) => {
+            shading.background = parse::parse_vec3("--background", b)?;
+            if shading.background.min_element() < 0.0 {
+                bail!("--background {b}: radiance cannot be negative");
+            }
+        }
+        (None, Some(path)) => {
+            if !a.environment_rotation.is_finite() {
+                bail!("--environment-rotation must be a finite number of degrees");
+            }
+            if !(a.environment_intensity.is_finite() && a.environment_intensity >= 0.0) {
+                bail!(
+                    "--environment-intensity {}: must be a finite number, 0 or more",
+                    a.environment_intensity
+                );
+            }
+            let map =
+                render::EnvironmentMap::load(path, a.environment_rotation, a.environment_intensity)
+                    .map_err(|e| anyhow::anyhow!("--environment {e}"))?;
+            shading.environment = Some(std::sync::Arc::new(map));
+        }
+        (None, None) => {}
+    }
     Ok(RenderOptions {
         output: a.output.clone(),
         baked: a.baked.clone(),
@@ -225,7 +283,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
             .preview
             .clone()
             .map(|path| PreviewOptions { frame: None, path }),
-        shading: Default::default(),
+        shading,
         exposure: a.exposure,
         cancel: Default::default(),
     })

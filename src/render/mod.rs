@@ -26,11 +26,12 @@
 //! writes, folders), `aov` (header matrices, projection, Cryptomatte ids), `wavefront` (one frame traced level by level), `shade` (Whitted shading of a hit, with
 //! glossy reflection and area lights), `lights` (emissive triangles as area lights),
 //! `sampling` (deterministic random numbers, GGX), `mips` (mip-maps, trilinear
-//! lookups), `camera`, `stats`, `options` / `output` (the options and the EXR / PNG
+//! lookups), `camera`, `environment` (`--background`, `--environment`: what rays leaving the scene see), `stats`, `options` / `output` (the options and the EXR / PNG
 //! encoders), and `errors` (the typed option and output errors).
 
 mod aov;
 mod camera;
+mod environment;
 mod errors;
 mod exr_zip;
 mod lights;
@@ -57,6 +58,7 @@ pub use camera::{
     animation_bounds, apply_exposure, aspect_warning, camera_aspect, default_size, size_for_aspect,
     size_matches, CameraModel, DEFAULT_WIDTH, MAX_EXPOSURE,
 };
+pub use environment::{EnvironmentError, EnvironmentMap};
 pub use errors::{FramesProblem, OptionError, OutputFile};
 pub use mips::TextureMips;
 pub use options::{

@@ -336,14 +336,19 @@ pub struct PreviewOptions {
     pub path: PathBuf,
 }
 
-/// Shading constants the command line does not expose.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Shading constants: the ambient term and the default light, which the command line
+/// does not expose, and what rays see when they leave the scene.
+#[derive(Clone, Debug, PartialEq)]
 pub struct ShadingOptions {
     /// Ambient light (linear RGB radiance times diffuse albedo), so unlit sides are not
     /// pitch black.
     pub ambient: Vec3,
-    /// Radiance of rays that leave the scene (primary misses have alpha 0).
+    /// Radiance of rays that leave the scene (primary misses have alpha 0), where no
+    /// `environment` is given (`--background R,G,B`).
     pub background: Vec3,
+    /// An equirectangular map seen by rays that leave the scene, in place of
+    /// `background` (`--environment FILE`).
+    pub environment: Option<std::sync::Arc<super::environment::EnvironmentMap>>,
     /// Where the scene has no light at all, add a directional light from over the
     /// camera's shoulder (irradiance π, so a white diffuse surface facing it has radiance 1).
     pub default_light: bool,
@@ -354,6 +359,7 @@ impl Default for ShadingOptions {
         ShadingOptions {
             ambient: Vec3::splat(0.05),
             background: Vec3::ZERO,
+            environment: None,
             default_light: true,
         }
     }
@@ -509,6 +515,9 @@ impl RenderOptions {
             " ambient={from}{},{},{} background={},{},{} default-light={}",
             a.x, a.y, a.z, sh.background.x, sh.background.y, sh.background.z, sh.default_light
         );
+        if let Some(env) = &sh.environment {
+            s += &format!(" environment={}", env.describe());
+        }
         s += &format!(" exposure={}", self.exposure);
         s
     }

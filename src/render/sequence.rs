@@ -437,7 +437,7 @@ impl Frames<'_> {
             dyn_soup,
             &lights,
             &camera,
-            opts.shading,
+            opts.shading.clone(),
             extent,
             self.mips,
         );

@@ -433,7 +433,11 @@ impl<'a> ShadeContext<'a> {
         out: &mut BlockOut,
     ) {
         let Some(hit) = hit else {
-            out.add(item.sample, item.weight * self.options.background);
+            let seen = match &self.options.environment {
+                Some(env) => env.radiance(ray.dir),
+                None => self.options.background,
+            };
+            out.add(item.sample, item.weight * seen);
             return;
         };
         let distance = hit.t * ray.dir.length();
