@@ -79,6 +79,11 @@ pub struct Args {
         requires = "environment"
     )]
     pub environment_intensity: f32,
+    /// Diffuse bounces a sample (cosine-weighted, with shadow rays to every light at each
+    /// bounce), converging with --spp; 0 is Whitted's model, where an ambient term stands
+    /// in for bounce light.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub diffuse_bounces: u32,
     /// Also write the first frame this run renders as a tone-mapped sRGB PNG.
     #[arg(long, value_name = "FILE.png")]
     pub preview: Option<PathBuf>,
@@ -227,7 +232,10 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         .transpose()?
         .unwrap_or_default();
     aovs.crypto_levels = a.crypto_levels;
-    let mut shading = render::ShadingOptions::default();
+    let mut shading = render::ShadingOptions {
+        diffuse_bounces: a.diffuse_bounces,
+        ..Default::default()
+    };
     match (&a.background, &a.environment) {
         (Some(_), Some(_)) => {
             bail!(

@@ -36,6 +36,8 @@ pub enum OptionError {
     Spp(u32),
     #[error("--max-depth {0}: at most 64")]
     MaxDepth(u32),
+    #[error("--diffuse-bounces {0}: at most 64")]
+    DiffuseBounces(u32),
     #[error(
         "--exposure {0}: must be a number of stops between -{MAX_EXPOSURE} and {MAX_EXPOSURE}"
     )]

@@ -349,6 +349,9 @@ pub struct ShadingOptions {
     /// An equirectangular map seen by rays that leave the scene, in place of
     /// `background` (`--environment FILE`).
     pub environment: Option<std::sync::Arc<super::environment::EnvironmentMap>>,
+    /// Cosine-weighted diffuse bounces a sample, each with shadow rays to every light
+    /// (`--diffuse-bounces`); 0 is Whitted's model, where `ambient` stands in for them.
+    pub diffuse_bounces: u32,
     /// Where the scene has no light at all, add a directional light from over the
     /// camera's shoulder (irradiance π, so a white diffuse surface facing it has radiance 1).
     pub default_light: bool,
@@ -360,6 +363,7 @@ impl Default for ShadingOptions {
             ambient: Vec3::splat(0.05),
             background: Vec3::ZERO,
             environment: None,
+            diffuse_bounces: 0,
             default_light: true,
         }
     }
@@ -515,6 +519,9 @@ impl RenderOptions {
             " ambient={from}{},{},{} background={},{},{} default-light={}",
             a.x, a.y, a.z, sh.background.x, sh.background.y, sh.background.z, sh.default_light
         );
+        if sh.diffuse_bounces > 0 {
+            s += &format!(" diffuse-bounces={}", sh.diffuse_bounces);
+        }
         if let Some(env) = &sh.environment {
             s += &format!(" environment={}", env.describe());
         }

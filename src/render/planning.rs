@@ -241,6 +241,9 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
     if opts.max_depth > 64 {
         return Err(OptionError::MaxDepth(opts.max_depth).into());
     }
+    if opts.shading.diffuse_bounces > 64 {
+        return Err(OptionError::DiffuseBounces(opts.shading.diffuse_bounces).into());
+    }
     // The last frame at or before the end of the animation; `None` without animation.
     let duration = scene.duration(selection) as f64;
     let last = (duration > 0.0).then(|| {

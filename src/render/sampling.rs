@@ -26,6 +26,8 @@ pub enum Purpose {
     Glossy = 1,
     /// Choosing an emissive triangle and a point on it.
     AreaLight = 2,
+    /// Choosing a diffuse bounce's direction.
+    Diffuse = 3,
 }
 
 impl Seed {
@@ -82,6 +84,17 @@ pub fn basis(n: Vec3) -> (Vec3, Vec3) {
         Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
         Vec3::new(b, sign + n.y * n.y * a, -n.y),
     )
+}
+
+/// A direction around unit `n` drawn with density `cos θ / π` (Malley's method: a point
+/// of the unit disc, uniform by area, lifted onto the hemisphere), from the uniform pair
+/// `r`.
+pub fn sample_cosine(n: Vec3, r: Vec2) -> Vec3 {
+    let (t, b) = basis(n);
+    let radius = r.y.sqrt();
+    let phi = std::f32::consts::TAU * r.x;
+    let (sin, cos) = phi.sin_cos();
+    (t * (radius * cos) + b * (radius * sin) + n * (1.0 - r.y).max(0.0).sqrt()).normalize_or_zero()
 }
 
 /// GGX (Trowbridge–Reitz) Smith masking `G1` for a direction at cosine `cos` to the

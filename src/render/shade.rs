@@ -55,7 +55,7 @@ use super::camera::CameraModel;
 use super::lights::AreaLights;
 use super::mips::TextureMips;
 use super::options::ShadingOptions;
-use super::sampling::{sample_ggx_vndf, smith_g1, stratified, Purpose, Seed};
+use super::sampling::{sample_cosine, sample_ggx_vndf, smith_g1, stratified, Purpose, Seed};
 use crate::geometry::{Hit, Ray};
 use crate::psf::Prim;
 use crate::scene::{
@@ -219,6 +219,10 @@ impl<'a> ShadeContext<'a> {
         if let Some(a) = scene.ambient {
             // The scene's own ambient light (AFF `am`) replaces the options' term.
             options.ambient = a;
+        }
+        if options.diffuse_bounces > 0 {
+            // Traced bounce light replaces the stand-in.
+            options.ambient = Vec3::ZERO;
         }
         ShadeContext {
             scene,
@@ -464,7 +468,7 @@ impl<'a> ShadeContext<'a> {
         let lobes = self.lobes(m, &s, base.truncate());
 
         // Emission (front face; both when double-sided) and ambient.
-        let emitted = if s.entering || m.double_sided {
+        let emitted = if (s.entering || m.double_sided) && !item.diffuse {
             self.emission(m, s.uv, s.lod)
         } else {
             Vec3::ZERO
@@ -496,6 +500,9 @@ impl<'a> ShadeContext<'a> {
             self.area_light(&s, &lobes, weight, origin, item, n, spp, out);
         }
 
+        if u32::from(item.bounces) < self.options.diffuse_bounces {
+            diffuse_bounce(&s, &lobes, item, weight, origin, cone, out);
+        }
         if item.depth >= max_depth {
             return;
         }
@@ -768,6 +775,8 @@ fn pass_through(s: &Surface, item: &Item, alpha: f32, eps: f32, cone: Cone, out:
                 coverage: item.coverage * (1.0 - alpha),
                 depth: item.depth,
                 passes: item.passes + 1,
+                bounces: item.bounces,
+                diffuse: item.diffuse,
                 seed: item.seed.child(2),
                 cone,
             },
@@ -831,6 +840,8 @@ fn secondary(
         coverage: 0.0,
         depth: item.depth + 1,
         passes: item.passes,
+        bounces: item.bounces,
+        diffuse: false,
         seed: item.seed.child(kind),
         cone: Cone {
             width: cone.width,
@@ -878,6 +889,48 @@ fn secondary(
             }
         }
     }
+}
+
+/// One cosine-weighted diffuse bounce (`--diffuse-bounces`): with the Lambertian BRDF
+/// `kd / π` and the density `cos / π` the estimator's weight is `kd` itself. The ray
+/// carries on to its hit's shadow rays (next-event estimation), so it adds no emission of
+/// its own (`Item::diffuse`); where it leaves the scene it sees the background or the
+/// environment, which is how they light the scene.
+fn diffuse_bounce(
+    s: &Surface,
+    lobes: &Lobes,
+    item: &Item,
+    weight: Vec3,
+    origin: Vec3,
+    cone: Cone,
+    out: &mut BlockOut,
+) {
+    let w = weight * lobes.kd;
+    if w.max_element() <= MIN_WEIGHT {
+        return;
+    }
+    let dir = sample_cosine(s.ns, item.seed.get(Purpose::Diffuse, 0));
+    if dir.dot(s.ng) <= 0.0 {
+        return; // below the geometric surface (a bent shading normal): no light there
+    }
+    out.next(
+        Ray::new(origin, dir),
+        Item {
+            sample: item.sample,
+            weight: w,
+            coverage: 0.0,
+            depth: item.depth + 1,
+            passes: item.passes,
+            bounces: item.bounces + 1,
+            diffuse: true,
+            seed: item.seed.child(3),
+            // A diffuse lobe spreads over the hemisphere: the coarsest texture level.
+            cone: Cone {
+                width: cone.width,
+                spread: 1.0,
+            },
+        },
+    );
 }
 
 fn reflect(d: Vec3, n: Vec3) -> Vec3 {
@@ -936,6 +989,11 @@ pub(super) struct Item {
     pub(super) coverage: f32,
     pub(super) depth: u32,
     pub(super) passes: u16,
+    /// Diffuse bounces taken on the way to this ray (`--diffuse-bounces`).
+    pub(super) bounces: u8,
+    /// The ray leaves a diffuse bounce: what it meets of the emitters was counted by the
+    /// bounce's own shadow rays to them, so it adds no emission (no double counting).
+    pub(super) diffuse: bool,
     /// The ray's own random numbers.
     pub(super) seed: Seed,
     pub(super) cone: Cone,

@@ -299,6 +299,8 @@ pub fn render_frame_with<T: Intersector>(
             coverage: 1.0,
             depth: 0,
             passes: 0,
+            bounces: 0,
+            diffuse: false,
             seed: Seed::camera(frame, at.x, at.y, at.k),
             cone,
         };
