@@ -11,6 +11,11 @@
 //! into even and odd halves, each byte replaced by its difference from the one before
 //! plus 128, then zlib), sets the header's `compression` to ZIP and its `chunkCount` to
 //! the blocks, and writes the new offset table. A block that would not shrink is stored raw, as the format allows.
+//! The blocks are compressed in parallel (issue 38: one writer thread was 15 ms of a
+//! 16-core frame at 640x480 and 84 ms at 1920x1080), each on its own, so the bytes do
+//! not depend on the thread count.
+
+use rayon::prelude::*;
 
 /// Scan lines a ZIP block holds (OpenEXR's `ZIP_COMPRESSION`).
 pub const LINES: usize = 16;
@@ -161,30 +166,52 @@ pub fn zip_scanlines(uncompressed: &[u8]) -> Result<Vec<u8>, Malformed> {
         out[at..at + 4].copy_from_slice(&n.to_le_bytes());
     }
     out.resize(end + 8 * blocks, 0);
-    let mut compressor = libdeflater::Compressor::new(
-        libdeflater::CompressionLvl::new(LEVEL).map_err(|_| Malformed("compression level"))?,
-    );
-    let (mut raw, mut predicted, mut packed) = (Vec::new(), Vec::new(), Vec::new());
-    for (k, group) in spans.chunks(LINES).enumerate() {
-        raw.clear();
-        for &(data, size) in group {
-            raw.extend_from_slice(&b[data..data + size]);
-        }
-        predict(&raw, &mut predicted);
-        packed.resize(compressor.zlib_compress_bound(predicted.len()), 0);
-        let n = compressor
-            .zlib_compress(&predicted, &mut packed)
-            .map_err(|_| Malformed("compression failed"))?;
-        // Stored raw where compression does not shrink it (readers take a block of the
-        // uncompressed size as raw).
-        let body: &[u8] = if n < raw.len() { &packed[..n] } else { &raw };
+    let level =
+        libdeflater::CompressionLvl::new(LEVEL).map_err(|_| Malformed("compression level"))?;
+    // The blocks are independent: each is compressed on whichever core is free (one
+    // compressor and scratch a task), and the bytes of each depend on its lines alone,
+    // so the file is the same whatever the thread count. Called from the writer thread,
+    // this borrows the render's pool (`--threads`) between its batches.
+    let bodies: Vec<Result<Vec<u8>, Malformed>> = spans
+        .par_chunks(LINES)
+        .map_init(
+            || {
+                (
+                    libdeflater::Compressor::new(level),
+                    Vec::new(),
+                    Vec::new(),
+                    Vec::new(),
+                )
+            },
+            |(compressor, raw, predicted, packed), group| {
+                raw.clear();
+                for &(data, size) in group {
+                    raw.extend_from_slice(&b[data..data + size]);
+                }
+                predict(raw, predicted);
+                packed.resize(compressor.zlib_compress_bound(predicted.len()), 0);
+                let n = compressor
+                    .zlib_compress(predicted, packed)
+                    .map_err(|_| Malformed("compression failed"))?;
+                // Stored raw where compression does not shrink it (readers take a block
+                // of the uncompressed size as raw).
+                Ok(if n < raw.len() {
+                    packed[..n].to_vec()
+                } else {
+                    raw.clone()
+                })
+            },
+        )
+        .collect();
+    for (k, body) in bodies.into_iter().enumerate() {
+        let body = body?;
         let offset = out.len() as u64;
         out[end + 8 * k..end + 8 * k + 8].copy_from_slice(&offset.to_le_bytes());
         let y = y0 + (k * LINES) as i32;
         out.extend_from_slice(&y.to_le_bytes());
         let len = i32::try_from(body.len()).map_err(|_| Malformed("block too large"))?;
         out.extend_from_slice(&len.to_le_bytes());
-        out.extend_from_slice(body);
+        out.extend_from_slice(&body);
     }
     Ok(out)
 }
@@ -238,6 +265,18 @@ mod tests {
             .unwrap();
         let raw = raw.into_inner();
         let zipped = zip_scanlines(&raw).unwrap();
+        // The blocks are compressed in parallel: one thread and three give the same
+        // bytes as the global pool.
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            assert!(
+                pool.install(|| zip_scanlines(&raw).unwrap()) == zipped,
+                "{threads} thread(s) gave other bytes"
+            );
+        }
         // Never larger: a block that would grow is stored raw.
         assert!(
             zipped.len() <= raw.len(),
