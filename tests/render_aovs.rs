@@ -116,6 +116,8 @@ def conv(v):
         return [v.numerator, v.denominator]
     if isinstance(v, np.ndarray):
         return v.tolist()
+    if isinstance(v, tuple) and all(isinstance(x, float) for x in v):
+        return list(v)
     if isinstance(v, (str, int, float)):
         return v
     return str(v)
@@ -230,6 +232,18 @@ fn header_attributes_have_the_right_values() {
     assert_eq!(exr.header["framesPerSecond"], serde_json::json!([24, 1]));
     assert_eq!(exr.text("software"), render::software());
     assert_eq!(exr.text("software"), "subfield 0.1.0");
+    // Linear Rec.709 primaries with a D65 white (DESIGN.md §4): red, green, blue, white.
+    let chroma: Vec<f64> = exr.header["chromaticities"]
+        .as_array()
+        .expect("a chromaticities attribute")
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    let rec709 = [0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290];
+    assert_eq!(chroma.len(), 8, "{chroma:?}");
+    for (got, want) in chroma.iter().zip(rec709) {
+        assert!((got - want).abs() < 1e-6, "{chroma:?}");
+    }
     let options = exr.text("subfield/options");
     for part in [
         "size=64x48",
@@ -271,6 +285,7 @@ fn header_attributes_have_the_right_values() {
         format!("subfield/options: \"{options}\""),
         "worldToCamera: ".to_string(),
         "worldToNDC: ".to_string(),
+        "chromaticities: 0.64, 0.33, 0.3, 0.6, 0.15, 0.06, 0.3127, 0.329".to_string(),
         format!(
             "cryptomatte/{}/name: \"CryptoObject\"",
             render::crypto_key("CryptoObject")

@@ -84,6 +84,16 @@ fn text(s: &str) -> Text {
     Text::from_slice_unchecked(s.as_bytes())
 }
 
+/// The colour space of every frame's RGB: linear, Rec.709 (sRGB) primaries, D65 white
+/// (the `chromaticities` attribute, DESIGN.md §4), which is what the renderer's linear
+/// RGB and every glTF colour are.
+pub const REC709_D65: exr::meta::attribute::Chromaticities = exr::meta::attribute::Chromaticities {
+    red: exr::math::Vec2(0.64, 0.33),
+    green: exr::math::Vec2(0.30, 0.60),
+    blue: exr::math::Vec2(0.15, 0.06),
+    white: exr::math::Vec2(0.3127, 0.3290),
+};
+
 /// The header attributes of a frame (see DESIGN.md §4): `framesPerSecond`,
 /// `worldToCamera`, `worldToNDC`, `software`, `subfield/options` and the Cryptomatte
 /// metadata. No time stamps.
@@ -232,7 +242,8 @@ pub fn encode_exr(
         encoding(),
         AnyChannels::sort(list),
     );
-    let image = Image::from_layer(layer);
+    let mut image = Image::from_layer(layer);
+    image.attributes.chromaticities = Some(REC709_D65);
     let mut bytes = std::io::Cursor::new(Vec::with_capacity(n * 8));
     image.write().non_parallel().to_buffered(&mut bytes)?;
     let mut bytes = bytes.into_inner();
