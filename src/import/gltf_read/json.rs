@@ -748,3 +748,78 @@ pub(super) fn type_components(t: &str) -> Option<usize> {
         _ => return None,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn accessor(json: &str) -> Result<Accessor, String> {
+        serde_json::from_str(json).map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn integers_may_be_whole_floats() {
+        for text in ["4", "4.0", "4e0", "0.4e1", "400e-2"] {
+            let a = accessor(&format!(r#"{{"count": {text}, "componentType": {text}}}"#))
+                .unwrap_or_else(|e| panic!("{text}: {e}"));
+            assert_eq!((a.count, a.component_type), (Some(4), Some(4)), "{text}");
+        }
+        let a = accessor(r#"{"byteOffset": -0.0, "bufferView": 1e1}"#).unwrap();
+        assert_eq!((a.byte_offset, a.buffer_view), (0, Some(10)));
+        // Absent and null keep the schema's default and `None`.
+        let a = accessor(r#"{"bufferView": null}"#).unwrap();
+        assert_eq!((a.byte_offset, a.buffer_view, a.count), (0, None, None));
+        // In arrays and maps too.
+        let p: Primitive = serde_json::from_str(
+            r#"{"attributes": {"POSITION": 2.0}, "targets": [{"NORMAL": 3.0}]}"#,
+        )
+        .unwrap();
+        assert_eq!(p.attributes.unwrap()["POSITION"], 2);
+        assert_eq!(p.targets[0]["NORMAL"], 3);
+        let n: Node = serde_json::from_str(r#"{"children": [1.0, 2, 3e0]}"#).unwrap();
+        assert_eq!(n.children, vec![1, 2, 3]);
+    }
+
+    #[test]
+    fn fractions_negatives_and_overflow_are_refused() {
+        for (json, value) in [
+            (r#"{"count": 1.5}"#, "1.5"),
+            (r#"{"count": -1}"#, "-1"),
+            (r#"{"count": -1.0}"#, "-1"),
+            (r#"{"count": 1e300}"#, "1e+300"),
+            (r#"{"componentType": 4294967296}"#, "4294967296"),
+            (r#"{"componentType": 4294967296.0}"#, "4294967296"),
+            (r#"{"count": "3"}"#, "\"3\""),
+        ] {
+            let e = accessor(json).unwrap_err();
+            assert!(
+                e.contains(value) && e.contains("whole number"),
+                "{json}: {e}"
+            );
+        }
+        assert_eq!(
+            accessor(r#"{"componentType": 4294967295.0}"#)
+                .unwrap()
+                .component_type,
+            Some(u32::MAX)
+        );
+    }
+
+    #[test]
+    fn errors_name_the_property() {
+        let e = parse(br#"{"accessors": [{}, {"count": 2.5}]}"#).unwrap_err();
+        assert!(
+            e.starts_with("accessors[1].count: invalid value: floating point `2.5`"),
+            "{e}"
+        );
+        let e = parse(br#"{"meshes": [{"primitives": [{"attributes": {"NORMAL": -2}}]}]}"#)
+            .unwrap_err();
+        assert!(
+            e.starts_with("meshes[0].primitives[0].attributes.NORMAL: "),
+            "{e}"
+        );
+        // Trailing bytes after the document are still an error, as serde_json's own.
+        assert!(parse(b"{} x").is_err());
+        assert!(parse(b"{}").is_ok());
+    }
+}
