@@ -992,6 +992,26 @@ fn issue41_buffer_without_data_that_nothing_reads() {
             ],
         );
     }
+    // A .gltf whose buffer 0 has no URI (there is no binary chunk to stand for it).
+    let mut doc = Doc::new();
+    quad(&mut doc, json!({}), None);
+    let j = doc.with_buffer(None);
+    let (path, r) = import_file(&dir, "chunkless.gltf", &serde_json::to_vec(&j).unwrap());
+    let e = r.unwrap_err();
+    assert!(
+        matches!(e, ImportError::Accessor { accessor: 0, .. }),
+        "{e}"
+    );
+    render_refused(
+        &path,
+        &[
+            "accessors[0]",
+            "POSITION",
+            "bufferViews[0]",
+            "buffers[0] has no data",
+            "no GLB binary chunk",
+        ],
+    );
 }
 
 /// Every integer in `v` written as a float of the same value (`3` → `3.0`).

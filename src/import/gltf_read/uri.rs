@@ -58,9 +58,13 @@ impl Importer<'_> {
                 "buffers[{b}] is a meshopt fallback buffer, which only compressed views may \
                  name (it is not loaded)"
             )),
+            (Some(None), _) if b == 0 => Err(
+                "buffers[0] has no data: it has no URI and the file has no GLB binary chunk"
+                    .to_string(),
+            ),
             (Some(None), _) => Err(format!(
-                "buffers[{b}] has no data: it has no URI and is not the GLB binary chunk \
-                 (only buffers[0] of a .glb is)"
+                "buffers[{b}] has no data: it has no URI, and only buffers[0] may be a .glb's \
+                 binary chunk"
             )),
             (None, _) => Err(format!("buffers[{b}] does not exist")),
         }
