@@ -22,10 +22,12 @@ use subfield::scene::{LightKind, Property, Scene, UvTransform};
 // ---------------------------------------------------------------------------------------
 // Helpers: a document under construction, files, the validator, the CLI.
 
-/// A glTF document being written: its JSON and its one binary buffer.
+/// A glTF document being written: its JSON and its binary buffer (buffer 0), then
+/// `more_buffers` as they are.
 struct Doc {
     json: Value,
     bin: Vec<u8>,
+    more_buffers: Vec<Value>,
 }
 
 impl Doc {
@@ -33,6 +35,7 @@ impl Doc {
         Doc {
             json: json!({"asset": {"version": "2.0", "generator": "subfield tests/gltf_spec.rs"}}),
             bin: Vec::new(),
+            more_buffers: Vec::new(),
         }
     }
 
@@ -108,7 +111,9 @@ impl Doc {
         if let Some(u) = uri {
             b["uri"] = json!(u);
         }
-        j["buffers"] = json!([b]);
+        let mut buffers = vec![b];
+        buffers.extend(self.more_buffers.iter().cloned());
+        j["buffers"] = Value::Array(buffers);
         j
     }
 
@@ -913,4 +918,319 @@ fn bad_data_behind_valid_structure_names_the_accessor() {
     let e = r.unwrap_err();
     assert!(matches!(e, ImportError::UriOutsideFolder { .. }), "{e}");
     render_refused(&path, &["buffers[0]", "https://example.com/scene.bin"]);
+}
+
+// ---------------------------------------------------------------------------------------
+// Issue 41: the last kinds of file the specification (and the validator) allows that we
+// refused. Each valid file is checked with the validator and rendered; what the scene
+// does read must still be right, and what is really wrong is still one error line.
+
+/// `subfield render FILE` (not quiet) succeeds and prints exactly one warning line
+/// holding every one of `parts`.
+fn render_warned(file: &Path, parts: &[&str]) {
+    let out = file.with_extension("exr");
+    let o = subfield(&[
+        "render",
+        file.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "16x16",
+        "--spp",
+        "1",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "render {}: {err}", file.display());
+    assert!(out.is_file());
+    let hits = err
+        .lines()
+        .filter(|l| l.starts_with("warning: ") && parts.iter().all(|p| l.contains(p)))
+        .count();
+    assert_eq!(hits, 1, "one warning with {parts:?} expected in: {err}");
+}
+
+#[test]
+fn issue41_buffer_without_data_that_nothing_reads() {
+    let dir = temp_dir("issue41-buffer");
+    for (name, glb) in [("unused.gltf", false), ("unused.glb", true)] {
+        let mut doc = Doc::new();
+        // Buffer 1: no URI, not the GLB's chunk; a view on it that nothing reads.
+        doc.more_buffers.push(json!({"byteLength": 48}));
+        doc.push("bufferViews", json!({"buffer": 1, "byteLength": 48}));
+        quad(&mut doc, json!({}), None);
+        let bytes = if glb { doc.glb() } else { doc.gltf() };
+        let (path, scene) = import_file(&dir, name, &bytes);
+        let scene = scene.unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(scene.meshes[0].primitives[0].triangles.len(), 2);
+        assert_spec_valid(&path);
+        render_ok(&path, &[]);
+    }
+    // Read, it is one error naming the accessor, the view and the buffer.
+    for (name, glb) in [("read.gltf", false), ("read.glb", true)] {
+        let mut doc = Doc::new();
+        doc.more_buffers.push(json!({"byteLength": 48}));
+        let view = doc.push("bufferViews", json!({"buffer": 1, "byteLength": 48}));
+        let normals = doc.push(
+            "accessors",
+            json!({"bufferView": view, "componentType": 5126, "count": 4, "type": "VEC3"}),
+        );
+        quad(&mut doc, json!({"NORMAL": normals}), None);
+        let bytes = if glb { doc.glb() } else { doc.gltf() };
+        let (path, r) = import_file(&dir, name, &bytes);
+        let e = r.unwrap_err();
+        assert!(
+            matches!(e, ImportError::Accessor { accessor, .. } if accessor == normals),
+            "{name}: {e}"
+        );
+        render_refused(
+            &path,
+            &[
+                &format!("accessors[{normals}]"),
+                "NORMAL",
+                &format!("bufferViews[{view}]"),
+                "buffers[1] has no data",
+            ],
+        );
+    }
+    // A .gltf whose buffer 0 has no URI (there is no binary chunk to stand for it).
+    let mut doc = Doc::new();
+    quad(&mut doc, json!({}), None);
+    let j = doc.with_buffer(None);
+    let (path, r) = import_file(&dir, "chunkless.gltf", &serde_json::to_vec(&j).unwrap());
+    let e = r.unwrap_err();
+    assert!(
+        matches!(e, ImportError::Accessor { accessor: 0, .. }),
+        "{e}"
+    );
+    render_refused(
+        &path,
+        &[
+            "accessors[0]",
+            "POSITION",
+            "bufferViews[0]",
+            "buffers[0] has no data",
+            "no GLB binary chunk",
+        ],
+    );
+}
+
+/// Every integer in `v` written as a float of the same value (`3` → `3.0`).
+fn integers_as_floats(v: &mut Value) {
+    match v {
+        Value::Number(n) if !n.is_f64() => *v = json!(n.as_f64().unwrap()),
+        Value::Array(a) => a.iter_mut().for_each(integers_as_floats),
+        Value::Object(o) => o.values_mut().for_each(integers_as_floats),
+        _ => {}
+    }
+}
+
+#[test]
+fn issue41_integers_written_as_whole_floats() {
+    let dir = temp_dir("issue41-floats");
+    // Indices, counts, offsets, lengths, component types, a mode, a texCoord, sampler
+    // enumerations, attribute and node indices, the default scene.
+    let mut doc = Doc::new();
+    let tex = red_green_texture(&mut doc);
+    let mat = doc.push(
+        "materials",
+        json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": tex, "texCoord": 0}}}),
+    );
+    let uv = doc.floats(&[0.25, 0.5, 0.75, 0.5, 0.75, 0.5, 0.25, 0.5], "VEC2");
+    quad(&mut doc, json!({"TEXCOORD_0": uv}), Some(mat));
+    doc.json["meshes"][0]["primitives"][0]["mode"] = json!(4);
+    let (_, ints) = import_file(&dir, "ints.gltf", &doc.gltf());
+    let ints = ints.unwrap();
+
+    let mut j: Value = serde_json::from_slice(&doc.gltf()).unwrap();
+    integers_as_floats(&mut j);
+    // `-0.0` and `4e0` are whole-valued floats too.
+    j["scene"] = json!("SCENE");
+    j["meshes"][0]["primitives"][0]["mode"] = json!("MODE");
+    let text = serde_json::to_string_pretty(&j)
+        .unwrap()
+        .replace("\"SCENE\"", "-0.0")
+        .replace("\"MODE\"", "4e0");
+    assert!(text.contains("\"count\": 4.0") && text.contains("\"wrapS\": 33071.0"));
+    let (path, floats) = import_file(&dir, "floats.gltf", text.as_bytes());
+    let floats = floats.unwrap_or_else(|e| panic!("{e}"));
+    let model = |s: &Scene| {
+        format!(
+            "{:?}",
+            Scene {
+                source: PathBuf::new(),
+                ..s.clone()
+            }
+        )
+    };
+    assert_eq!(model(&floats), model(&ints), "the same scene read");
+    assert_spec_valid(&path);
+    render_ok(&path, &[]);
+
+    // A fraction, a negative number or one past the type's range stays an error naming
+    // the property (and the validator refuses them too).
+    let mut doc = Doc::new();
+    quad(&mut doc, json!({}), None);
+    for (name, at, bad, parts) in [
+        (
+            "fraction",
+            "/accessors/0/count",
+            json!(1.5),
+            ["accessors[0].count", "1.5"],
+        ),
+        (
+            "negative",
+            "/bufferViews/1/byteOffset",
+            json!(-4),
+            ["bufferViews[1].byteOffset", "-4"],
+        ),
+        (
+            "past-u32",
+            "/accessors/1/componentType",
+            json!(4294967296.0),
+            ["accessors[1].componentType", "4294967296"],
+        ),
+        (
+            "index",
+            "/meshes/0/primitives/0/attributes/POSITION",
+            json!(0.5),
+            ["meshes[0].primitives[0].attributes.POSITION", "0.5"],
+        ),
+    ] {
+        let mut j = doc.with_buffer(Some(format!(
+            "data:application/octet-stream;base64,{}",
+            base64(&doc.bin)
+        )));
+        *j.pointer_mut(at).unwrap() = bad;
+        let (path, r) = import_file(
+            &dir,
+            &format!("{name}.gltf"),
+            &serde_json::to_vec_pretty(&j).unwrap(),
+        );
+        let e = r.unwrap_err();
+        assert!(matches!(e, ImportError::Json { .. }), "{name}: {e}");
+        if let Some((errors, report)) = validator_errors(&path) {
+            assert!(errors > 0, "{name}: the validator accepts it: {report}");
+        }
+        render_refused(&path, &parts);
+    }
+}
+
+#[test]
+fn issue41_primitive_without_position_is_skipped_warned() {
+    let dir = temp_dir("issue41-position");
+    let mut doc = Doc::new();
+    quad(&mut doc, json!({}), None);
+    // A primitive with only normals in front of the quad's, in a named mesh, and a
+    // second mesh (on a node of its own) with nothing else.
+    let normals = doc.floats(&[0., 0., 1., 0., 0., 1., 0., 0., 1.], "VEC3");
+    doc.json["meshes"][0]["name"] = json!("wing");
+    let bare = json!({"attributes": {"NORMAL": normals}});
+    doc.json["meshes"][0]["primitives"]
+        .as_array_mut()
+        .unwrap()
+        .insert(0, bare.clone());
+    let mesh = doc.push("meshes", json!({"primitives": [bare]}));
+    let node = doc.push("nodes", json!({"mesh": mesh}));
+    doc.json["scenes"][0]["nodes"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!(node));
+    let (path, scene) = import_file(&dir, "some.gltf", &doc.gltf());
+    let scene = scene.unwrap();
+    assert_eq!(scene.meshes[0].primitives.len(), 1);
+    assert_eq!(scene.meshes[0].primitives[0].triangles.len(), 2);
+    assert!(scene.meshes[1].primitives.is_empty());
+    let skipped = [
+        "without POSITION",
+        "meshes[0] (\"wing\").primitives[0]",
+        "meshes[1].primitives[0]",
+    ];
+    assert!(warned(&scene, &skipped), "{:?}", scene.warnings);
+    assert_eq!(
+        scene
+            .warnings
+            .iter()
+            .filter(|w| w.0.contains("POSITION"))
+            .count(),
+        1,
+        "one warning: {:?}",
+        scene.warnings
+    );
+    assert!(!warned(&scene, &["background alone"]));
+    assert_spec_valid(&path);
+    render_warned(&path, &skipped);
+
+    // Every primitive without: nothing to trace, said in the same warning; the frames
+    // show the background.
+    doc.json["meshes"][0]["primitives"] = json!([bare]);
+    let (path, scene) = import_file(&dir, "none.gltf", &doc.gltf());
+    let scene = scene.unwrap();
+    assert!(scene.meshes.iter().all(|m| m.primitives.is_empty()));
+    let nothing = [
+        "without POSITION",
+        "meshes[1].primitives[0]",
+        "background alone",
+    ];
+    assert!(warned(&scene, &nothing), "{:?}", scene.warnings);
+    assert_spec_valid(&path);
+    render_warned(&path, &nothing);
+}
+
+#[test]
+fn issue41_unknown_accessor_type_nothing_reads() {
+    let dir = temp_dir("issue41-type");
+    let mut doc = Doc::new();
+    quad(&mut doc, json!({}), None);
+    // A type a later glTF might define, on an accessor of zeros nothing reads.
+    let odd = doc.push(
+        "accessors",
+        json!({"componentType": 5126, "count": 2, "type": "MAT5"}),
+    );
+    let (path, scene) = import_file(&dir, "unread.gltf", &doc.gltf());
+    assert_eq!(scene.unwrap().meshes[0].primitives[0].triangles.len(), 2);
+    assert_spec_valid(&path);
+    render_ok(&path, &[]);
+
+    // Read (as an animation's output), it is one error naming the accessor and the type.
+    let times = doc.floats(&[0., 1.], "SCALAR");
+    doc.set(
+        "animations",
+        json!([{"samplers": [{"input": times, "output": odd}],
+                "channels": [{"sampler": 0, "target": {"node": 0, "path": "scale"}}]}]),
+    );
+    let (path, r) = import_file(&dir, "read.gltf", &doc.gltf());
+    let e = r.unwrap_err();
+    assert!(
+        matches!(e, ImportError::Accessor { accessor, .. } if accessor == odd),
+        "{e}"
+    );
+    render_refused(
+        &path,
+        &[&format!("accessors[{odd}]"), "\"MAT5\"", "animations[0]"],
+    );
+}
+
+#[test]
+fn issue41_what_stays_refused_on_purpose() {
+    let dir = temp_dir("issue41-refused");
+    // A file that asks for a reader of glTF 2.1: the validator accepts it (a 2.x
+    // document), but a 2.0 reader must not read it.
+    let mut doc = Doc::new();
+    quad(&mut doc, json!({}), None);
+    doc.json["asset"]["version"] = json!("2.1");
+    doc.json["asset"]["minVersion"] = json!("2.1");
+    let (path, r) = import_file(&dir, "min-version.gltf", &doc.gltf());
+    let e = r.unwrap_err();
+    assert!(matches!(e, ImportError::Invalid { .. }), "{e}");
+    assert_spec_valid(&path);
+    render_refused(&path, &["asset.minVersion", "\"2.1\"", "only glTF 2.0"]);
+
+    // A buffer by http:// URI: never fetched.
+    let mut doc = Doc::new();
+    quad(&mut doc, json!({}), None);
+    let j = doc.with_buffer(Some("http://example.com/scene.bin".into()));
+    let (path, r) = import_file(&dir, "http.gltf", &serde_json::to_vec(&j).unwrap());
+    let e = r.unwrap_err();
+    assert!(matches!(e, ImportError::UriOutsideFolder { .. }), "{e}");
+    render_refused(&path, &["buffers[0]", "http://example.com/scene.bin"]);
 }

@@ -31,7 +31,9 @@ impl Importer<'_> {
             return Ok(decoded);
         }
         let b = v.buffer.unwrap_or(usize::MAX);
-        let buf = self.buffers.get(b).map(Vec::as_slice).unwrap_or(&[]);
+        let buf = self
+            .buffer_bytes(b)
+            .map_err(|why| self.acc_err(accessor, usage, format!("bufferViews[{view}]: {why}")))?;
         let start = v.byte_offset;
         let length = v.byte_length.unwrap_or(0);
         let end = start.checked_add(length);
@@ -81,8 +83,18 @@ impl Importer<'_> {
             .and_then(DataType::from_code)
             .ok_or_else(|| self.acc_err(ai, usage, "no valid componentType"))?;
         let type_ = acc.type_.as_deref().unwrap_or("");
-        let comps =
-            type_components(type_).ok_or_else(|| self.acc_err(ai, usage, "no valid type"))?;
+        // `check` lets any type string through: an accessor nothing reads may have a
+        // type a later glTF defines. One that is read must be a type we know.
+        let comps = type_components(type_).ok_or_else(|| {
+            self.acc_err(
+                ai,
+                usage,
+                format!(
+                    "type {type_:?} is not one glTF 2.0 defines (SCALAR, VEC2, VEC3, VEC4, \
+                     MAT2, MAT3, MAT4)"
+                ),
+            )
+        })?;
         let csize = data_type.size();
         if matches!(type_, "MAT2" | "MAT3") && csize < 4 {
             return Err(self.acc_err(ai, usage, "padded matrix columns are not supported"));

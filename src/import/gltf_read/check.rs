@@ -2,14 +2,14 @@
 //! requires are there, every index is in range, every enumeration has a defined value.
 //! Past this the readers index the root's arrays freely. Anything the specification
 //! allows passes (an accessor without a buffer view, a texture whose image comes from an
-//! extension, a channel target without a node, an unknown light type, a scene without
-//! nodes); what we cannot draw is the readers' business, as a warning or an
+//! extension, a channel target without a node, an unknown light type or accessor type, a
+//! scene without nodes); what we cannot draw is the readers' business, as a warning or an
 //! [`ImportError::Unsupported`](super::ImportError).
 //!
 //! Every problem found is listed with its JSON path (`skins[0].joints[1]: index 9 out of
 //! range (3 nodes)`).
 
-use super::json::{type_components, ComponentType, Root, TextureInfo};
+use super::json::{ComponentType, Root, TextureInfo};
 
 /// Primitive modes 0 (points) to 6 (triangle fan).
 const MAX_MODE: u32 = 6;
@@ -172,12 +172,10 @@ fn accessors(r: &Root, n: &Counts, p: &mut Problems) {
             }
             Some(_) => {}
         }
-        match a.type_.as_deref() {
-            None => p.push(format!("{at}.type"), "required, missing"),
-            Some(t) if type_components(t).is_none() => {
-                p.push(format!("{at}.type"), format!("{t:?} is not defined"))
-            }
-            Some(_) => {}
+        // The schema lets `type` be any string (a later glTF may add one, and the
+        // validator only warns): an unknown one is refused when the accessor is read.
+        if a.type_.is_none() {
+            p.push(format!("{at}.type"), "required, missing");
         }
         if a.count.is_none() {
             p.push(format!("{at}.count"), "required, missing");

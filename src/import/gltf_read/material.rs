@@ -219,7 +219,9 @@ impl Importer<'_> {
                         continue;
                     }
                     let b = view.buffer.unwrap_or(usize::MAX);
-                    let buf = self.buffers.get(b).map(Vec::as_slice).unwrap_or(&[]);
+                    let buf = self
+                        .buffer_bytes(b)
+                        .map_err(|why| err(format!("bufferViews[{v}]: {why}")))?;
                     let start = view.byte_offset;
                     start
                         .checked_add(view.byte_length.unwrap_or(0))

@@ -46,6 +46,7 @@ impl Importer<'_> {
     /// the texture-coordinate set its material's textures name.
     pub(super) fn meshes(&mut self, materials: &[Material]) -> Result<Vec<Mesh>, ImportError> {
         let mut skipped = Vec::new();
+        let mut no_position = Vec::new();
         let mut meshes = Vec::new();
         let root = self.root;
         for (mi, mesh) in root.meshes.iter().enumerate() {
@@ -59,8 +60,20 @@ impl Importer<'_> {
                     skipped.push(format!("meshes[{mi}].primitives[{pi}] ({mode:?})"));
                     continue;
                 }
+                // The specification allows a primitive without POSITION (an extension
+                // or other attributes may stand for it): there is nothing to trace.
+                let position = prim.attributes.as_ref().and_then(|a| a.get("POSITION"));
+                let Some(&position) = position else {
+                    let name = mesh
+                        .name
+                        .as_ref()
+                        .map(|n| format!(" ({n:?})"))
+                        .unwrap_or_default();
+                    no_position.push(format!("meshes[{mi}]{name}.primitives[{pi}]"));
+                    continue;
+                };
                 let material = prim.material.and_then(|m| materials.get(m));
-                primitives.push(self.primitive(prim, mi, pi, mode, material)?);
+                primitives.push(self.primitive(prim, position, (mi, pi), mode, material)?);
             }
             meshes.push(Mesh {
                 name: mesh.name.clone(),
@@ -75,15 +88,30 @@ impl Importer<'_> {
                 skipped.join(", ")
             ));
         }
+        if !no_position.is_empty() {
+            // Said plainly when it leaves the file nothing at all: the frames are empty.
+            let left = meshes.iter().any(|m: &Mesh| !m.primitives.is_empty());
+            self.warn(format!(
+                "skipped {} primitive(s) without POSITION, which have nothing to trace: {}{}",
+                no_position.len(),
+                no_position.join(", "),
+                if left {
+                    ""
+                } else {
+                    "; no mesh has a primitive left, so the frames show the background alone"
+                }
+            ));
+        }
         Ok(meshes)
     }
 
-    /// One triangle primitive; its accessors must agree with the POSITION count.
+    /// One triangle primitive, its POSITION accessor `pos_acc`; its other accessors
+    /// must agree with the POSITION count.
     fn primitive(
         &mut self,
         prim: &json::Primitive,
-        mi: usize,
-        pi: usize,
+        pos_acc: usize,
+        (mi, pi): (usize, usize),
         mode: Mode,
         material: Option<&Material>,
     ) -> Result<Primitive, ImportError> {
@@ -91,10 +119,6 @@ impl Importer<'_> {
         let empty = BTreeMap::new();
         let attrs = prim.attributes.as_ref().unwrap_or(&empty);
         let get = |s: &str| attrs.get(s).copied();
-        let pos_acc = get("POSITION").ok_or_else(|| ImportError::Model {
-            path: self.path.to_path_buf(),
-            reason: format!("{at} has no POSITION"),
-        })?;
         let positions = self.vec3s(pos_acc, &format!("{at}.POSITION"))?;
         let nv = positions.len();
         let normals = match get("NORMAL") {

@@ -254,9 +254,8 @@ impl Importer<'_> {
             .buffer
             .ok_or_else(|| format!("extensions.{name}.buffer: required, missing"))?;
         let buf = self
-            .buffers
-            .get(b)
-            .ok_or_else(|| format!("extensions.{name}.buffer: buffers[{b}] does not exist"))?;
+            .buffer_bytes(b)
+            .map_err(|why| format!("extensions.{name}.buffer: {why}"))?;
         let length = m
             .byte_length
             .ok_or_else(|| format!("extensions.{name}.byteLength: required, missing"))?;

@@ -82,9 +82,9 @@ pub(crate) fn from_slice(bytes: &[u8], path: &Path, folder: &Path) -> Result<Sce
     } else {
         (bytes, None)
     };
-    let root: json::Root = serde_json::from_slice(json).map_err(|e| ImportError::Json {
+    let root = json::parse(json).map_err(|reason| ImportError::Json {
         path: path.to_path_buf(),
-        reason: e.to_string(),
+        reason,
     })?;
     let problems = check::check(&root);
     if !problems.is_empty() {
@@ -158,7 +158,8 @@ struct Importer<'a> {
     path: &'a Path,
     folder: &'a Path,
     root: &'a json::Root,
-    buffers: Vec<Vec<u8>>,
+    /// Per buffer, its bytes; `None` when it has none (`uri::load_buffers`).
+    buffers: Vec<Option<Vec<u8>>>,
     /// Per buffer view, its decoded bytes when it is meshopt-compressed (`meshopt`).
     decoded_views: Vec<Option<Vec<u8>>>,
     warnings: Vec<Warning>,

@@ -4,10 +4,17 @@
 
 use std::path::Path;
 
-use super::{ImportError, Importer};
+use super::{json, ImportError, Importer};
 
 impl Importer<'_> {
-    pub(super) fn load_buffers(&self, bin: Option<&[u8]>) -> Result<Vec<Vec<u8>>, ImportError> {
+    /// Every buffer's bytes, `None` for a buffer that has none to load: a meshopt
+    /// `fallback` buffer, or one without a URI that is not the GLB's binary chunk. Only
+    /// a buffer view that is read needs its buffer's bytes ([`Self::buffer_bytes`]), so
+    /// a buffer nothing reads may have none, as the specification allows.
+    pub(super) fn load_buffers(
+        &self,
+        bin: Option<&[u8]>,
+    ) -> Result<Vec<Option<Vec<u8>>>, ImportError> {
         let mut out = Vec::new();
         for (i, buffer) in self.root.buffers.iter().enumerate() {
             let err = |reason: String| ImportError::Buffer {
@@ -17,24 +24,17 @@ impl Importer<'_> {
             };
             // Only compressed views read a meshopt fallback buffer, and they read the
             // compressed buffer instead: it need not be loaded (it may hold no data).
-            let ext = buffer.extensions.as_ref();
-            if ext.is_some_and(|e| {
-                e.ext_meshopt.as_ref().is_some_and(|m| m.fallback)
-                    || e.khr_meshopt.as_ref().is_some_and(|m| m.fallback)
-            }) {
-                out.push(Vec::new());
+            if is_fallback(buffer) {
+                out.push(None);
                 continue;
             }
-            let mut data = match &buffer.uri {
-                None => match (i, bin) {
-                    (0, Some(b)) => b.to_vec(),
-                    _ => {
-                        return Err(err(
-                            "has no URI and there is no GLB binary chunk for it".into()
-                        ))
-                    }
-                },
-                Some(uri) => self.load_uri(uri, &format!("buffers[{i}]"))?,
+            let mut data = match (&buffer.uri, i, bin) {
+                (Some(uri), _, _) => self.load_uri(uri, &format!("buffers[{i}]"))?,
+                (None, 0, Some(b)) => b.to_vec(),
+                (None, _, _) => {
+                    out.push(None);
+                    continue;
+                }
             };
             let length = buffer.byte_length.unwrap_or(0);
             if data.len() < length {
@@ -44,9 +44,30 @@ impl Importer<'_> {
                 )));
             }
             data.truncate(length);
-            out.push(data);
+            out.push(Some(data));
         }
         Ok(out)
+    }
+
+    /// The bytes of `buffers[b]`, or why it has none: the reason names the buffer, the
+    /// caller adds the buffer view and what read it.
+    pub(super) fn buffer_bytes(&self, b: usize) -> Result<&[u8], String> {
+        match (self.buffers.get(b), self.root.buffers.get(b)) {
+            (Some(Some(bytes)), _) => Ok(bytes),
+            (Some(None), Some(buffer)) if is_fallback(buffer) => Err(format!(
+                "buffers[{b}] is a meshopt fallback buffer, which only compressed views may \
+                 name (it is not loaded)"
+            )),
+            (Some(None), _) if b == 0 => Err(
+                "buffers[0] has no data: it has no URI and the file has no GLB binary chunk"
+                    .to_string(),
+            ),
+            (Some(None), _) => Err(format!(
+                "buffers[{b}] has no data: it has no URI, and only buffers[0] may be a .glb's \
+                 binary chunk"
+            )),
+            (None, _) => Err(format!("buffers[{b}] does not exist")),
+        }
     }
 
     /// Reads a `data:` URI or a file relative to the scene's folder. A URI that leaves the
@@ -90,6 +111,14 @@ impl Importer<'_> {
             source,
         })
     }
+}
+
+/// A buffer that `EXT_meshopt_compression` / `KHR_meshopt_compression` marks `fallback`.
+fn is_fallback(buffer: &json::Buffer) -> bool {
+    buffer.extensions.as_ref().is_some_and(|e| {
+        e.ext_meshopt.as_ref().is_some_and(|m| m.fallback)
+            || e.khr_meshopt.as_ref().is_some_and(|m| m.fallback)
+    })
 }
 
 /// `%XX` escapes decoded; malformed escapes kept as they are.
