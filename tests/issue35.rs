@@ -6,7 +6,8 @@
 //!   1001..1025), and `--frames` and `--shard` still work on it;
 //! * a frame's header says `default-light=true` only when the default light was added;
 //! * a `.blend` given as a scene, and a glTF scene given to `inspect`, get a message that
-//!   says what to do.
+//!   says what to do;
+//! * BART glass transmits (the kitchen's dragon, `fm … 20 0.85 1.55`, was opaque grey).
 //!
 //! `--resume`'s count of the finished frames it replaces is checked in
 //! `tests/render_cli.rs` (`resume_rerenders_frames_made_with_other_options`).
@@ -241,4 +242,45 @@ fn inspect_of_a_gltf_scene_says_to_bake_it_first() {
         assert!(!e.contains("magic bytes"), "{e}");
         assert_eq!(e.lines().count(), 1, "{e}");
     }
+}
+
+/// A sphere of the kitchen dragon's glass (`fm 0.1 0.1 0.1  0.2 0.2 0.2  0.05 0.05 0.05
+/// 20 0.85 1.55`) in front of a white wall lit from the side (no ambient term): through
+/// its middle the wall shows with about (0.95 · 0.81)² = 0.59 of its radiance (two
+/// surfaces of Fresnel 0.047, transmission T less the 0.05 of `metallic`), plus the
+/// glass's own diffuse and highlight. Before the fix the glass passed 0.2 of that at
+/// each surface (the base colour tinted it): about 0.03 of the wall.
+#[test]
+fn bart_glass_transmits() {
+    let dir = temp_dir("issue35-glass");
+    let view = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 20\nhither 0.01\nresolution 32 32\n\
+                am 0 0 0\nl 3 0 5\n\
+                f 1 1 1  1 0 0 0 0\np 4\n-4 -4 -2\n4 -4 -2\n4 4 -2\n-4 4 -2\n";
+    let glass = "fm 0.1 0.1 0.1  0.2 0.2 0.2  0.05 0.05 0.05  20 0.85 1.55\ns 0 0 0 0.5\n";
+    let centre = |name: &str, text: &str| {
+        let path = dir.join(format!("{name}.aff"));
+        std::fs::write(&path, text).unwrap();
+        let scene = import::load(&path).unwrap();
+        let out = dir.join(format!("{name}.exr"));
+        let o = RenderOptions {
+            output: out.clone(),
+            width: 32,
+            height: 32,
+            pixel_type: render::PixelType::Float,
+            ..Default::default()
+        };
+        render::render_sequence(&scene, &o, &mut |_| {}).unwrap();
+        let (w, _, chans) = common::exr_read::read_exr(&out);
+        let r = common::exr_read::channel(&chans, "R");
+        (r[15 * w + 15] + r[15 * w + 16] + r[16 * w + 15] + r[16 * w + 16]) / 4.0
+    };
+    let wall = centre("wall", view);
+    let through = centre("glass", &format!("{view}{glass}"));
+    eprintln!("the wall {wall}, through the glass {through}");
+    // The wall: white, lit without falloff at cos = 7/√58 (the light is at (3, 0, 5)).
+    assert!((wall - 7.0 / 58f32.sqrt()).abs() < 1e-3, "{wall}");
+    assert!(
+        through > 0.55 * wall && through < 1.2 * wall,
+        "the wall through the glass: {through} of {wall}"
+    );
 }
