@@ -2,7 +2,8 @@
 # grey floor, a back wall, a red and a green box, a 1000 W point light and a 3 W/m² sun,
 # a camera), exported with the glTF exporter's default settings (lighting mode
 # "Standard": candela and lux) plus lights and camera, then rendered by Cycles with
-# direct light only, once with the Principled BSDFs as authored and once with each
+# direct light only (also exported in the "Unitless" mode, to show what that gives),
+# once with the Principled BSDFs as authored and once with each
 # replaced by a Lambertian Diffuse BSDF of its colour (subfield's diffuse lobe).
 # benches/blender_units.sh runs it, renders the exported file with subfield and compares
 # the two per material.
@@ -68,6 +69,11 @@ sc.render.resolution_percentage = 100
 # The exporter's defaults; lights and cameras are not exported by default, so asked for.
 bpy.ops.export_scene.gltf(filepath=out + "/scene.glb", export_format="GLB",
                           export_cameras=True, export_lights=True)
+# The same in the non-default "Unitless" lighting mode (docs/INPUTS.md: 683x too dark).
+mode = {"convert_lighting_mode": "COMPAT"} if bpy.app.version < (3, 6, 0) else \
+    {"export_import_convert_lighting_mode": "COMPAT"}
+bpy.ops.export_scene.gltf(filepath=out + "/scene_unitless.glb", export_format="GLB",
+                          export_cameras=True, export_lights=True, **mode)
 
 sc.render.engine = "CYCLES"
 cy = sc.cycles

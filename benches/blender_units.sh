@@ -15,3 +15,7 @@ blender -b --factory-startup --python benches/blender_units.py -- "$out" "$w" "$
     --float --aov albedo --spp 16 --quiet
 python3 benches/blender_units_compare.py "$out/ours.0.exr" \
     "$out/cycles_principled.exr" "$out/cycles_lambert.exr"
+echo "the same scene exported in Blender's \"Unitless\" lighting mode:"
+"$bin" render "$out/scene_unitless.glb" -o "$out/unitless.#.exr" --frames 0 \
+    --size "${w}x${h}" --float --aov albedo --spp 16 --quiet
+python3 benches/blender_units_compare.py "$out/unitless.0.exr" "$out/cycles_lambert.exr"

@@ -40,6 +40,6 @@ for c in sorted(colours):
         y = cyc[..., :3][mask].sum(-1).mean()
         row.append((mask.sum(), o, y))
     n, o, _ = row[0]
-    cells = " ".join(f"{y:>12.4f} ours/it {o / y:6.3f}   " for (_, _, y) in row)
+    cells = " ".join(f"{y:>12.4f} ours/it {o / y:9.5f} " for (_, _, y) in row)
     name = ",".join(f"{x:g}" for x in c)
     print(f"{name:>22} {n:>7} {o:>9.4f} {cells}")
