@@ -199,8 +199,8 @@ pub struct RenderPlan {
     /// The scene's own ambient light (AFF `am`), which replaces the options' ambient
     /// term; the options string records it in its place.
     pub ambient: Option<Vec3>,
-    /// Whether the options' default light is added: asked for, and the scene shows no
-    /// light ([`adds_default_light`]). Frames say so in their header.
+    /// Whether the options' default light is added: asked for, and the shown scene has
+    /// no punctual light and no emitting material. Frames say so in their header.
     pub default_light: bool,
 }
 
