@@ -3,7 +3,7 @@
 //!
 //! * without `--frames` a render covers the authored range, from the frame of the
 //!   earliest key to the frame of the latest (a shot keyed at 1001–1024 renders
-//!   1001..1025), and `--frames` and `--shard` still work on it;
+//!   1001..1025), `--frames` and `--shard` still work on it, and `submit` plans it too;
 //! * a frame's header says `default-light=true` only when the default light was added;
 //! * a `.blend` given as a scene, and a glTF scene given to `inspect`, get a message that
 //!   says what to do;
@@ -115,6 +115,35 @@ fn a_shot_keyed_at_1001_to_1024_renders_those_24_frames_by_default() {
         frames_of(&render::plan(&scene, &o).unwrap()),
         [1001, 1009, 1017]
     );
+}
+
+#[test]
+fn submit_plans_the_authored_range_too() {
+    let dir = temp_dir("issue35-submit");
+    let keys: Vec<u32> = (1001..=1024).collect();
+    let scene = dir.join("shot.glb");
+    import::write_gltf(&keyed_cube(&keys, true), &scene).unwrap();
+    let psf = dir.join("shot.psf");
+    let o = subfield(&["bake", s(&scene), "-o", s(&psf)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = subfield(&[
+        "submit",
+        "slurm",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&dir.join("out/f.####.exr")),
+        "--size",
+        "8x6",
+        "--tasks",
+        "4",
+        "--dry-run",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let script = String::from_utf8_lossy(&o.stdout);
+    assert!(script.contains("--frames=1001..1025"), "{script}");
+    assert!(script.contains("#SBATCH --array=0-3\n"), "{script}");
 }
 
 #[test]
