@@ -7,9 +7,10 @@
 #          SCENE OUT.exr W H SPP FRAME [options]
 # options (all optional):
 #   --world L          uniform world radiance (our ambient term is 0.05 × albedo, unoccluded)
-#   --light-scale K    multiply the importer's point/spot power by K: the importer reads glTF
-#                      candela as photometric (W = cd·4π/683); subfield reads them as W/sr,
-#                      so K = 683 lights the scene as subfield does
+#   --light-scale K    multiply the importer's point/spot power by K (default 1). The
+#                      importer reads glTF candela as photometric (W = cd·4π/683), as
+#                      subfield does since issue 35; K = 683 matches files written by
+#                      subfield before then, whose numbers were W/sr
 #   --look-from X,Y,Z --look-at X,Y,Z --yfov DEG
 #                      a camera at glTF coordinates (else the file's first camera)
 #   --sun              subfield's default light: directional, irradiance π, from over the

@@ -142,7 +142,8 @@ def main():
         "asset": {"version": "2.0", "generator": "subfield benches/skinned_scene.py"},
         "extensionsUsed": ["KHR_lights_punctual"],
         "extensions": {"KHR_lights_punctual": {"lights": [
-            {"type": "point", "color": [1, 1, 1], "intensity": 400.0}]}},
+            # candela (KHR_lights_punctual): 400 W/sr in subfield's radiometric unit
+            {"type": "point", "color": [1, 1, 1], "intensity": 400.0 * 683}]}},
         "scene": 0,
         "scenes": [{"nodes": [0, 1, 2, 3] + roots, "extras": {"fps": a.fps}}],
         "nodes": nodes,

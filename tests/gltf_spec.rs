@@ -565,7 +565,8 @@ fn unknown_light_type_and_unknown_extensions_warn() {
         scene.lights[0].kind,
         LightKind::Spot { outer_cone_angle, .. } if outer_cone_angle == 0.5
     ));
-    assert_eq!(scene.lights[0].intensity, 30.0);
+    // 30 candela: 30/683 W/sr in the model.
+    assert_eq!(scene.lights[0].intensity, (30.0f64 / 683.0) as f32);
     assert_eq!(scene.nodes[2].light, None, "the area light is skipped");
     assert_eq!(scene.nodes[3].light, Some(0));
     assert!(warned(&scene, &["lights[0]", "\"area\"", "skipped"]));

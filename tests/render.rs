@@ -603,7 +603,7 @@ fn every_shared_gltf_renders_two_frames() {
                     24,
                     opts.aovs,
                     PixelType::Half,
-                    &opts.options_string(s.plan.fps, s.plan.ambient)
+                    &opts.options_string(s.plan.fps, s.plan.ambient, s.plan.default_light)
                 ),
                 "{}",
                 p.display()

@@ -238,8 +238,17 @@ fn resume_rerenders_frames_made_with_other_options() {
     run("1", false);
     let spp1 = snapshot(&dir.join("o"));
     // Other options: no frame is complete for this run, every one is rendered again.
+    // One broken frame is no finished frame: only the two whole ones are counted as
+    // replaced, in one line (issue 35).
+    std::fs::write(dir.join("o/f.1.exr"), b"cut short").unwrap();
     let log = run("2", true);
     assert!(log.contains("(0 skipped as complete)"), "{log}");
+    let said: Vec<&str> = log.lines().filter(|l| l.contains("again")).collect();
+    assert_eq!(
+        said,
+        ["--resume rendered 2 finished frames again: they were made with other options (the options string in the header differs)"],
+        "{log}"
+    );
     let spp2 = snapshot(&dir.join("o"));
     assert_eq!(spp2.len(), 3);
     for ((_, a), (_, b)) in spp1.iter().zip(&spp2) {
@@ -248,6 +257,7 @@ fn resume_rerenders_frames_made_with_other_options() {
     // The same options: all skipped, nothing rewritten.
     let log = run("2", true);
     assert!(log.contains("(3 skipped as complete)"), "{log}");
+    assert!(!log.contains("again"), "{log}");
     assert_eq!(snapshot(&dir.join("o")), spp2);
 }
 

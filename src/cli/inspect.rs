@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
+use subfield::format::FormatError;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -19,8 +20,19 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
-    let ins = subfield::format::inspect(&a.file)
-        .with_context(|| format!("cannot inspect {}", a.file.display()))?;
+    let ins = match subfield::format::inspect(&a.file) {
+        Ok(ins) => ins,
+        // A scene given for its bake: the command that makes one (issue 35).
+        Err(FormatError::GltfScene { kind }) => anyhow::bail!(
+            "cannot inspect {}: this is a glTF scene ({kind}), not a baked file: bake it first: subfield bake {} -o {}",
+            a.file.display(),
+            a.file.display(),
+            a.file.with_extension("psf").display(),
+        ),
+        Err(e) => {
+            return Err(e).with_context(|| format!("cannot inspect {}", a.file.display()))
+        }
+    };
     let text = if a.json {
         format!("{}\n", ins.to_json())
     } else if a.verbose {

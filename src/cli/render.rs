@@ -28,7 +28,9 @@ pub struct Args {
     #[arg(long)]
     pub baked: Option<PathBuf>,
     /// Frames: A..B (inclusive A, exclusive B), a single frame N, every S-th frame A..B:S,
-    /// or a comma list of these (0..10,47,50..60); default: the whole animation.
+    /// or a comma list of these (0..10,47,50..60); default: the authored range, from the
+    /// frame of the earliest key to the frame of the latest (frame 0 alone without
+    /// animation).
     #[arg(long, value_name = "A..B|N|A..B:S,...")]
     pub frames: Option<String>,
     /// Frames per second; frame i shows time i/F (default: the scene's extras.fps, else 24).
@@ -436,6 +438,18 @@ pub fn drive(
         }
         r => r?,
     };
+    if !quiet && summary.replaced > 0 {
+        // `--resume` rendered over whole frames: say so, once (issue 35).
+        let line = format!(
+            "--resume rendered {} again: {} made with other options (the options string in the header differs)",
+            subfield::plural(summary.replaced as u64, "finished frame"),
+            if summary.replaced == 1 { "it was" } else { "they were" },
+        );
+        match &bar {
+            Some(b) => b.println(&line),
+            None => eprintln!("{line}"),
+        }
+    }
     if !quiet {
         let t = &summary.totals;
         let n = t.frames.max(1) as f64;

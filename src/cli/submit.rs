@@ -196,7 +196,7 @@ fn complete(plan: &RenderPlan, opts: &RenderOptions, frame: u32) -> bool {
         opts.height,
         opts.aovs,
         opts.pixel_type,
-        &opts.options_string(plan.fps, plan.ambient),
+        &opts.options_string(plan.fps, plan.ambient, plan.default_light),
     )
 }
 

@@ -17,6 +17,12 @@ pub enum FormatError {
     },
     #[error("not a baked subfield file: magic bytes {0:02x?}")]
     Magic([u8; 8]),
+    /// A glTF scene where a baked file was expected: it is to be baked first.
+    #[error("this is a glTF scene ({kind}), not a baked file: bake it first (subfield bake SCENE -o FILE.psf)")]
+    GltfScene {
+        /// `"GLB"` or `"JSON"`.
+        kind: &'static str,
+    },
     #[error("format version {found} is not supported (this build reads versions 2 to {supported}); re-bake the scene")]
     Version { found: u32, supported: u32 },
     #[error("file is truncated in {section}: needs {needed} bytes, has {have}")]

@@ -468,6 +468,14 @@ impl Header {
         let n = all.len().min(8);
         magic[..n].copy_from_slice(&all[..n]);
         if magic[..n] != MAGIC[..n] {
+            // A scene given for its bake is the likely mistake: say so.
+            if all.starts_with(b"glTF") {
+                return Err(FormatError::GltfScene { kind: "GLB" });
+            }
+            let json = all.iter().find(|c| !c.is_ascii_whitespace()) == Some(&b'{');
+            if json {
+                return Err(FormatError::GltfScene { kind: "JSON" });
+            }
             return Err(FormatError::Magic(magic));
         }
         let Some(b) = all.get(..HEADER_LEN) else {

@@ -49,6 +49,11 @@ pub enum ImportError {
     #[error("{path}: malformed GLB: {reason}")]
     Glb { path: PathBuf, reason: String },
 
+    /// A Blender `.blend` file (by its extension or its `BLENDER` magic), which only
+    /// Blender reads: the scene is to be exported as glTF first.
+    #[error("{path}: a Blender file, which subfield does not read: export the scene from Blender as glTF (File > Export > glTF 2.0, .glb) and render that file")]
+    BlendFile { path: PathBuf },
+
     /// The JSON could not be parsed as glTF.
     #[error("{path}: not valid glTF JSON: {reason}")]
     Json { path: PathBuf, reason: String },

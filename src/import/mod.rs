@@ -4,7 +4,8 @@
 //! * [`load`]: one entry for every format we read, chosen by extension (any case):
 //!   `.aff` / `.nff` go through the BART reader ([`aff`]), everything else through the
 //!   glTF 2.0 reader (`.gltf` with external or data-URI buffers, `.glb`). Each reader
-//!   produces a [`Scene`] on its own; neither goes through the other.
+//!   produces a [`Scene`] on its own; neither goes through the other. A Blender `.blend`
+//!   file is refused with a word on exporting glTF ([`ImportError::BlendFile`]).
 //! * [`from_gltf_slice`]: glTF or GLB bytes already in memory.
 //! * [`validate`]: the border check every importer runs before handing a scene out; past
 //!   it the rest of the crate relies on the invariants it checks (every index in range,
@@ -52,14 +53,34 @@ use crate::scene::Scene;
 /// A BART `.aff` or `.nff` file is parsed and mapped onto the model
 /// ([`aff::load_scene`]), as the file `subfield convert` writes would import.
 pub fn load(path: &Path) -> Result<Scene, ImportError> {
-    let is_aff = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("aff") || e.eq_ignore_ascii_case("nff"));
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    let is_aff = ext.eq_ignore_ascii_case("aff") || ext.eq_ignore_ascii_case("nff");
     if is_aff {
         return aff::load_scene(path);
     }
+    if is_blend(path, ext) {
+        return Err(ImportError::BlendFile {
+            path: path.to_path_buf(),
+        });
+    }
     gltf_read::load(path)
+}
+
+/// Whether `path` is a Blender file: named `.blend` (or a backup, `.blend1`, `.blend2`…)
+/// or starting with Blender's magic `BLENDER` (an uncompressed `.blend` under another
+/// name). A file that cannot be read is not judged here: the reader reports it.
+fn is_blend(path: &Path, ext: &str) -> bool {
+    let lower = ext.to_ascii_lowercase();
+    let named = lower
+        .strip_prefix("blend")
+        .is_some_and(|n| n.bytes().all(|c| c.is_ascii_digit()));
+    if named {
+        return true;
+    }
+    let mut magic = [0u8; 7];
+    std::fs::File::open(path)
+        .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic))
+        .is_ok_and(|()| &magic == b"BLENDER")
 }
 
 /// Imports glTF or GLB bytes; external URIs resolve against `folder`.

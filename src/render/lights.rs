@@ -9,7 +9,7 @@
 
 use glam::{Vec2, Vec3};
 
-use crate::scene::{Scene, TriangleSoup};
+use crate::scene::{Material, Scene, TriangleSoup};
 
 /// One emissive triangle, world space.
 #[derive(Clone, Copy, Debug)]
@@ -55,23 +55,27 @@ fn luminance(c: Vec3) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }
 
+/// Power a unit area of `m` gives off, for the table (0: it does not emit).
+fn material_power(m: &Material) -> f32 {
+    let l = luminance(m.emissive * m.emissive_strength);
+    let sides = if m.double_sided { 2.0 } else { 1.0 };
+    if l.is_finite() && l > 0.0 {
+        l * sides
+    } else {
+        0.0
+    }
+}
+
+/// Whether triangles of `m` become area lights.
+pub(super) fn emits(m: &Material) -> bool {
+    material_power(m) > 0.0
+}
+
 impl AreaLights {
     /// Emitters of the static then the moving triangles (hit numbers in that order).
     pub fn new(scene: &Scene, static_soup: &TriangleSoup, dynamic_soup: &TriangleSoup) -> Self {
         // Power a unit area of each material gives off (0: it does not emit).
-        let power: Vec<f32> = scene
-            .materials
-            .iter()
-            .map(|m| {
-                let l = luminance(m.emissive * m.emissive_strength);
-                let sides = if m.double_sided { 2.0 } else { 1.0 };
-                if l.is_finite() && l > 0.0 {
-                    l * sides
-                } else {
-                    0.0
-                }
-            })
-            .collect();
+        let power: Vec<f32> = scene.materials.iter().map(material_power).collect();
         if power.iter().all(|&p| p == 0.0) {
             return AreaLights::default();
         }
@@ -168,7 +172,6 @@ impl AreaLights {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Material;
 
     fn soup(tris: &[([Vec3; 3], u32)]) -> TriangleSoup {
         let mut s = TriangleSoup::new();

@@ -66,8 +66,8 @@ pub use options::{
     RenderOptions, ShadingOptions, Shard, DEFAULT_CRYPTO_LEVELS, MAX_FRAMES, MAX_SIDE,
 };
 pub use output::{
-    channel_names, encode_exr, encode_preview, is_complete, linear_to_srgb8, software,
-    OPTIONS_ATTRIBUTE,
+    channel_names, encode_exr, encode_preview, frame_file, is_complete, linear_to_srgb8, software,
+    FrameFile, OPTIONS_ATTRIBUTE,
 };
 pub use planning::{plan, CameraSource, FramePlan, OutputPattern, RenderPlan};
 pub use sequence::render_sequence;
@@ -212,6 +212,9 @@ pub struct RenderSummary {
     pub plan: RenderPlan,
     pub rendered: usize,
     pub skipped: usize,
+    /// Frames rendered again by `resume` although their file was whole: it was made with
+    /// other options (its header's options string differs).
+    pub replaced: usize,
     /// The rendered frames' times and rays, summed (per-frame figures go to `--stats` as
     /// each frame is written: a summary stays the same size whatever the frame count).
     pub totals: FrameTotals,

@@ -405,7 +405,8 @@ pub struct RenderOptions {
     pub output: PathBuf,
     /// A baked `.psf` of the scene's static part; `None` bakes in memory.
     pub baked: Option<PathBuf>,
-    /// `None`: the whole animation at `fps` (frame 0 alone without animation).
+    /// `None`: the authored range at `fps`, from the frame of the earliest key to the frame
+    /// of the latest of the clips that play (frame 0 alone without animation).
     pub frames: Option<FrameSet>,
     /// `None`: the scene's `extras.fps`, else 24.
     pub fps: Option<f32>,
@@ -470,9 +471,15 @@ impl RenderOptions {
     /// (`subfield/options`) and `--resume` re-renders a frame whose string differs.
     /// `fps` is the resolved rate (the plan's); `scene_ambient`, the scene's own ambient
     /// light where it has one (the plan's), is written in place of the options' ambient
-    /// term, which it replaces (`ambient=scene:R,G,B`). Deterministic: no time stamps,
-    /// no paths.
-    pub fn options_string(&self, fps: f32, scene_ambient: Option<Vec3>) -> String {
+    /// term, which it replaces (`ambient=scene:R,G,B`); `default_light`, whether the
+    /// default light is added (the plan's: asked for and the scene has no light).
+    /// Deterministic: no time stamps, no paths.
+    pub fn options_string(
+        &self,
+        fps: f32,
+        scene_ambient: Option<Vec3>,
+        default_light: bool,
+    ) -> String {
         let mut s = format!(
             "size={}x{} spp={} max-depth={} pixel={} fps={} animation={}",
             self.width,
@@ -517,7 +524,7 @@ impl RenderOptions {
         };
         s += &format!(
             " ambient={from}{},{},{} background={},{},{} default-light={}",
-            a.x, a.y, a.z, sh.background.x, sh.background.y, sh.background.z, sh.default_light
+            a.x, a.y, a.z, sh.background.x, sh.background.y, sh.background.z, default_light
         );
         if sh.diffuse_bounces > 0 {
             s += &format!(" diffuse-bounces={}", sh.diffuse_bounces);

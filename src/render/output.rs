@@ -252,6 +252,22 @@ pub fn encode_exr(
         .map_err(|e| exr::error::Error::Invalid(e.to_string().into()))
 }
 
+/// What a resumed run finds where a frame goes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum FrameFile {
+    /// No regular file there.
+    Missing,
+    /// Not a whole EXR: cut short, corrupt, or unreadable.
+    Incomplete,
+    /// A whole EXR made with other options: another options string (see
+    /// [`RenderOptions::options_string`](super::RenderOptions::options_string)), size,
+    /// channels or pixel type, or none of ours.
+    OtherOptions,
+    /// A whole EXR of this size, these channels and these options.
+    Complete,
+}
+
 /// Whether `path` is a complete EXR with this size, these channels and this options
 /// string (`subfield/options`, see
 /// [`RenderOptions::options_string`](super::RenderOptions::options_string)): every
@@ -265,8 +281,22 @@ pub fn is_complete(
     pixel: PixelType,
     options: &str,
 ) -> bool {
+    frame_file(path, width, height, aovs, pixel, options) == FrameFile::Complete
+}
+
+/// What is at `path` for a frame of this size, these channels and this options string:
+/// [`is_complete`] that also tells a whole frame made with other options from a broken
+/// or missing one.
+pub fn frame_file(
+    path: &Path,
+    width: u32,
+    height: u32,
+    aovs: Aovs,
+    pixel: PixelType,
+    options: &str,
+) -> FrameFile {
     if !path.is_file() {
-        return false;
+        return FrameFile::Missing;
     }
     let Ok(img) = read()
         .no_deep_data()
@@ -278,13 +308,13 @@ pub fn is_complete(
         .non_parallel()
         .from_file(path)
     else {
-        return false;
+        return FrameFile::Incomplete;
     };
     let [layer] = img.layer_data.as_slice() else {
-        return false;
+        return FrameFile::OtherOptions;
     };
     if layer.size != Vec2(width as usize, height as usize) {
-        return false;
+        return FrameFile::OtherOptions;
     }
     let key = text(OPTIONS_ATTRIBUTE);
     let stored = layer
@@ -294,11 +324,11 @@ pub fn is_complete(
         .or_else(|| img.attributes.other.get(&key));
     match stored {
         Some(AttributeValue::Text(t)) if t.bytes() == options.as_bytes() => {}
-        _ => return false,
+        _ => return FrameFile::OtherOptions,
     }
     let want = channel_names(aovs);
     let got = &layer.channel_data.list;
-    got.len() == want.len()
+    let same = got.len() == want.len()
         && got.iter().zip(&want).all(|(c, w)| {
             let ty = match (&c.sample_data, w.as_str()) {
                 (FlatSamples::F16(_), "A" | "B" | "G" | "R") => pixel == PixelType::Half,
@@ -307,7 +337,12 @@ pub fn is_complete(
                 _ => false,
             };
             ty && c.name.bytes() == w.as_bytes()
-        })
+        });
+    if same {
+        FrameFile::Complete
+    } else {
+        FrameFile::OtherOptions
+    }
 }
 
 /// Linear radiance → 8-bit sRGB, clamped (what an EXR viewer shows at exposure 0).

@@ -9,7 +9,7 @@ use glam::Vec3;
 use super::camera::{animation_bounds, aspect_warning, CameraModel, MAX_EXPOSURE};
 use super::errors::OptionError;
 use super::options::{FrameRange, FrameSet, RenderOptions, Shard, MAX_SIDE};
-use super::output::is_complete;
+use super::output::{frame_file, FrameFile};
 use super::stats;
 use super::writer::{check_target, check_writable};
 use super::RenderError;
@@ -182,7 +182,8 @@ impl FramePlan {
 pub struct RenderPlan {
     pub selection: ClipSelection,
     pub fps: f32,
-    /// The frames asked for (`--frames`, else the whole animation), before sharding.
+    /// The frames asked for (`--frames`, else the authored range: the frame of the
+    /// earliest key to the frame of the latest), before sharding.
     pub set: FrameSet,
     /// Their span: the first frame to one past the last, before sharding.
     pub range: FrameRange,
@@ -198,6 +199,9 @@ pub struct RenderPlan {
     /// The scene's own ambient light (AFF `am`), which replaces the options' ambient
     /// term; the options string records it in its place.
     pub ambient: Option<Vec3>,
+    /// Whether the options' default light is added: asked for, and the shown scene has
+    /// no punctual light and no emitting material. Frames say so in their header.
+    pub default_light: bool,
 }
 
 impl RenderPlan {
@@ -244,28 +248,28 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
     if opts.shading.diffuse_bounces > 64 {
         return Err(OptionError::DiffuseBounces(opts.shading.diffuse_bounces).into());
     }
-    // The last frame at or before the end of the animation; `None` without animation.
+    // The authored range: the frames of the earliest and the latest key of the clips
+    // that play; `None` without animation (or with every key at time 0).
     let duration = scene.duration(selection) as f64;
-    let last = (duration > 0.0).then(|| {
-        // The end is an f32 key time, a few ulps (2^-24 each, relative) off the frame time
-        // it stands for: 299/30 s is stored as 9.966666 s, 298.99999 frames at 30 fps.
-        // Allow 2^-20 of it, so the last key's frame is not dropped.
-        let x = duration * fps as f64;
-        (x + x * (1.0 / 1_048_576.0) + 1e-6)
-            .floor()
-            .min(u32::MAX as f64 - 1.0) as u32
-    });
+    let authored = scene
+        .key_span(selection)
+        .filter(|&(_, end)| end > 0.0)
+        .map(|(start, end)| (key_frame(start, fps), key_frame(end, fps)));
+    let last = authored.map(|(_, l)| l);
     let set = match &opts.frames {
         Some(s) => s.clone(),
-        None => FrameSet::from(FrameRange {
-            start: 0,
-            end: last.unwrap_or(0) + 1,
-        }),
+        None => {
+            let (start, end) = authored.unwrap_or((0, 0));
+            FrameSet::from(FrameRange {
+                start,
+                end: end + 1,
+            })
+        }
     };
     set.check().map_err(|e| match opts.frames {
         Some(_) => e,
         None => OptionError::AnimationTooLong {
-            frames: last.unwrap_or(0) as u64 + 1,
+            frames: authored.map_or(1, |(a, b)| u64::from(b - a) + 1),
             fps,
         },
     })?;
@@ -364,7 +368,42 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
         camera,
         split: static_dynamic_split(scene, selection).summary(),
         ambient: scene.ambient,
+        default_light: adds_default_light(scene, opts),
     })
+}
+
+/// Whether a render adds the options' default light: they ask for it and the shown scene
+/// has no light, neither a punctual light on a node nor an emitting material on a mesh.
+/// The frames' `ShadeContext` adds it when this says so (and the scene has no light,
+/// which this implies), so the header's `default-light` is what the frames show.
+fn adds_default_light(scene: &Scene, opts: &RenderOptions) -> bool {
+    let lit = |n: usize| {
+        let node = &scene.nodes[n];
+        node.light.is_some()
+            || node
+                .mesh
+                .and_then(|m| scene.meshes.get(m))
+                .is_some_and(|m| {
+                    m.primitives.iter().any(|p| {
+                        scene
+                            .materials
+                            .get(p.material as usize)
+                            .is_some_and(super::lights::emits)
+                    })
+                })
+    };
+    opts.shading.default_light && !scene.scene_nodes().into_iter().any(lit)
+}
+
+/// The frame at or before a key time (seconds) at `fps`, clamped to `0..u32::MAX`.
+/// The time is an f32, a few ulps (2^-24 each, relative) off the frame time it stands
+/// for: 299/30 s is stored as 9.966666 s, 298.99999 frames at 30 fps, and 1001/24 s may
+/// come out just under frame 1001. Allow 2^-20 of it, so a key's own frame is not lost.
+fn key_frame(t: f32, fps: f32) -> u32 {
+    let x = t as f64 * fps as f64;
+    (x + x.abs() * (1.0 / 1_048_576.0) + 1e-6)
+        .floor()
+        .clamp(0.0, u32::MAX as f64 - 1.0) as u32
 }
 
 /// The split a render uses: the static instances of *all* clips (exactly what `subfield
@@ -439,11 +478,12 @@ pub(super) fn check_outputs(plan: &RenderPlan, opts: &RenderOptions) -> Result<(
     Ok(())
 }
 
-/// Whether a resumed run skips `path`: its file is complete for these options
-/// (`options`: [`RenderOptions::options_string`], compared with the file's header).
-pub(super) fn skips(opts: &RenderOptions, path: &Path, options: &str) -> bool {
-    opts.resume
-        && is_complete(
+/// What a resumed run finds at `path` (`options`: [`RenderOptions::options_string`],
+/// compared with the file's header): it skips a [`FrameFile::Complete`] one; `None`
+/// when the run does not resume.
+pub(super) fn resumed(opts: &RenderOptions, path: &Path, options: &str) -> Option<FrameFile> {
+    opts.resume.then(|| {
+        frame_file(
             path,
             opts.width,
             opts.height,
@@ -451,6 +491,7 @@ pub(super) fn skips(opts: &RenderOptions, path: &Path, options: &str) -> bool {
             opts.pixel_type,
             options,
         )
+    })
 }
 
 #[cfg(test)]

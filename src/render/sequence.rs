@@ -13,8 +13,11 @@ use super::aov::{CryptoNames, FrameHeader};
 use super::camera::{apply_exposure, CameraModel};
 use super::errors::OutputFile;
 use super::mips::TextureMips;
-use super::options::RenderOptions;
-use super::planning::{check_outputs, plan, skips, static_dynamic_split, CameraSource, RenderPlan};
+use super::options::{RenderOptions, ShadingOptions};
+use super::output::FrameFile;
+use super::planning::{
+    check_outputs, plan, resumed, static_dynamic_split, CameraSource, RenderPlan,
+};
 use super::shade::{FrameBuffers, ShadeContext};
 use super::stats::{self, FrameStats, FrameTotals, PlotBars};
 use super::wavefront::{render_frame_with, AovInputs, FrameScratch};
@@ -64,7 +67,7 @@ pub fn render_sequence(
         split: &split,
         psf: &psf,
         static_soup: &static_soup,
-        options: opts.options_string(plan.fps, plan.ambient),
+        options: opts.options_string(plan.fps, plan.ambient, plan.default_light),
         crypto: opts
             .aovs
             .cryptomatte
@@ -81,6 +84,7 @@ pub fn render_sequence(
         stats_file,
         plot,
         skipped,
+        replaced,
         preview_written,
     } = frames.run(stats_file, on_event)?;
     if let Some((f, p)) = stats_file {
@@ -97,6 +101,7 @@ pub fn render_sequence(
     Ok(RenderSummary {
         rendered: totals.frames,
         skipped,
+        replaced,
         totals,
         preview: preview_written,
         static_seconds,
@@ -168,6 +173,8 @@ struct Done {
     stats_file: Option<(StatsFile, PathBuf)>,
     plot: PlotBars,
     skipped: usize,
+    /// Whole frames made with other options, rendered again.
+    replaced: usize,
     preview_written: Option<PathBuf>,
 }
 
@@ -271,6 +278,7 @@ impl Frames<'_> {
             spare: None,
         };
         let mut skipped = 0usize;
+        let mut replaced = 0usize;
         // Frames handed to the writer or skipped, and whether the loop stopped for the
         // cancel flag or because the writer was gone.
         let mut done = 0usize;
@@ -310,7 +318,9 @@ impl Frames<'_> {
                 }
                 done += 1;
                 let path = plan.pattern.path(frame);
-                if skips(opts, &path, &self.options) {
+                let found = resumed(opts, &path, &self.options);
+                replaced += usize::from(found == Some(FrameFile::OtherOptions));
+                if found == Some(FrameFile::Complete) {
                     skipped += 1;
                     on_event(RenderEvent::Frame(&FrameReport {
                         frame,
@@ -378,6 +388,7 @@ impl Frames<'_> {
             stats_file: written.stats_file,
             plot: written.plot,
             skipped,
+            replaced,
             preview_written: written.preview_written,
         })
     }
@@ -437,7 +448,10 @@ impl Frames<'_> {
             dyn_soup,
             &lights,
             &camera,
-            opts.shading.clone(),
+            ShadingOptions {
+                default_light: plan.default_light,
+                ..opts.shading.clone()
+            },
             extent,
             self.mips,
         );

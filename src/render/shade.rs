@@ -14,7 +14,8 @@
 //! their sample one after the other in array order. Jitter comes from a hash of (frame,
 //! pixel, sample). Nothing depends on the thread count.
 //!
-//! Model (linear RGB; `KHR_lights_punctual` units): base colour = factor × texture
+//! Model (linear RGB radiance, W·sr⁻¹·m⁻², lights radiometric: see `scene::LightDef`):
+//! base colour = factor × texture
 //! (sRGB texels linearised before filtering; textures are mip-mapped and looked up
 //! trilinearly at the level of detail of the ray's cone, see `mips`); the shading normal
 //! bent by the normal map, if any (tangents from the triangle's uvs);
@@ -42,9 +43,11 @@
 //!   texture in place of `kd` where it has one) and the emission `emissive·strength·texture` (from the
 //!   front face, both faces when double-sided).
 //!
-//! Irradiance: directional `E = intensity` (lux), point and spot `E = intensity/d²`
-//! (candela; `E = intensity` for a light without falloff, `Falloff::None`: AFF/NFF
-//! lights) with the spec's range window and spot cone falloff. Without punctual lights
+//! Irradiance: directional `E = intensity` (W/m²: a glTF file's lux / 683), point and
+//! spot `E = intensity/d²` (W/sr: candela / 683; `E = intensity` for a light without
+//! falloff, `Falloff::None`: AFF/NFF lights) with the spec's range window and spot cone
+//! falloff. So a Lambertian floor of albedo ρ at distance `d` from a point light of `I`
+//! candela, at incidence θ, has radiance `ρ/π · I/683 · cosθ/d²`. Without punctual lights
 //! and emitters, the options' default light.
 
 use std::time::Duration;

@@ -134,6 +134,16 @@ impl Scene {
             .fold(0.0, f32::max)
     }
 
+    /// Earliest and latest keyframe times of the selected clips (seconds): the
+    /// authored span a render covers by default; `None` without keys.
+    pub fn key_span(&self, sel: ClipSelection) -> Option<(f32, f32)> {
+        self.selected_clips(sel)
+            .iter()
+            .flat_map(|a| &a.channels)
+            .filter_map(|c| Some((*c.times.first()?, *c.times.last()?)))
+            .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+    }
+
     /// The pose at time `t` (seconds).
     pub fn pose_at(&self, sel: ClipSelection, t: f32) -> Pose {
         let mut pose = Pose::default();

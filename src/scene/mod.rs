@@ -411,18 +411,26 @@ impl Camera {
     }
 }
 
-/// Kind of a punctual light (`KHR_lights_punctual`).
+/// Luminous efficacy that turns the photometric units of glTF's `KHR_lights_punctual`
+/// (candela, lux) into the model's radiometric ones (W/sr, W/m²): 683 lm/W, the SI
+/// candela's definition at 555 nm and the factor Blender's glTF importer and exporter use
+/// (`PBR_WATTS_TO_LUMENS`). The glTF reader divides by it, the glTF writer multiplies.
+pub const LUMENS_PER_WATT: f64 = 683.0;
+
+/// Kind of a punctual light (`KHR_lights_punctual`). The model is radiometric: see
+/// [`LightDef::intensity`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
 pub enum LightKind {
-    /// Intensity in candela (lm/sr).
+    /// Intensity is radiant intensity, W/sr (a glTF file's candela / 683).
     Point,
-    /// Intensity in candela; cone angles in radians from the axis.
+    /// Intensity in W/sr, as a point light's; cone angles in radians from the axis.
     Spot {
         inner_cone_angle: f32,
         outer_cone_angle: f32,
     },
-    /// Intensity in lux (lm/m²); shines along the node's `-Z`.
+    /// Intensity is irradiance, W/m² (a glTF file's lux / 683); shines along the
+    /// node's `-Z`.
     Directional,
 }
 
@@ -431,11 +439,11 @@ pub enum LightKind {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[non_exhaustive]
 pub enum Falloff {
-    /// `E = intensity / d²`, intensity in candela: physical, and the only falloff of
+    /// `E = intensity / d²`, intensity in W/sr: physical, and the only falloff of
     /// glTF's `KHR_lights_punctual`.
     #[default]
     InverseSquare,
-    /// `E = intensity` at any distance (intensity in lux, as for a directional light):
+    /// `E = intensity` at any distance (intensity in W/m², as for a directional light):
     /// the positional lights of NFF and AFF (BART), whose intensity does not fall off.
     /// glTF keeps it in the light's `extras` (`"falloff": "none"`); other glTF readers
     /// see an inverse-square light.
@@ -449,8 +457,11 @@ pub struct LightDef {
     pub kind: LightKind,
     /// Linear RGB.
     pub color: Vec3,
-    /// In the spec's units: candela for point and spot, lux for directional (and for
-    /// point and spot lights without falloff, [`Falloff::None`]).
+    /// Radiometric, the unit of the renderer's radiance (W·sr⁻¹·m⁻²): radiant intensity
+    /// in W/sr for point and spot lights, irradiance in W/m² for directional ones (and
+    /// for point and spot lights without falloff, [`Falloff::None`]). A glTF file gives
+    /// candela and lux, which the reader divides by [`LUMENS_PER_WATT`] (and the writer
+    /// multiplies back); AFF/NFF lights are set so that BART's shading comes out.
     pub intensity: f32,
     /// Distance where the light's influence ends; `None` is infinite.
     pub range: Option<f32>,
@@ -465,6 +476,7 @@ pub struct Light {
     pub node: usize,
     pub kind: LightKind,
     pub color: Vec3,
+    /// W/sr or W/m², as [`LightDef::intensity`].
     pub intensity: f32,
     pub range: Option<f32>,
     pub falloff: Falloff,

@@ -225,6 +225,7 @@ fn build_camera_and_lights(b: &mut Scene) {
             ..Node::default()
         },
     );
+    // Intensities in the model's W/sr; the written file says 683 times as many candela.
     b.lights.push(LightDef {
         name: Some("lamp".into()),
         kind: LightKind::Point,

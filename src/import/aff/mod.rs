@@ -39,10 +39,11 @@
 //!   1e-4 become 1, as BART does); yon is infinite.
 //! * Lights: `l` / `la` become point lights (`KHR_lights_punctual` in the converted file)
 //!   of the AFF colour (white when absent) without falloff ([`Falloff::None`](crate::scene::Falloff::None): NFF and AFF
-//!   lights are as bright at any distance) and intensity π (so a white diffuse surface
-//!   facing a white light has radiance 1, NFF's `diffuse · colour · N·L`). The converted
-//!   file keeps the falloff in the light's `extras` (`"falloff": "none"`), which subfield
-//!   reads back; other glTF readers see an inverse-square light. `la` lights named by a
+//!   lights are as bright at any distance) and intensity π W/m² (so a white diffuse
+//!   surface facing a white light has radiance 1, NFF's `diffuse · colour · N·L`); the
+//!   converted file writes it in the spec's units, 683·π. It keeps the falloff in the
+//!   light's `extras` (`"falloff": "none"`), which subfield reads back; other glTF
+//!   readers see an inverse-square light of 683·π candela. `la` lights named by a
 //!   `k` block follow its translation track (the light's position).
 //! * Textures: each AFF image becomes an opaque RGBA8 image with the default sampler
 //!   (linear, repeat); the converted file embeds it as PNG.

@@ -8,7 +8,7 @@
 
 use std::collections::HashMap;
 
-use glam::{DQuat, DVec3, Quat, Vec3, Vec4};
+use glam::{DQuat, DVec3, Quat, Vec3};
 use serde_json::{json, Value};
 
 use super::{AffMaterial, AffScene, AffTexture, AffTransform, ImportError, MorphBatch, Tracks};
@@ -22,14 +22,23 @@ use crate::scene::{
 ///
 /// | model (glTF) | from AFF |
 /// |---|---|
-/// | `base_color` (`baseColorFactor`) | diffuse colour (`f`: colour·Kd), clamped to [0, 1]; alpha 1. A texture is multiplied by it, as glTF does |
+/// | `base_color` (`baseColorFactor`) | diffuse colour (`f`: colour·Kd), clamped to [0, 1]; alpha 1. A texture is multiplied by it, as glTF does. A transmissive material's is `min(1, kd + T)` (below) |
 /// | `metallic` | mirror weight: the largest specular component (`f`: Ks), clamped — a Whitted renderer's reflection coefficient |
 /// | `roughness` | `(2/(shine+2))^¼` (Phong exponent → Beckmann-like α = √(2/(n+2)), roughness = √α); 1 for shine ≤ 0 |
-/// | `transmission` (`KHR_materials_transmission`) | `T`, clamped to [0, 1] |
+/// | `transmission` (`KHR_materials_transmission`) | `T / max(base_color)`, clamped to [0, 1] (below) |
 /// | `ior` (`KHR_materials_ior`) | `ior` when ≥ 1 (AFF files write 0 for opaque surfaces: the glTF default 1.5 is kept) |
 /// | `double_sided` | when `T > 0` (AFF: transmissive surfaces are two-sided) |
 ///
 /// | `ambient` | the ambient colour (`f`: colour·Kd, the diffuse colour), negatives as 0: the scene's ambient light `am` is reflected with it |
+///
+/// Transmission: AFF (as NFF) adds `T ×` the refracted colour, untinted, beside the
+/// diffuse colour `kd`; glTF tints the transmitted light by the base colour `b` and
+/// shares it with the diffuse lobe: transmitted `b·t`, diffuse `b·(1 − t)`. Taking
+/// `b = kd` (as for opaque materials) made BART's glass a dark grey filter (the
+/// kitchen's dragon, `kd` 0.2 and `T` 0.85, passed 0.17 of the light at each surface
+/// instead of 0.85: issue 35). So `b = min(1, kd + T)` and `t = T / max(b)`: exact
+/// (transmitted `T`, diffuse `kd`) for a grey `kd` with `kd + T ≤ 1`; otherwise the
+/// brightest channel transmits `T` and the diffuse colour is what is left.
 ///
 /// The exact AFF numbers (ambient, diffuse, specular, shine, T, ior) are kept by
 /// [`material_extras`]: AFF's per-material ambient colour has no glTF counterpart (the
@@ -47,14 +56,21 @@ pub fn material(m: &AffMaterial, texture: Option<u32>) -> Material {
     } else {
         1.0
     };
+    let kd = Vec3::new(
+        clamp01(m.diffuse.x),
+        clamp01(m.diffuse.y),
+        clamp01(m.diffuse.z),
+    );
+    let t = clamp01(m.transmittance);
+    let (base, transmission) = if t > 0.0 {
+        let b = (kd + Vec3::splat(t)).min(Vec3::ONE);
+        (b, clamp01(t / b.max_element()))
+    } else {
+        (kd, 0.0)
+    };
     Material {
         name: None,
-        base_color: Vec4::new(
-            clamp01(m.diffuse.x),
-            clamp01(m.diffuse.y),
-            clamp01(m.diffuse.z),
-            1.0,
-        ),
+        base_color: base.extend(1.0),
         base_color_texture: texture.map(|texture| TextureRef {
             texture,
             tex_coord: 0,
@@ -68,7 +84,7 @@ pub fn material(m: &AffMaterial, texture: Option<u32>) -> Material {
         emissive_texture: None,
         normal_texture: None,
         normal_scale: 1.0,
-        transmission: clamp01(m.transmittance),
+        transmission,
         ior: if m.ior >= 1.0 { m.ior } else { 1.5 },
         double_sided: m.transmittance > 0.0,
         alpha_mode: AlphaMode::Opaque,

@@ -665,7 +665,9 @@ pub(super) struct Light {
     #[serde(rename = "type")]
     pub type_: Option<String>,
     pub color: [f32; 3],
-    pub intensity: f32,
+    /// Candela (point, spot) or lux (directional). Read as f64: the writer's
+    /// `intensity × 683` of an f32 is exact in f64, so dividing it back gives the f32.
+    pub intensity: f64,
     pub range: Option<f32>,
     pub spot: Option<Spot>,
     pub extras: Option<serde_json::Value>,

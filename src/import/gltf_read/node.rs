@@ -7,6 +7,7 @@ use glam::{Mat4, Quat, Vec3};
 use super::{ImportError, Importer};
 use crate::scene::{
     CameraDef, Falloff, LightDef, LightKind, Node, NodeTransform, Projection, Skin, Trs,
+    LUMENS_PER_WATT,
 };
 
 impl Importer<'_> {
@@ -188,7 +189,8 @@ impl Importer<'_> {
                 name: l.name.clone(),
                 kind,
                 color: Vec3::from_array(l.color),
-                intensity: l.intensity,
+                // Candela and lux to W/sr and W/m² (the model's unit, see `LightDef`).
+                intensity: (l.intensity / LUMENS_PER_WATT) as f32,
                 range: l.range,
                 falloff,
             });

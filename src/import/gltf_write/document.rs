@@ -11,7 +11,7 @@ use serde_json::{json, Map, Value};
 use super::ImportError;
 use crate::scene::{
     AlphaMode, Falloff, Image, Interpolation, LightKind, Material, NodeTransform, Primitive,
-    Projection, Property, Scene, Texture, TextureRef, Wrap,
+    Projection, Property, Scene, Texture, TextureRef, Wrap, LUMENS_PER_WATT,
 };
 
 /// Names of the extensions the document uses (`extensionsUsed`).
@@ -327,8 +327,8 @@ fn cameras_json(scene: &Scene) -> Vec<Value> {
         .collect()
 }
 
-/// `KHR_lights_punctual` lights; a point or spot light without falloff gets
-/// `"extras": { "falloff": "none" }`.
+/// `KHR_lights_punctual` lights, intensities in the spec's candela and lux; a point or
+/// spot light without falloff gets `"extras": { "falloff": "none" }`.
 fn lights_json(scene: &Scene) -> Vec<Value> {
     scene
         .lights
@@ -339,7 +339,12 @@ fn lights_json(scene: &Scene) -> Vec<Value> {
                 o.insert("name".into(), json!(n));
             }
             o.insert("color".into(), json!(l.color.to_array()));
-            o.insert("intensity".into(), json!(l.intensity));
+            // The spec's candela and lux (the model's W/sr and W/m² × 683), in f64:
+            // exact, so the reader's division gives back the f32.
+            o.insert(
+                "intensity".into(),
+                json!(f64::from(l.intensity) * LUMENS_PER_WATT),
+            );
             if let Some(r) = l.range {
                 o.insert("range".into(), json!(r));
             }
