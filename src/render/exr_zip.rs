@@ -15,7 +15,8 @@
 //! 16-core frame at 640x480 and 84 ms at 1920x1080), each on its own, so the bytes do
 //! not depend on the thread count.
 
-use rayon::prelude::*;
+/// What one compression worker made: (block number, its bytes), or why it failed.
+type Compressed = Result<Vec<(usize, Vec<u8>)>, Malformed>;
 
 /// Scan lines a ZIP block holds (OpenEXR's `ZIP_COMPRESSION`).
 pub const LINES: usize = 16;
@@ -168,43 +169,67 @@ pub fn zip_scanlines(uncompressed: &[u8]) -> Result<Vec<u8>, Malformed> {
     out.resize(end + 8 * blocks, 0);
     let level =
         libdeflater::CompressionLvl::new(LEVEL).map_err(|_| Malformed("compression level"))?;
-    // The blocks are independent: each is compressed on whichever core is free (one
-    // compressor and scratch a task), and the bytes of each depend on its lines alone,
-    // so the file is the same whatever the thread count. Called from the writer thread,
-    // this borrows the render's pool (`--threads`) between its batches.
-    let bodies: Vec<Result<Vec<u8>, Malformed>> = spans
-        .par_chunks(LINES)
-        .map_init(
-            || {
-                (
-                    libdeflater::Compressor::new(level),
-                    Vec::new(),
-                    Vec::new(),
-                    Vec::new(),
-                )
-            },
-            |(compressor, raw, predicted, packed), group| {
-                raw.clear();
-                for &(data, size) in group {
-                    raw.extend_from_slice(&b[data..data + size]);
-                }
-                predict(raw, predicted);
-                packed.resize(compressor.zlib_compress_bound(predicted.len()), 0);
-                let n = compressor
-                    .zlib_compress(predicted, packed)
-                    .map_err(|_| Malformed("compression failed"))?;
-                // Stored raw where compression does not shrink it (readers take a block
-                // of the uncompressed size as raw).
-                Ok(if n < raw.len() {
+    // The blocks are independent: each is compressed by whichever worker takes it
+    // next (one compressor and scratch a worker), and the bytes of each depend on its
+    // lines alone, so the file is the same whatever the thread count. The workers are
+    // threads of their own, as many as the render's pool has (`--threads`), not tasks
+    // of that pool: the writer thread calls this while the pool's threads may be
+    // waiting for the writer to take the next frame, and tasks queued on them then
+    // would never run (with `--threads 1` that hung every render).
+    let groups: Vec<&[(usize, usize)]> = spans.chunks(LINES).collect();
+    let workers = rayon::current_num_threads().clamp(1, groups.len().max(1));
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let compress = || -> Compressed {
+        let mut compressor = libdeflater::Compressor::new(level);
+        let (mut raw, mut predicted, mut packed) = (Vec::new(), Vec::new(), Vec::new());
+        let mut done = Vec::new();
+        loop {
+            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let Some(group) = groups.get(k) else {
+                return Ok(done);
+            };
+            raw.clear();
+            for &(data, size) in group.iter() {
+                raw.extend_from_slice(&b[data..data + size]);
+            }
+            predict(&raw, &mut predicted);
+            packed.resize(compressor.zlib_compress_bound(predicted.len()), 0);
+            let n = compressor
+                .zlib_compress(&predicted, &mut packed)
+                .map_err(|_| Malformed("compression failed"))?;
+            // Stored raw where compression does not shrink it (readers take a block of
+            // the uncompressed size as raw).
+            done.push((
+                k,
+                if n < raw.len() {
                     packed[..n].to_vec()
                 } else {
                     raw.clone()
+                },
+            ));
+        }
+    };
+    let mut bodies: Vec<Vec<u8>> = vec![Vec::new(); groups.len()];
+    let results: Vec<Compressed> = if workers == 1 {
+        vec![compress()]
+    } else {
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = (0..workers).map(|_| scope.spawn(compress)).collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join()
+                        .unwrap_or(Err(Malformed("a compression worker panicked")))
                 })
-            },
-        )
-        .collect();
+                .collect()
+        })
+    };
+    for r in results {
+        for (k, body) in r? {
+            bodies[k] = body;
+        }
+    }
     for (k, body) in bodies.into_iter().enumerate() {
-        let body = body?;
         let offset = out.len() as u64;
         out[end + 8 * k..end + 8 * k + 8].copy_from_slice(&offset.to_le_bytes());
         let y = y0 + (k * LINES) as i32;
