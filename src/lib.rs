@@ -23,6 +23,8 @@ pub mod farm;
 pub mod format;
 pub mod gen;
 pub mod geometry;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 pub mod import;
 pub mod psf;
 pub mod render;

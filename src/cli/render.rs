@@ -9,7 +9,9 @@ use anyhow::{bail, Context};
 use subfield::farm;
 use subfield::format::ContentHash;
 use subfield::import;
-use subfield::render::{self, LookAt, PixelType, PreviewOptions, RenderEvent, RenderOptions};
+use subfield::render::{
+    self, LookAt, PixelType, PreviewOptions, RenderEvent, RenderOptions, TraceDevice,
+};
 use subfield::scene::Scene;
 
 use super::parse;
@@ -90,6 +92,11 @@ pub struct Args {
     /// RGBA as 32-bit floats.
     #[arg(long)]
     pub float: bool,
+    /// Where frames are traced: cpu (the default), gpu (a Vulkan adapter through wgpu;
+    /// an error when there is none), auto (a discrete GPU when there is one, else the CPU;
+    /// says which). Shading stays on the CPU.
+    #[arg(long, value_name = "cpu|gpu|auto", default_value = "cpu", value_parser = parse::parse_device)]
+    pub device: TraceDevice,
     /// Skip frames whose output file exists and reads back complete.
     #[arg(long)]
     pub resume: bool,
@@ -227,6 +234,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
             .map(|path| PreviewOptions { frame: None, path }),
         shading: Default::default(),
         exposure: a.exposure,
+        device: a.device,
         cancel: Default::default(),
     })
 }
@@ -316,6 +324,7 @@ pub fn drive(
                     opts.spp
                 ));
             }
+            RenderEvent::Device(d) => pending.push(format!("tracing on: {d}")),
             RenderEvent::StaticReady {
                 triangles,
                 baked_file,

@@ -6,7 +6,7 @@ mod triangle;
 
 pub use aabb::Aabb;
 pub use brute::BruteForce;
-pub use triangle::{intersect_pre, intersect_triangle, RayPre, TriPre};
+pub use triangle::{intersect_pre, intersect_triangle, is_degenerate, RayPre, Shear, TriPre};
 
 use glam::Vec3;
 use rayon::prelude::*;
