@@ -94,7 +94,7 @@ impl GpuDevice {
                     format!("{} '{}'", kind(i.device_type), i.name)
                 })
                 .collect();
-            format!("saw {}", names.join(", "))
+            names.join(", ")
         };
         // The best kind first; among equals, the enumeration order.
         adapters.sort_by_key(|a| rank(a.get_info().device_type));
@@ -127,7 +127,8 @@ impl GpuDevice {
         }
         // The adapter's own limits: as many storage buffers and as large ones as it has.
         let limits = adapter.limits();
-        let max_binding = u64::from(limits.max_storage_buffer_binding_size)
+        let max_binding = limits
+            .max_storage_buffer_binding_size
             .min(limits.max_buffer_size)
             // Bindings are addressed by u32 words' indices in the kernels.
             .min(u64::from(u32::MAX) & !3);
@@ -332,7 +333,7 @@ impl GpuDevice {
         if data.is_empty() {
             return;
         }
-        if data.len() % 4 == 0 {
+        if data.len().is_multiple_of(4) {
             self.queue.write_buffer(b, offset, data);
         } else {
             let mut v = data.to_vec();

@@ -29,14 +29,14 @@ pub use trace::GpuTracer;
 #[non_exhaustive]
 pub enum GpuError {
     #[error(
-        "no {wanted} found: looked for a Vulkan adapter through wgpu ({seen}); install a \
-         Vulkan driver: the GPU vendor's (e.g. NVIDIA's), or Debian's mesa-vulkan-drivers \
+        "no {wanted} found: looked for a Vulkan adapter through wgpu, found {seen}; install \
+         a Vulkan driver: the GPU vendor's (e.g. NVIDIA's), or Debian's mesa-vulkan-drivers \
          and libvulkan1 for lavapipe, a CPU fallback"
     )]
     NoAdapter {
         /// "GPU adapter" or "discrete GPU adapter".
         wanted: &'static str,
-        /// The adapters that were seen, or "none".
+        /// The adapters that were found, in words, or "none".
         seen: String,
     },
     #[error("the GPU adapter '{adapter}' lacks {feature}, which the GPU tracer needs ({why})")]

@@ -142,7 +142,7 @@ fn static_part(static_soup: &TriangleSoup, opts: &RenderOptions) -> Result<Psf, 
 /// Where the frames are traced: the CPU's dynamic layer beside the static PSF, or the
 /// GPU's copies of both. Either is traced by the same `render_frame_with`.
 enum Tracing {
-    Cpu(DynamicLayer),
+    Cpu(Box<DynamicLayer>),
     #[cfg(feature = "gpu")]
     Gpu(Box<GpuParts>),
 }
@@ -195,7 +195,7 @@ fn device_words(device: &Option<Device>) -> String {
 /// The frame loop's tracer: on the GPU, the static part uploaded once.
 fn tracing(device: Option<Device>, psf: &Psf, moving: usize) -> Result<Tracing, RenderError> {
     match device {
-        None => Ok(Tracing::Cpu(DynamicLayer::for_triangles(moving))),
+        None => Ok(Tracing::Cpu(Box::new(DynamicLayer::for_triangles(moving)))),
         #[cfg(feature = "gpu")]
         Some(dev) => {
             let gpu = |source| RenderError::Gpu {
