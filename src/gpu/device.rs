@@ -275,6 +275,11 @@ impl GpuDevice {
         self.max_binding
     }
 
+    /// Waits until everything submitted has run (a benchmark's clock stops after it).
+    pub fn finish(&self) -> Result<(), GpuError> {
+        self.wait()
+    }
+
     /// The first error the driver reported since the last check, as a [`GpuError`].
     pub(super) fn check(&self) -> Result<(), GpuError> {
         let taken = self.errors.lock().ok().and_then(|mut g| g.take());

@@ -132,12 +132,14 @@ impl GpuMoving {
     /// This frame's moving triangles, gridded on the GPU. Triangle `i` is reported as
     /// hit number `static count + i`.
     pub fn update(&mut self, dev: &GpuDevice, tris: &[[Vec3; 3]]) -> Result<(), GpuError> {
+        // Until this frame's grid is complete the part is empty: a failed update leaves
+        // nothing half made for a tracer to read.
+        self.count = 0;
+        self.entries = 0;
         crate::psf::check_triangles(tris)?;
         let count = u32::try_from(tris.len())
             .map_err(|_| dev.too_large("the moving triangles", tris.len() as u64))?;
         if tris.is_empty() {
-            self.count = 0;
-            self.entries = 0;
             return Ok(());
         }
         let bounds = Aabb::from_triangles(tris);
