@@ -276,3 +276,53 @@ fn gpu_runs_are_deterministic() {
     };
     assert_eq!(run(), run());
 }
+
+/// A baked file opened again, mapped raw (`--codec none`, the arrays used in place) and
+/// zstd-compressed, uploads to the same hits as brute force's.
+#[test]
+fn gpu_traces_opened_baked_files() {
+    use subfield::format::{open_psf, write_psf, Codec, OpenOptions, WriteOptions};
+    let Some(dev) = common::gpu::device() else {
+        return;
+    };
+    let mut rng = Rng::new(901);
+    let stat = static_scene(&mut rng);
+    let psf = Psf::build(
+        &stat,
+        &PsfParams {
+            level: 2,
+            tiles: 16,
+        },
+    )
+    .expect("bake");
+    let dir = std::env::temp_dir().join(format!("subfield-gpu-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let brute = BruteForce::new(&stat);
+    let rs = rays(&mut rng, 1500, &[], &[]);
+    let mut want = vec![None; rs.len()];
+    brute.intersect_batch(&rs, &mut want);
+    let gmov = GpuMoving::new(dev).expect("moving part");
+    for codec in [Codec::None, Codec::Zstd] {
+        let path = dir.join(format!("{codec:?}.psf"));
+        let opts = WriteOptions {
+            codec,
+            ..Default::default()
+        };
+        write_psf(&path, &psf, &opts).expect("write");
+        let opened = open_psf(&path, &OpenOptions::default()).expect("open").psf;
+        let gstat = GpuStatic::upload(dev, &opened).expect("upload");
+        let mut got = vec![None; rs.len()];
+        GpuTracer::new(dev, &gstat, &gmov)
+            .try_intersect_batch(&rs, &mut got)
+            .expect("trace");
+        for i in 0..rs.len() {
+            assert_eq!(
+                bits(got[i]),
+                bits(want[i]),
+                "{codec:?}: ray {i} {:?}",
+                rs[i]
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
