@@ -237,3 +237,45 @@ pub(super) fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> 
         resource: b.as_entire_binding(),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gen::synth::{self, Rng};
+
+    /// The grid covers the clip box (so every grown triangle box lands in cells), stays
+    /// within its caps, and does not cut a tight cluster finer than its triangles.
+    #[test]
+    fn grid_shape_covers_the_bounds_within_the_caps() {
+        let mut rng = Rng::new(3);
+        let cases: Vec<Vec<[Vec3; 3]>> = vec![
+            synth::soup(&mut rng, 1000, Vec3::ZERO, Vec3::splat(10.0), 0.3),
+            synth::soup(
+                &mut rng,
+                200_000,
+                Vec3::ZERO,
+                Vec3::new(100.0, 1.0, 100.0),
+                0.01,
+            ),
+            // a tight ball of large triangles: no finer than half the median size
+            synth::soup(&mut rng, 5000, Vec3::ZERO, Vec3::splat(0.5), 2.0),
+            vec![[Vec3::ONE; 3]],
+        ];
+        for tris in &cases {
+            let b = Aabb::from_triangles(tris);
+            let s = shape_for(tris, &b);
+            let cells: u64 = s.dims.iter().map(|&d| u64::from(d)).product();
+            assert!(cells <= MAX_CELLS, "{:?}", s.dims);
+            assert!(s.dims.iter().all(|&d| (1..=MAX_SIDE).contains(&d)));
+            for k in 0..3 {
+                let end = s.lo[k] + s.cell * s.dims[k] as f32;
+                assert!(end >= s.clip.max[k], "axis {k}: {end} < {}", s.clip.max[k]);
+                assert!(s.lo[k] <= b.min[k] - s.margin);
+                assert!(s.clip.max[k] >= b.max[k] + s.margin);
+            }
+        }
+        let ball = &cases[2];
+        let s = shape_for(ball, &Aabb::from_triangles(ball));
+        assert!(s.dims.iter().all(|&d| d <= 8), "{:?}", s.dims);
+    }
+}
