@@ -27,6 +27,9 @@ pub struct GpuDevice {
     pub(super) max_binding: u64,
     /// The first error the driver reported outside a call that returns one.
     errors: Arc<Mutex<Option<String>>>,
+    /// Whether the adapter has timestamp queries (`TIMESTAMP_QUERY`), which the
+    /// benchmark's GPU times come from.
+    timestamps: bool,
     pub(super) trace_layout: wgpu::BindGroupLayout,
     pub(super) trace_pipe: wgpu::ComputePipeline,
     pub(super) grid_layout: wgpu::BindGroupLayout,
@@ -132,9 +135,14 @@ impl GpuDevice {
             .min(limits.max_buffer_size)
             // Bindings are addressed by u32 words' indices in the kernels.
             .min(u64::from(u32::MAX) & !3);
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let mut features = wgpu::Features::SHADER_F64;
+        if timestamps {
+            features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
         let (device, queue) = block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("subfield"),
-            required_features: wgpu::Features::SHADER_F64,
+            required_features: features,
             required_limits: limits,
             ..Default::default()
         }))
@@ -241,6 +249,7 @@ impl GpuDevice {
             info,
             max_binding,
             errors,
+            timestamps,
             trace_layout,
             trace_pipe,
             grid_layout,
@@ -273,6 +282,48 @@ impl GpuDevice {
     /// The largest storage binding, in bytes.
     pub fn max_binding(&self) -> u64 {
         self.max_binding
+    }
+
+    /// Whether GPU times (timestamp queries) can be taken on this adapter.
+    pub fn has_timestamps(&self) -> bool {
+        self.timestamps
+    }
+
+    /// `2 k` timestamp queries, `k` spans each from a pass's start to a (later) pass's
+    /// end, when the adapter has them.
+    pub(super) fn stamps(&self, spans: u32) -> Option<wgpu::QuerySet> {
+        self.timestamps.then(|| {
+            self.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("gpu time"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2 * spans,
+            })
+        })
+    }
+
+    /// The seconds the `spans` spans of `set` cover together (after their passes were
+    /// submitted).
+    pub(super) fn stamped_seconds(
+        &self,
+        set: &wgpu::QuerySet,
+        spans: u32,
+    ) -> Result<f64, GpuError> {
+        let bytes = 16 * u64::from(spans);
+        let resolve = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("gpu time"),
+            size: bytes,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.resolve_query_set(set, 0..2 * spans, &resolve, 0);
+        let b = self.read_back(enc, &resolve, bytes)?;
+        let t: Vec<u64> = bytemuck::pod_collect_to_vec(&b[..bytes as usize]);
+        let ticks: f64 = t
+            .chunks_exact(2)
+            .map(|p| p[1].saturating_sub(p[0]) as f64)
+            .sum();
+        Ok(ticks * f64::from(self.queue.get_timestamp_period()) * 1e-9)
     }
 
     /// Waits until everything submitted has run (a benchmark's clock stops after it).

@@ -54,6 +54,9 @@ pub struct GpuMoving {
     pub(super) shape: Shape,
     /// Entries in the last grid (a triangle counts once per cell it is listed in).
     entries: u64,
+    /// Whether updates are timed on the GPU, and the last update's GPU seconds.
+    timing: bool,
+    gpu_seconds: Option<f64>,
 }
 
 impl std::fmt::Debug for GpuMoving {
@@ -126,6 +129,8 @@ impl GpuMoving {
             count: 0,
             shape: Shape::default(),
             entries: 0,
+            timing: false,
+            gpu_seconds: None,
         })
     }
 
@@ -161,6 +166,14 @@ impl GpuMoving {
         let uniform = dev.uniform(bytemuck::bytes_of(&params));
 
         // Count, then scan the counts (plus one zero: the total lands at the end).
+        let stamps = if self.timing { dev.stamps(2) } else { None };
+        let writes = |begin: Option<u32>, end: Option<u32>| {
+            stamps.as_ref().map(|set| wgpu::ComputePassTimestampWrites {
+                query_set: set,
+                beginning_of_pass_write_index: begin,
+                end_of_pass_write_index: end,
+            })
+        };
         let mut enc = dev.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&counts, 0, None);
         let bind = |cell_tris: &wgpu::Buffer| {
@@ -179,12 +192,22 @@ impl GpuMoving {
         {
             let placeholder = dev.buffer("the moving grid's lists", 16, usage)?;
             let group = bind(&placeholder);
-            let mut pass = enc.begin_compute_pass(&Default::default());
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("count"),
+                timestamp_writes: writes(Some(0), None),
+            });
             pass.set_pipeline(&dev.count_pipe);
             pass.set_bind_group(0, &group, &[]);
             pass.dispatch_workgroups(gx, gy, 1);
         }
         exclusive_scan(dev, &mut enc, &counts, &self.cell_start, cells + 1)?;
+        if stamps.is_some() {
+            // An empty pass whose end closes the first span (count and scan).
+            drop(enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("scanned"),
+                timestamp_writes: writes(None, Some(1)),
+            }));
+        }
         // The total: the last exclusive sum.
         let mut total_enc = enc;
         let last = dev.buffer("the moving grid's total", 4, usage)?;
@@ -203,17 +226,36 @@ impl GpuMoving {
         enc.clear_buffer(&counts, 0, None);
         {
             let group = bind(&self.cell_tris);
-            let mut pass = enc.begin_compute_pass(&Default::default());
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("scatter"),
+                timestamp_writes: writes(Some(2), Some(3)),
+            });
             pass.set_pipeline(&dev.scatter_pipe);
             pass.set_bind_group(0, &group, &[]);
             pass.dispatch_workgroups(gx, gy, 1);
         }
         dev.queue.submit([enc.finish()]);
         dev.check()?;
+        self.gpu_seconds = match &stamps {
+            Some(set) => Some(dev.stamped_seconds(set, 2)?),
+            None => None,
+        };
         self.count = count;
         self.shape = shape;
         self.entries = entries;
         Ok(())
+    }
+
+    /// Times updates on the GPU (timestamp queries, where the adapter has them; an update
+    /// then waits for its time): for benchmarks.
+    pub fn set_timing(&mut self, on: bool) {
+        self.timing = on;
+    }
+
+    /// The last update's GPU seconds (count and scan, then scatter; not the upload nor
+    /// the entry count's read-back between them), when timed.
+    pub fn gpu_seconds(&self) -> Option<f64> {
+        self.gpu_seconds
     }
 
     /// The moving triangles of the last update.

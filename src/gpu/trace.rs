@@ -72,6 +72,8 @@ pub struct GpuTracer<'a> {
     stat: &'a GpuStatic,
     moving: &'a GpuMoving,
     error: Mutex<Option<GpuError>>,
+    /// GPU seconds of the trace passes so far, when timed ([`timed`](Self::timed)).
+    gpu_seconds: Option<Mutex<f64>>,
 }
 
 impl<'a> GpuTracer<'a> {
@@ -81,7 +83,25 @@ impl<'a> GpuTracer<'a> {
             stat,
             moving,
             error: Mutex::new(None),
+            gpu_seconds: None,
         }
+    }
+
+    /// Times every trace pass on the GPU (timestamp queries, where the adapter has them;
+    /// each batch then waits once more for its time): for benchmarks.
+    pub fn timed(mut self) -> Self {
+        if self.dev.has_timestamps() {
+            self.gpu_seconds = Some(Mutex::new(0.0));
+        }
+        self
+    }
+
+    /// The GPU seconds of the trace passes so far, when [`timed`](Self::timed) on an
+    /// adapter with timestamp queries.
+    pub fn gpu_seconds(&self) -> Option<f64> {
+        self.gpu_seconds
+            .as_ref()
+            .and_then(|m| m.lock().ok().map(|g| *g))
     }
 
     /// The first error a batch of the [`Intersector`] methods met, if any (taken).
@@ -181,13 +201,27 @@ impl<'a> GpuTracer<'a> {
             ],
         });
         let mut enc = dev.device.create_command_encoder(&Default::default());
+        let stamps = self.gpu_seconds.as_ref().and_then(|_| dev.stamps(1));
         {
-            let mut pass = enc.begin_compute_pass(&Default::default());
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("trace"),
+                timestamp_writes: stamps.as_ref().map(|set| wgpu::ComputePassTimestampWrites {
+                    query_set: set,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                }),
+            });
             pass.set_pipeline(&dev.trace_pipe);
             pass.set_bind_group(0, &group, &[]);
             pass.dispatch_workgroups(gx, gy, 1);
         }
         let bytes = dev.read_back(enc, &hits, n * 16)?;
+        if let (Some(set), Some(total)) = (&stamps, &self.gpu_seconds) {
+            let secs = dev.stamped_seconds(set, 1)?;
+            if let Ok(mut g) = total.lock() {
+                *g += secs;
+            }
+        }
         Ok(bytemuck::pod_collect_to_vec(&bytes[..rays.len() * 16]))
     }
 }
