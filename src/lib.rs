@@ -8,7 +8,10 @@
 //! * `import` → `scene`: the glTF and AFF / NFF readers ([`import::load`]) and the glTF
 //!   writer;
 //! * `gen` → `import`, `scene`: scenes made in code (museum, animart, synthetic sets);
-//! * `render` → `psf`, `format`, `scene`: camera, shading, EXR sequences;
+//! * `gpu` → `psf`, `geometry` (the cargo feature `gpu`): the same tracer seam on a GPU
+//!   (wgpu over Vulkan), the hits the CPU's to the bit;
+//! * `render` → `psf`, `format`, `scene` (and `gpu` for `--device gpu`): camera, shading,
+//!   EXR sequences;
 //! * `farm` → `format`: staging bakes by content hash, Slurm and Open Job Description jobs.
 //!
 //! A module does not reach back up: `scene` knows no file format, `import` knows no
@@ -23,6 +26,8 @@ pub mod farm;
 pub mod format;
 pub mod gen;
 pub mod geometry;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 pub mod import;
 pub mod psf;
 pub mod render;

@@ -11,7 +11,7 @@ use anyhow::Context;
 use subfield::format::{write_psf, WriteOptions};
 use subfield::gen::museum::{write_museum, MuseumParams};
 use subfield::import;
-use subfield::render::{OutputPattern, PreviewOptions, RenderOptions};
+use subfield::render::{OutputPattern, PreviewOptions, RenderOptions, TraceDevice};
 use subfield::scene::ClipSelection;
 use subfield::{Psf, PsfParams};
 
@@ -36,6 +36,11 @@ pub struct Args {
         allow_negative_numbers = true
     )]
     pub exposure: f32,
+    /// Where frames are traced: cpu (the default), gpu (a Vulkan adapter through wgpu;
+    /// an error when there is none), auto (a discrete GPU when there is one, else the CPU;
+    /// says which). Shading stays on the CPU.
+    #[arg(long, value_name = "cpu|gpu|auto", default_value = "cpu", value_parser = parse::parse_device)]
+    pub device: TraceDevice,
     /// Skip frames already in DIR that read back complete.
     #[arg(long)]
     pub resume: bool,
@@ -92,6 +97,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         height,
         resume: a.resume,
         exposure: a.exposure,
+        device: a.device,
         stats: Some(dir.join("stats.csv")),
         plot: Some(dir.join("plot.svg")),
         // The middle frame of the range (of the whole animation: the triangles gathered

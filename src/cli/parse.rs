@@ -4,7 +4,7 @@
 //! library (`subfield::render`); only the string parsing lives in the CLI.
 
 use glam::Vec3;
-use subfield::render::{Aovs, FrameSet, FrameSpan, Shard, MAX_FRAMES, MAX_SIDE};
+use subfield::render::{Aovs, FrameSet, FrameSpan, Shard, TraceDevice, MAX_FRAMES, MAX_SIDE};
 
 fn bad(flag: &str, value: &str, why: impl std::fmt::Display) -> anyhow::Error {
     anyhow::anyhow!("{flag} {value:?}: {why}")
@@ -88,6 +88,16 @@ pub fn parse_frames(s: &str) -> anyhow::Result<FrameSet> {
 }
 
 /// `WxH`, both in `1..=32768`.
+/// `--device cpu|gpu|auto`.
+pub fn parse_device(s: &str) -> Result<TraceDevice, String> {
+    match s {
+        "cpu" => Ok(TraceDevice::Cpu),
+        "gpu" => Ok(TraceDevice::Gpu),
+        "auto" => Ok(TraceDevice::Auto),
+        _ => Err(format!("{s:?}: expected cpu, gpu or auto")),
+    }
+}
+
 pub fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
     let (w, h) = s
         .split_once(['x', 'X'])

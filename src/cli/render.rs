@@ -9,7 +9,9 @@ use anyhow::{bail, Context};
 use subfield::farm;
 use subfield::format::ContentHash;
 use subfield::import;
-use subfield::render::{self, LookAt, PixelType, PreviewOptions, RenderEvent, RenderOptions};
+use subfield::render::{
+    self, LookAt, PixelType, PreviewOptions, RenderEvent, RenderOptions, TraceDevice,
+};
 use subfield::scene::Scene;
 
 use super::parse;
@@ -125,6 +127,11 @@ pub struct Args {
     /// RGBA as 32-bit floats.
     #[arg(long)]
     pub float: bool,
+    /// Where frames are traced: cpu (the default), gpu (a Vulkan adapter through wgpu;
+    /// an error when there is none), auto (a discrete GPU when there is one, else the CPU;
+    /// says which). Shading stays on the CPU.
+    #[arg(long, value_name = "cpu|gpu|auto", default_value = "cpu", value_parser = parse::parse_device)]
+    pub device: TraceDevice,
     /// Skip frames whose output file exists and reads back complete.
     #[arg(long)]
     pub resume: bool,
@@ -295,6 +302,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
             .map(|path| PreviewOptions { frame: None, path }),
         shading,
         exposure: a.exposure,
+        device: a.device,
         cancel: Default::default(),
     })
 }
@@ -384,6 +392,7 @@ pub fn drive(
                     opts.spp
                 ));
             }
+            RenderEvent::Device(d) => pending.push(format!("tracing on: {d}")),
             RenderEvent::StaticReady {
                 triangles,
                 baked_file,

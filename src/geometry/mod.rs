@@ -6,7 +6,7 @@ mod triangle;
 
 pub use aabb::Aabb;
 pub use brute::BruteForce;
-pub use triangle::{intersect_pre, intersect_triangle, RayPre, TriPre};
+pub use triangle::{intersect_pre, intersect_triangle, is_degenerate, RayPre, Shear, TriPre};
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -76,7 +76,9 @@ impl Hit {
     }
 }
 
-/// Closest-hit and any-hit queries over a set of triangles. Batch calls trace in
+/// Closest-hit and any-hit queries over a set of triangles: the tracer seam. The
+/// renderer is generic over it; the CPU's `psf::Layered` and the GPU's `gpu::GpuTracer`
+/// implement it, with the same hits to the bit (docs/GPU.md). Batch calls trace in
 /// parallel with rayon; results come back in the order of the rays. Called from outside
 /// rayon's pool, a batch parks the calling thread until the pool's workers (which may
 /// have to wake first) are done: a program tracing batch after batch runs them from a

@@ -22,8 +22,23 @@ pub struct RayPre {
     rows4: [Vec4; 9],
 }
 
-impl RayPre {
-    pub fn new(org: Vec3, dir: Vec3) -> RayPre {
+/// The shear of a ray direction as the paper writes it: the dominant axis `kz`, the two
+/// others `(kx, ky)` in winding order, and `(sx, sy, sz) = (d[kx] / d[kz], d[ky] / d[kz],
+/// 1 / d[kz])`. [`RayPre::new`] builds its matrix from it; the GPU tracer
+/// (`src/gpu/trace.rs`) receives it with each ray, so the divisions are the CPU's, bit for
+/// bit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shear {
+    pub kx: usize,
+    pub ky: usize,
+    pub kz: usize,
+    pub sx: f32,
+    pub sy: f32,
+    pub sz: f32,
+}
+
+impl Shear {
+    pub fn new(dir: Vec3) -> Shear {
         let a = dir.abs();
         let kz = if a.x >= a.y && a.x >= a.z {
             0
@@ -44,6 +59,27 @@ impl RayPre {
             (_, true) => (1, 0),
         };
         let (sx, sy, sz) = (d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
+        Shear {
+            kx,
+            ky,
+            kz,
+            sx,
+            sy,
+            sz,
+        }
+    }
+}
+
+impl RayPre {
+    pub fn new(org: Vec3, dir: Vec3) -> RayPre {
+        let Shear {
+            kx,
+            ky,
+            kz,
+            sx,
+            sy,
+            sz,
+        } = Shear::new(dir);
         // The shear by columns: column kx is (1, 0, 0), column ky (0, 1, 0), column kz
         // (-sx, -sy, sz). Whole vectors are stored and loaded, never single lanes.
         let mut cols = [Vec3A::ZERO; 3];

@@ -114,6 +114,16 @@ impl DirectionTable {
 
     /// The subfield for a direction; `dir` must be finite and non-zero.
     #[inline]
+    /// Cells along each side of a cube face (the GPU tracer uploads the table as is).
+    pub fn res(&self) -> u32 {
+        self.res
+    }
+
+    /// The subfield of each cell: face by face, rows of `res` cells.
+    pub fn cells(&self) -> &[u16] {
+        &self.cells
+    }
+
     pub fn lookup(&self, dir: Vec3) -> usize {
         let a = dir.abs();
         let face = if a.x >= a.y && a.x >= a.z {

@@ -570,6 +570,16 @@ impl Psf {
     pub fn subfields(&self) -> &[Subfield] {
         &self.subfields
     }
+
+    /// The box rays are clipped to: the bounds grown by the rounding allowance.
+    pub fn clip(&self) -> &Aabb {
+        &self.clip
+    }
+
+    /// The direction → subfield table a query picks its subfield by.
+    pub fn direction_table(&self) -> &DirectionTable {
+        &self.table
+    }
 }
 
 /// Rasterises every triangle into one subfield, the entries sorted by tile. Sequential

@@ -63,7 +63,7 @@ pub use errors::{FramesProblem, OptionError, OutputFile};
 pub use mips::TextureMips;
 pub use options::{
     Aovs, CancelFlag, FrameRange, FrameSet, FrameSpan, LookAt, PixelType, PreviewOptions,
-    RenderOptions, ShadingOptions, Shard, DEFAULT_CRYPTO_LEVELS, MAX_FRAMES, MAX_SIDE,
+    RenderOptions, ShadingOptions, Shard, TraceDevice, DEFAULT_CRYPTO_LEVELS, MAX_FRAMES, MAX_SIDE,
 };
 pub use output::{
     channel_names, encode_exr, encode_preview, frame_file, is_complete, linear_to_srgb8, software,
@@ -154,6 +154,20 @@ pub enum RenderError {
     /// The writer thread ended without an answer (it cannot, short of a bug).
     #[error("the frame writer stopped unexpectedly")]
     WriterGone,
+    /// The GPU tracer (`--device gpu`): no adapter, a scene too large for it, or the
+    /// device failing mid-run (the frame in flight is not written).
+    #[cfg(feature = "gpu")]
+    #[error("--device {device}: {source}")]
+    Gpu {
+        device: &'static str,
+        #[source]
+        source: crate::gpu::GpuError,
+    },
+    /// `--device gpu` or `auto` in a build without the cargo feature `gpu`.
+    #[error(
+        "--device {0}: this build of subfield has no GPU tracer (the cargo feature `gpu` is off)"
+    )]
+    NoGpuSupport(&'static str),
 }
 
 impl RenderError {
@@ -197,6 +211,9 @@ pub struct FrameReport {
 #[non_exhaustive]
 pub enum RenderEvent<'a> {
     Planned(&'a RenderPlan),
+    /// Where the frames will be traced: `cpu`, or `gpu: ` and the adapter in words
+    /// (`--device auto` says here which it took).
+    Device(&'a str),
     /// The static part is ready: baked in memory, or opened from `--baked`.
     StaticReady {
         triangles: usize,

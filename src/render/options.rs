@@ -397,6 +397,29 @@ impl PartialEq for CancelFlag {
     }
 }
 
+/// Where frames are traced (`--device`, DESIGN.md §4). Shading stays on the CPU either way.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TraceDevice {
+    /// The CPU tracer on every core (the default).
+    #[default]
+    Cpu,
+    /// A Vulkan adapter through wgpu (`src/gpu/`); an error when there is none.
+    Gpu,
+    /// A discrete GPU when there is one, else the CPU.
+    Auto,
+}
+
+impl TraceDevice {
+    /// The name in the options string and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            TraceDevice::Cpu => "cpu",
+            TraceDevice::Gpu => "gpu",
+            TraceDevice::Auto => "auto",
+        }
+    }
+}
+
 /// Everything `render_sequence` needs besides the scene. `Default` gives the command
 /// line's defaults (640×480, 1 spp, depth 4, half floats) and an empty output pattern.
 #[derive(Clone, Debug, PartialEq)]
@@ -434,6 +457,9 @@ pub struct RenderOptions {
     /// `--exposure EV`: the RGB written (EXR and preview) is the radiance × 2^EV; alpha
     /// and the AOVs are unchanged. 0 leaves the pixels as traced.
     pub exposure: f32,
+    /// Where frames are traced. The options string names the device that traced (for
+    /// `Auto`, the one it chose), so `--resume` re-renders frames made on the other.
+    pub device: TraceDevice,
     /// Stops the run after the frame in flight (Ctrl-C); not an option of the pixels.
     pub cancel: CancelFlag,
 }
@@ -461,6 +487,7 @@ impl Default for RenderOptions {
             preview: None,
             shading: ShadingOptions::default(),
             exposure: 0.0,
+            device: TraceDevice::Cpu,
             cancel: CancelFlag::default(),
         }
     }
@@ -533,6 +560,7 @@ impl RenderOptions {
             s += &format!(" environment={}", env.describe());
         }
         s += &format!(" exposure={}", self.exposure);
+        s += &format!(" device={}", self.device.name());
         s
     }
 }

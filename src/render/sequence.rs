@@ -13,7 +13,7 @@ use super::aov::{CryptoNames, FrameHeader};
 use super::camera::{apply_exposure, CameraModel};
 use super::errors::OutputFile;
 use super::mips::TextureMips;
-use super::options::{RenderOptions, ShadingOptions};
+use super::options::{RenderOptions, ShadingOptions, TraceDevice};
 use super::output::FrameFile;
 use super::planning::{
     check_outputs, plan, resumed, static_dynamic_split, CameraSource, RenderPlan,
@@ -41,6 +41,13 @@ pub fn render_sequence(
     let wall = Instant::now();
     let plan = plan(scene, opts)?;
     on_event(RenderEvent::Planned(&plan));
+    // The adapter first: `--device gpu` without one fails before any bake.
+    let device = open_device(opts.device)?;
+    let used = match &device {
+        Some(_) => TraceDevice::Gpu,
+        None => TraceDevice::Cpu,
+    };
+    on_event(RenderEvent::Device(&device_words(&device)));
 
     // The static part: opened (refused when stale) or baked in memory.
     let split_all = scene.split(ClipSelection::All);
@@ -58,6 +65,7 @@ pub fn render_sequence(
         seconds: static_seconds,
     });
 
+    let tracing = tracing(device, &psf, plan.split.dynamic_triangles)?;
     let mips = TextureMips::build(scene);
     let frames = Frames {
         scene,
@@ -67,7 +75,11 @@ pub fn render_sequence(
         split: &split,
         psf: &psf,
         static_soup: &static_soup,
-        options: opts.options_string(plan.fps, plan.ambient, plan.default_light),
+        options: RenderOptions {
+            device: used,
+            ..opts.clone()
+        }
+        .options_string(plan.fps, plan.ambient, plan.default_light),
         crypto: opts
             .aovs
             .cryptomatte
@@ -86,7 +98,7 @@ pub fn render_sequence(
         skipped,
         replaced,
         preview_written,
-    } = frames.run(stats_file, on_event)?;
+    } = frames.run(tracing, stats_file, on_event)?;
     if let Some((f, p)) = stats_file {
         f.file.commit().map_err(|source| RenderError::Write {
             path: p,
@@ -130,6 +142,81 @@ fn static_part(static_soup: &TriangleSoup, opts: &RenderOptions) -> Result<Psf, 
             &PsfParams::for_static(static_soup.len()),
         )?,
     })
+}
+
+/// Where the frames are traced: the CPU's dynamic layer beside the static PSF, or the
+/// GPU's copies of both. Either is traced by the same `render_frame_with`.
+enum Tracing {
+    Cpu(Box<DynamicLayer>),
+    #[cfg(feature = "gpu")]
+    Gpu(Box<GpuParts>),
+}
+
+#[cfg(feature = "gpu")]
+struct GpuParts {
+    dev: crate::gpu::GpuDevice,
+    stat: crate::gpu::GpuStatic,
+    moving: crate::gpu::GpuMoving,
+}
+
+#[cfg(feature = "gpu")]
+type Device = crate::gpu::GpuDevice;
+#[cfg(not(feature = "gpu"))]
+type Device = std::convert::Infallible;
+
+/// The adapter `choice` asks for: `None` for the CPU (`cpu`, or `auto` without a
+/// discrete GPU).
+fn open_device(choice: TraceDevice) -> Result<Option<Device>, RenderError> {
+    #[cfg(feature = "gpu")]
+    {
+        use crate::gpu::{AdapterPolicy, GpuDevice};
+        let policy = match choice {
+            TraceDevice::Cpu => return Ok(None),
+            TraceDevice::Gpu => AdapterPolicy::Any,
+            TraceDevice::Auto => AdapterPolicy::Discrete,
+        };
+        GpuDevice::open(policy).map_err(|source| RenderError::Gpu {
+            device: choice.name(),
+            source,
+        })
+    }
+    #[cfg(not(feature = "gpu"))]
+    match choice {
+        TraceDevice::Cpu => Ok(None),
+        other => Err(RenderError::NoGpuSupport(other.name())),
+    }
+}
+
+fn device_words(device: &Option<Device>) -> String {
+    match device {
+        None => "cpu".to_string(),
+        #[cfg(feature = "gpu")]
+        Some(d) => format!("gpu: {}", d.describe()),
+        #[cfg(not(feature = "gpu"))]
+        Some(d) => match *d {},
+    }
+}
+
+/// The frame loop's tracer: on the GPU, the static part uploaded once.
+fn tracing(device: Option<Device>, psf: &Psf, moving: usize) -> Result<Tracing, RenderError> {
+    match device {
+        None => Ok(Tracing::Cpu(Box::new(DynamicLayer::for_triangles(moving)))),
+        #[cfg(feature = "gpu")]
+        Some(dev) => {
+            let gpu = |source| RenderError::Gpu {
+                device: "gpu",
+                source,
+            };
+            let stat = crate::gpu::GpuStatic::upload(&dev, psf).map_err(gpu)?;
+            let moving = crate::gpu::GpuMoving::new(&dev).map_err(gpu)?;
+            Ok(Tracing::Gpu(Box::new(GpuParts { dev, stat, moving })))
+        }
+        #[cfg(not(feature = "gpu"))]
+        Some(d) => {
+            let _ = psf;
+            match d {}
+        }
+    }
 }
 
 /// What the frame loop renders from.
@@ -255,6 +342,7 @@ impl Frames<'_> {
     /// sent.
     fn run(
         &self,
+        mut tracing: Tracing,
         stats_file: Option<(StatsFile, PathBuf)>,
         on_event: &mut dyn FnMut(RenderEvent<'_>),
     ) -> Result<Done, RenderError> {
@@ -298,8 +386,6 @@ impl Frames<'_> {
                 }
             });
 
-            // The moving triangles get their own grids, sized for their count like a bake.
-            let mut dl = DynamicLayer::for_triangles(plan.split.dynamic_triangles);
             let mut dyn_soup = TriangleSoup::new();
             let mut next_soup = TriangleSoup::new();
             let mut scratch = FrameScratch::default();
@@ -338,7 +424,7 @@ impl Frames<'_> {
                 }
                 match self.render_one(
                     static_bounds,
-                    &mut dl,
+                    &mut tracing,
                     &mut dyn_soup,
                     &mut next_soup,
                     &mut scratch,
@@ -414,7 +500,7 @@ impl Frames<'_> {
     fn render_one(
         &self,
         static_bounds: Option<(Vec3, Vec3)>,
-        dl: &mut DynamicLayer,
+        tracing: &mut Tracing,
         dyn_soup: &mut TriangleSoup,
         next_soup: &mut TriangleSoup,
         scratch: &mut FrameScratch,
@@ -426,7 +512,17 @@ impl Frames<'_> {
         let t = time as f32;
         let clock = Instant::now();
         scene.dynamic_triangles_at(split, t, dyn_soup);
-        dl.update(&dyn_soup.positions)?;
+        match tracing {
+            Tracing::Cpu(dl) => dl.update(&dyn_soup.positions)?,
+            #[cfg(feature = "gpu")]
+            Tracing::Gpu(g) => g
+                .moving
+                .update(&g.dev, &dyn_soup.positions)
+                .map_err(|source| RenderError::Gpu {
+                    device: "gpu",
+                    source,
+                })?,
+        }
         let camera = self.camera_at(t)?;
         // The motion AOV: the moving triangles and the camera one frame later.
         let next = if opts.aovs.motion {
@@ -456,22 +552,49 @@ impl Frames<'_> {
             self.mips,
         );
         let update_ms = clock.elapsed().as_secs_f64() * 1e3;
-        let tracer = psf.with_dynamic(dl);
         let inputs = AovInputs {
             aovs: opts.aovs,
             next,
             crypto: self.crypto.as_deref(),
         };
-        let (mut fb, work) = render_frame_with(
-            scratch,
-            &ctx,
-            &tracer,
-            &camera,
-            frame,
-            opts.spp,
-            opts.max_depth,
-            &inputs,
-        );
+        // One renderer, generic over the tracer (the seam: `geometry::Intersector`).
+        let (mut fb, work) = match tracing {
+            Tracing::Cpu(dl) => {
+                let tracer = psf.with_dynamic(dl);
+                render_frame_with(
+                    scratch,
+                    &ctx,
+                    &tracer,
+                    &camera,
+                    frame,
+                    opts.spp,
+                    opts.max_depth,
+                    &inputs,
+                )
+            }
+            #[cfg(feature = "gpu")]
+            Tracing::Gpu(g) => {
+                let tracer = crate::gpu::GpuTracer::new(&g.dev, &g.stat, &g.moving);
+                let out = render_frame_with(
+                    scratch,
+                    &ctx,
+                    &tracer,
+                    &camera,
+                    frame,
+                    opts.spp,
+                    opts.max_depth,
+                    &inputs,
+                );
+                // A batch that failed answered "no hit": the frame is not written.
+                if let Some(source) = tracer.take_error() {
+                    return Err(RenderError::Gpu {
+                        device: "gpu",
+                        source,
+                    });
+                }
+                out
+            }
+        };
         apply_exposure(&mut fb.rgba, opts.exposure);
         let header = FrameHeader::new(&camera, plan.fps, self.options.clone(), self.crypto.clone());
         Ok((

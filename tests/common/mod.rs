@@ -7,6 +7,9 @@
 pub mod build;
 pub mod exr_read;
 pub mod farm;
+#[cfg(feature = "gpu")]
+pub mod gpu;
+pub mod motion;
 pub mod render_scene;
 pub mod reseal;
 

@@ -1,0 +1,187 @@
+//! `subfield render --device gpu` as a program: the frames equal `--device cpu`'s pixel
+//! for pixel and channel for channel (the GPU's hits are the CPU's to the bit, and
+//! shading is the CPU's), the header names the device so `--resume` re-renders frames
+//! made on the other one, `auto` without a discrete GPU traces on the CPU and says so,
+//! and `gpu` without any adapter fails in one line and writes nothing.
+//!
+//! Needs a GPU adapter (lavapipe in CI): tests/common/gpu.rs.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use common::exr_read::read_exr;
+use common::render_scene::{files_under, temp_dir, write_scene};
+
+fn subfield(args: &[&str], env: &[(&str, &str)]) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_subfield"));
+    c.args(args);
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    c.output().unwrap()
+}
+
+fn ok(args: &[&str]) -> Output {
+    let o = subfield(args, &[]);
+    assert!(
+        o.status.success(),
+        "subfield {args:?} failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn contains(hay: &[u8], needle: &str) -> bool {
+    hay.windows(needle.len()).any(|w| w == needle.as_bytes())
+}
+
+#[test]
+fn gpu_frames_equal_cpu_frames() {
+    if common::gpu::device().is_none() {
+        return;
+    }
+    let dir = temp_dir("gpu-vs-cpu");
+    let scene = write_scene(&dir);
+    let render = |device: &str| {
+        let out = dir.join(format!("{device}/f.##.exr"));
+        ok(&[
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--frames",
+            "2..5",
+            "--size",
+            "40x30",
+            "--spp",
+            "2",
+            "--aov",
+            "depth,normal,albedo,position,motion",
+            "--float",
+            "--device",
+            device,
+            "--quiet",
+        ]);
+    };
+    render("cpu");
+    render("gpu");
+    let frames = files_under(&dir.join("cpu"));
+    assert_eq!(frames.len(), 3);
+    for f in &frames {
+        let (a, b) = (dir.join("cpu").join(f), dir.join("gpu").join(f));
+        let (wa, ha, ca) = read_exr(&a);
+        let (wb, hb, cb) = read_exr(&b);
+        assert_eq!((wa, ha), (wb, hb));
+        assert_eq!(ca.len(), cb.len());
+        for ((na, va), (nb, vb)) in ca.iter().zip(&cb) {
+            assert_eq!(na, nb);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(va), bits(vb), "{}: channel {na} differs", f.display());
+        }
+        // The header names the device that traced.
+        assert!(contains(&std::fs::read(&a).unwrap(), "device=cpu"));
+        assert!(contains(&std::fs::read(&b).unwrap(), "device=gpu"));
+    }
+
+    // --resume over the CPU's frames with --device gpu re-renders them (other options).
+    let out = dir.join("cpu/f.##.exr");
+    ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&out),
+        "--frames",
+        "2..5",
+        "--size",
+        "40x30",
+        "--spp",
+        "2",
+        "--aov",
+        "depth,normal,albedo,position,motion",
+        "--float",
+        "--device",
+        "gpu",
+        "--resume",
+        "--quiet",
+    ]);
+    for f in &frames {
+        let bytes = std::fs::read(dir.join("cpu").join(f)).unwrap();
+        assert!(
+            contains(&bytes, "device=gpu"),
+            "{} not re-rendered",
+            f.display()
+        );
+    }
+}
+
+#[test]
+fn auto_without_a_discrete_gpu_traces_on_the_cpu() {
+    let Some(dev) = common::gpu::device() else {
+        return;
+    };
+    let dir = temp_dir("gpu-auto");
+    let scene = write_scene(&dir);
+    let out = dir.join("f.#.exr");
+    let o = ok(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&out),
+        "--frames",
+        "0",
+        "--size",
+        "16x12",
+        "--device",
+        "auto",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    let want = if dev.is_discrete() {
+        "tracing on: gpu"
+    } else {
+        "tracing on: cpu"
+    };
+    assert!(err.contains(want), "stderr: {err}");
+}
+
+/// No Vulkan driver to be found (the loader pointed at none): one line naming what was
+/// looked for and how to install a driver, a failure status, no frame written.
+#[test]
+fn gpu_without_an_adapter_fails_in_one_line() {
+    let dir = temp_dir("gpu-none");
+    let scene = write_scene(&dir);
+    let out = dir.join("out/f.#.exr");
+    let o = subfield(
+        &[
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--frames",
+            "0",
+            "--device",
+            "gpu",
+        ],
+        &[
+            ("VK_ICD_FILENAMES", "/nonexistent.json"),
+            ("VK_DRIVER_FILES", "/nonexistent.json"),
+        ],
+    );
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    let lines: Vec<&str> = err
+        .lines()
+        .filter(|l| !l.contains("XDG_RUNTIME_DIR"))
+        .collect();
+    assert_eq!(lines.len(), 1, "stderr: {err}");
+    assert!(
+        lines[0].contains("Vulkan adapter") && lines[0].contains("mesa-vulkan-drivers"),
+        "stderr: {err}"
+    );
+    assert!(!dir.join("out").exists(), "something was written");
+}
