@@ -8,34 +8,11 @@
 
 mod common;
 
-use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
 use common::exr_read::read_exr;
+use common::farm::{ok, s};
 use common::render_scene::{files_under, temp_dir, write_scene};
-
-fn subfield(args: &[&str], env: &[(&str, &str)]) -> Output {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_subfield"));
-    c.args(args);
-    for (k, v) in env {
-        c.env(k, v);
-    }
-    c.output().unwrap()
-}
-
-fn ok(args: &[&str]) -> Output {
-    let o = subfield(args, &[]);
-    assert!(
-        o.status.success(),
-        "subfield {args:?} failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    o
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 fn contains(hay: &[u8], needle: &str) -> bool {
     hay.windows(needle.len()).any(|w| w == needle.as_bytes())
@@ -48,9 +25,10 @@ fn gpu_frames_equal_cpu_frames() {
     }
     let dir = temp_dir("gpu-vs-cpu");
     let scene = write_scene(&dir);
-    let render = |device: &str| {
-        let out = dir.join(format!("{device}/f.##.exr"));
-        ok(&[
+    // The same frames on `device` into `folder`, with `extra` flags.
+    let render = |device: &str, folder: &str, extra: &[&str]| {
+        let out = dir.join(format!("{folder}/f.##.exr"));
+        let mut args = vec![
             "render",
             s(&scene),
             "-o",
@@ -67,10 +45,12 @@ fn gpu_frames_equal_cpu_frames() {
             "--device",
             device,
             "--quiet",
-        ]);
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
     };
-    render("cpu");
-    render("gpu");
+    render("cpu", "cpu", &[]);
+    render("gpu", "gpu", &[]);
     let frames = files_under(&dir.join("cpu"));
     assert_eq!(frames.len(), 3);
     for f in &frames {
@@ -90,26 +70,7 @@ fn gpu_frames_equal_cpu_frames() {
     }
 
     // --resume over the CPU's frames with --device gpu re-renders them (other options).
-    let out = dir.join("cpu/f.##.exr");
-    ok(&[
-        "render",
-        s(&scene),
-        "-o",
-        s(&out),
-        "--frames",
-        "2..5",
-        "--size",
-        "40x30",
-        "--spp",
-        "2",
-        "--aov",
-        "depth,normal,albedo,position,motion",
-        "--float",
-        "--device",
-        "gpu",
-        "--resume",
-        "--quiet",
-    ]);
+    render("gpu", "cpu", &["--resume"]);
     for f in &frames {
         let bytes = std::fs::read(dir.join("cpu").join(f)).unwrap();
         assert!(
@@ -156,8 +117,9 @@ fn gpu_without_an_adapter_fails_in_one_line() {
     let dir = temp_dir("gpu-none");
     let scene = write_scene(&dir);
     let out = dir.join("out/f.#.exr");
-    let o = subfield(
-        &[
+    // The Vulkan loader pointed at no driver.
+    let o = Command::new(env!("CARGO_BIN_EXE_subfield"))
+        .args([
             "render",
             s(&scene),
             "-o",
@@ -166,12 +128,11 @@ fn gpu_without_an_adapter_fails_in_one_line() {
             "0",
             "--device",
             "gpu",
-        ],
-        &[
-            ("VK_ICD_FILENAMES", "/nonexistent.json"),
-            ("VK_DRIVER_FILES", "/nonexistent.json"),
-        ],
-    );
+        ])
+        .env("VK_ICD_FILENAMES", "/nonexistent.json")
+        .env("VK_DRIVER_FILES", "/nonexistent.json")
+        .output()
+        .unwrap();
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     let lines: Vec<&str> = err
