@@ -8,12 +8,17 @@
 # benches/blender_units.sh runs it, renders the exported file with subfield and compares
 # the two per material.
 #
-# run: blender -b --factory-startup --python benches/blender_units.py -- OUT_DIR W H SPP
+# With a fifth argument BOUNCES > 0 (benches/blender_bounces.sh), Cycles renders only the
+# Lambertian materials, with BOUNCES diffuse bounces and no clamping, to
+# cycles_lambert_bBOUNCES.exr: the reference for `--diffuse-bounces BOUNCES`.
+#
+# run: blender -b --factory-startup --python benches/blender_units.py -- OUT_DIR W H SPP [BOUNCES]
 import bpy, sys, math
 from mathutils import Vector
 
 a = sys.argv[sys.argv.index("--") + 1:]
 out, W, H, spp = a[0], int(a[1]), int(a[2]), int(a[3])
+bounces = int(a[4]) if len(a) > 4 else 0
 
 bpy.ops.wm.read_factory_settings(use_empty=True)
 sc = bpy.context.scene
@@ -81,7 +86,10 @@ cy.device = "CPU"
 cy.samples = spp
 cy.use_denoising = False
 cy.use_adaptive_sampling = False
-cy.max_bounces = 0  # direct light only: camera, surface, light
+cy.max_bounces = bounces  # 0: direct light only: camera, surface, light
+cy.diffuse_bounces = bounces
+cy.glossy_bounces = cy.transmission_bounces = cy.volume_bounces = cy.transparent_max_bounces = 0
+cy.sample_clamp_direct = cy.sample_clamp_indirect = 0.0  # no clamping: an unbiased reference
 sc.render.threads_mode = "FIXED"
 sc.render.threads = 2
 sc.render.film_transparent = True
@@ -92,8 +100,9 @@ sc.world = bpy.data.worlds.new("black")
 sc.world.use_nodes = True
 sc.world.node_tree.nodes["Background"].inputs[1].default_value = 0.0
 
-sc.render.filepath = out + "/cycles_principled.exr"
-bpy.ops.render.render(write_still=True)
+if bounces == 0:
+    sc.render.filepath = out + "/cycles_principled.exr"
+    bpy.ops.render.render(write_still=True)
 for m in bpy.data.materials:
     nt = m.node_tree
     p = nt.nodes.get("Principled BSDF")
@@ -103,5 +112,5 @@ for m in bpy.data.materials:
     d.inputs["Color"].default_value = p.inputs["Base Color"].default_value
     d.inputs["Roughness"].default_value = 0.0  # Lambert, not Oren-Nayar
     nt.links.new(d.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
-sc.render.filepath = out + "/cycles_lambert.exr"
+sc.render.filepath = out + ("/cycles_lambert.exr" if bounces == 0 else f"/cycles_lambert_b{bounces}.exr")
 bpy.ops.render.render(write_still=True)

@@ -1,6 +1,8 @@
 # Per-material comparison of subfield's direct light with Cycles' (issue 35's acceptance
 # figure; benches/blender_units.sh runs it), with the system python3 (OpenEXR + numpy).
-# run: python3 benches/blender_units_compare.py OURS.exr CYCLES.exr [CYCLES2.exr ...]
+# run: python3 benches/blender_units_compare.py [--bounces] OURS.exr CYCLES.exr [CYCLES2.exr ...]
+# (--bounces: OURS was rendered with --diffuse-bounces, where the ambient term is off, so
+# nothing is subtracted)
 # OURS.exr has the albedo AOV: its distinct colours are the material masks, eroded by one
 # pixel (so edges, where the two renderers' pixels cover different surfaces, are left
 # out), and only where Cycles' alpha is 1. Our direct light is RGB less the ambient term
@@ -18,9 +20,12 @@ def load(path, names):
     return np.stack([np.frombuffer(f.channel(c, pt), np.float32).reshape(h, w) for c in names], -1)
 
 
+bounce = sys.argv[1] == "--bounces"
+if bounce:
+    del sys.argv[1]
 ours = load(sys.argv[1], ["R", "G", "B"])
 albedo = load(sys.argv[1], ["albedo.R", "albedo.G", "albedo.B"])
-direct = ours - 0.05 * albedo
+direct = ours if bounce else ours - 0.05 * albedo
 key = np.round(albedo, 3)
 colours = {tuple(float(x) for x in c) for c in key.reshape(-1, 3) if c.max() > 0}
 h, w, _ = key.shape

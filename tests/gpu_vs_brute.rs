@@ -63,13 +63,40 @@ fn edge_rays(rng: &mut Rng, psf: &Psf, n: usize) -> Vec<Ray> {
 
 /// One case: `frames` frames of moving triangles over a static room, every ray checked.
 fn check_case(seed: u64, params: PsfParams, frames: usize, moving: usize, nrays: usize) {
+    check_case_split(seed, params, frames, moving, nrays, false);
+}
+
+/// [`check_case`], with `split` every array of the static part uploaded in 2 to 4
+/// bindings, as a scene larger than one binding (128 MiB on lavapipe) is.
+fn check_case_split(
+    seed: u64,
+    params: PsfParams,
+    frames: usize,
+    moving: usize,
+    nrays: usize,
+    split: bool,
+) {
     let Some(dev) = common::gpu::device() else {
         return;
     };
     let mut rng = Rng::new(seed);
-    let stat = static_scene(&mut rng);
+    let mut stat = static_scene(&mut rng);
+    if split {
+        // Dense enough that tiles hold slabs (over 32 entries), not only flat blocks.
+        stat.extend(subfield::gen::synth::soup(&mut rng, 1500, LO, HI, 0.8));
+    }
     let psf = Psf::build(&stat, &params).expect("bake");
-    let gstat = GpuStatic::upload(dev, &psf).expect("upload");
+    let gstat = if split {
+        let g = GpuStatic::upload_split(dev, &psf).expect("split upload");
+        assert!(
+            g.chunks().iter().all(|&c| c >= 2),
+            "every array in two parts or more: {:?}",
+            g.chunks()
+        );
+        g
+    } else {
+        GpuStatic::upload(dev, &psf).expect("upload")
+    };
     let mut layer = DynamicLayer::new(&psf);
     let mut gmov = GpuMoving::new(dev).expect("moving part");
     let mut before: Vec<[Vec3; 3]> = Vec::new();
@@ -140,6 +167,15 @@ fn gpu_equals_brute_force_and_cpu_over_frames() {
     for seed in 0..8u64 {
         let p = params[seed as usize % params.len()];
         check_case(0x9e37_79b9 ^ seed, p, 4, 60 + 40 * (seed as usize % 3), 400);
+    }
+}
+
+/// The static part's arrays split over several bindings (what a scene larger than one
+/// binding needs) answer as one binding does: brute force's hits, to the bit.
+#[test]
+fn gpu_split_arrays_equal_brute_force() {
+    for (seed, level, tiles) in [(0x5b17_u64, 0, 4), (0x5b18, 1, 7)] {
+        check_case_split(seed, PsfParams { level, tiles }, 2, 80, 500, true);
     }
 }
 

@@ -146,3 +146,21 @@ fn gpu_without_an_adapter_fails_in_one_line() {
     );
     assert!(!dir.join("out").exists(), "something was written");
 }
+
+/// `subfield demo --device gpu` without an adapter fails in the same one line before it
+/// writes its scene and bake: the folder it was given stays empty.
+#[test]
+fn demo_on_a_gpu_without_an_adapter_writes_nothing() {
+    let dir = temp_dir("gpu-demo-none");
+    let out = dir.join("demo");
+    let o = Command::new(env!("CARGO_BIN_EXE_subfield"))
+        .args(["demo", "-o", s(&out), "--device", "gpu", "--frames", "0"])
+        .env("VK_ICD_FILENAMES", "/nonexistent.json")
+        .env("VK_DRIVER_FILES", "/nonexistent.json")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("Vulkan adapter"), "stderr: {err}");
+    assert!(!out.exists(), "the demo wrote into {}", out.display());
+}

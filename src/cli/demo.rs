@@ -58,6 +58,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     super::set_threads(a.threads)?;
     let dir = &a.output;
     check_outputs(dir)?;
+    // `--device gpu` without an adapter fails before the scene and bake are written.
+    subfield::render::check_device(a.device)?;
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
 
     let clock = Instant::now();

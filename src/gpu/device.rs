@@ -8,6 +8,10 @@ use std::task::{Context, Poll, Waker};
 
 use super::GpuError;
 
+/// The trace kernel's storage bindings (trace.wgsl: 12, and 3 more parts of each of the
+/// static part's 5 split arrays).
+const TRACE_BINDINGS: u32 = 27;
+
 /// Which adapters may be taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum AdapterPolicy {
@@ -130,6 +134,13 @@ impl GpuDevice {
         }
         // The adapter's own limits: as many storage buffers and as large ones as it has.
         let limits = adapter.limits();
+        if limits.max_storage_buffers_per_shader_stage < TRACE_BINDINGS {
+            return Err(GpuError::MissingFeature {
+                adapter: info.name.clone(),
+                feature: "27 storage buffers a shader stage",
+                why: "the trace kernel binds the static part's arrays in up to 4 parts each",
+            });
+        }
         let max_binding = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size)
@@ -202,7 +213,7 @@ impl GpuDevice {
             })
         };
         let mut trace_entries = vec![uniform];
-        trace_entries.extend((1..=12).map(|b| storage(b, b != 2)));
+        trace_entries.extend((1..=TRACE_BINDINGS).map(|b| storage(b, b != 2)));
         let trace_layout = layout("trace", &trace_entries);
         let grid_layout = layout(
             "grid",

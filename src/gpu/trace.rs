@@ -33,6 +33,8 @@ struct Params {
     g_dims: [u32; 4],
     m_lo: [f32; 4],
     m_hi: [f32; 4],
+    k: [u32; 4],
+    k2: [u32; 4],
 }
 
 /// `Ray` in trace.wgsl: origin and `t_min`, direction and `t_max`, and the shear the CPU
@@ -173,6 +175,8 @@ impl<'a> GpuTracer<'a> {
             g_dims: [sh.dims[0], sh.dims[1], sh.dims[2], 0],
             m_lo: [sh.clip.min.x, sh.clip.min.y, sh.clip.min.z, sh.margin],
             m_hi: [sh.clip.max.x, sh.clip.max.y, sh.clip.max.z, 0.0],
+            k: [s.tris.shift, s.tiles.shift, s.starts.shift, s.entries.shift],
+            k2: [s.blocks.shift, 0, 0, 0],
         };
         let uniform = dev.uniform(bytemuck::bytes_of(&params));
         let ray_buf = dev.storage_with("the rays", bytemuck::cast_slice(&packed))?;
@@ -181,24 +185,34 @@ impl<'a> GpuTracer<'a> {
             n * 16,
             wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         )?;
+        let d = &s.dummy;
+        let mut entries = vec![
+            entry(0, &uniform),
+            entry(1, &ray_buf),
+            entry(2, &hits),
+            entry(3, s.tris.binding(0, d)),
+            entry(4, &s.subs),
+            entry(5, s.tiles.binding(0, d)),
+            entry(6, s.starts.binding(0, d)),
+            entry(7, s.entries.binding(0, d)),
+            entry(8, s.blocks.binding(0, d)),
+            entry(9, &s.table),
+            entry(10, &m.tris),
+            entry(11, &m.cell_start),
+            entry(12, &m.cell_tris),
+        ];
+        // Bindings 13.. : chunks 1..CHUNKS of each split array (trace.wgsl).
+        let mut b = 13;
+        for arr in [&s.tris, &s.tiles, &s.starts, &s.entries, &s.blocks] {
+            for k in 1..super::static_part::CHUNKS {
+                entries.push(entry(b, arr.binding(k, d)));
+                b += 1;
+            }
+        }
         let group = dev.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("trace"),
             layout: &dev.trace_layout,
-            entries: &[
-                entry(0, &uniform),
-                entry(1, &ray_buf),
-                entry(2, &hits),
-                entry(3, &s.tris),
-                entry(4, &s.subs),
-                entry(5, &s.tiles),
-                entry(6, &s.starts),
-                entry(7, &s.entries),
-                entry(8, &s.blocks),
-                entry(9, &s.table),
-                entry(10, &m.tris),
-                entry(11, &m.cell_start),
-                entry(12, &m.cell_tris),
-            ],
+            entries: &entries,
         });
         let mut enc = dev.device.create_command_encoder(&Default::default());
         let stamps = self.gpu_seconds.as_ref().and_then(|_| dev.stamps(1));

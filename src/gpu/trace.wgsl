@@ -35,6 +35,10 @@ struct Params {
     // the moving clip box; m_lo.w = the moving margin
     m_lo: vec4<f32>,
     m_hi: vec4<f32>,
+    // log2 of the elements a binding of each split array holds (static_part.rs):
+    // triangles' vec4s, tile headers, slab starts, entries; then blocks
+    k: vec4<u32>,
+    k2: vec4<u32>,
 }
 
 struct Ray {
@@ -84,6 +88,88 @@ struct Block {
 @group(0) @binding(10) var<storage, read> mtris: array<vec4<f32>>;
 @group(0) @binding(11) var<storage, read> cell_start: array<u32>;
 @group(0) @binding(12) var<storage, read> cell_tris: array<u32>;
+// The rest of the split arrays (static_part.rs, CHUNKS = 4): element i of an array is
+// element i & (2^k - 1) of its binding i >> k.
+@group(0) @binding(13) var<storage, read> stris1: array<vec4<f32>>;
+@group(0) @binding(14) var<storage, read> stris2: array<vec4<f32>>;
+@group(0) @binding(15) var<storage, read> stris3: array<vec4<f32>>;
+@group(0) @binding(16) var<storage, read> tiles1: array<vec4<u32>>;
+@group(0) @binding(17) var<storage, read> tiles2: array<vec4<u32>>;
+@group(0) @binding(18) var<storage, read> tiles3: array<vec4<u32>>;
+@group(0) @binding(19) var<storage, read> starts1: array<u32>;
+@group(0) @binding(20) var<storage, read> starts2: array<u32>;
+@group(0) @binding(21) var<storage, read> starts3: array<u32>;
+@group(0) @binding(22) var<storage, read> entries1: array<Entry>;
+@group(0) @binding(23) var<storage, read> entries2: array<Entry>;
+@group(0) @binding(24) var<storage, read> entries3: array<Entry>;
+@group(0) @binding(25) var<storage, read> blocks1: array<Block>;
+@group(0) @binding(26) var<storage, read> blocks2: array<Block>;
+@group(0) @binding(27) var<storage, read> blocks3: array<Block>;
+
+fn low(i: u32, k: u32) -> u32 {
+    return i & ((1u << k) - 1u);
+}
+
+fn stri(i: u32) -> vec4<f32> {
+    let j = low(i, P.k.x);
+    switch i >> P.k.x {
+        case 0u: { return stris[j]; }
+        case 1u: { return stris1[j]; }
+        case 2u: { return stris2[j]; }
+        default: { return stris3[j]; }
+    }
+}
+
+fn tile_at(i: u32) -> vec4<u32> {
+    let j = low(i, P.k.y);
+    switch i >> P.k.y {
+        case 0u: { return tiles[j]; }
+        case 1u: { return tiles1[j]; }
+        case 2u: { return tiles2[j]; }
+        default: { return tiles3[j]; }
+    }
+}
+
+fn start_at(i: u32) -> u32 {
+    let j = low(i, P.k.z);
+    switch i >> P.k.z {
+        case 0u: { return starts[j]; }
+        case 1u: { return starts1[j]; }
+        case 2u: { return starts2[j]; }
+        default: { return starts3[j]; }
+    }
+}
+
+fn entry_at(i: u32) -> Entry {
+    let j = low(i, P.k.w);
+    switch i >> P.k.w {
+        case 0u: { return entries[j]; }
+        case 1u: { return entries1[j]; }
+        case 2u: { return entries2[j]; }
+        default: { return entries3[j]; }
+    }
+}
+
+// Slot s of block i: its depth range, then its triangle.
+fn block_z(i: u32, s: u32) -> vec2<f32> {
+    let j = low(i, P.k2.x);
+    switch i >> P.k2.x {
+        case 0u: { return vec2<f32>(blocks[j].zmin[s], blocks[j].zmax[s]); }
+        case 1u: { return vec2<f32>(blocks1[j].zmin[s], blocks1[j].zmax[s]); }
+        case 2u: { return vec2<f32>(blocks2[j].zmin[s], blocks2[j].zmax[s]); }
+        default: { return vec2<f32>(blocks3[j].zmin[s], blocks3[j].zmax[s]); }
+    }
+}
+
+fn block_tri(i: u32, s: u32) -> u32 {
+    let j = low(i, P.k2.x);
+    switch i >> P.k2.x {
+        case 0u: { return blocks[j].tri[s]; }
+        case 1u: { return blocks1[j].tri[s]; }
+        case 2u: { return blocks2[j].tri[s]; }
+        default: { return blocks3[j].tri[s]; }
+    }
+}
 
 const NONE: u32 = 0xffffffffu;
 const FLAT: u32 = 0x80000000u;
@@ -152,9 +238,9 @@ fn test_tri(pre: Pre, base: u32, tris_static: bool, t_min: f32, t_max: f32) -> B
     var v1: vec4<f32>;
     var v2: vec4<f32>;
     if tris_static {
-        v0 = stris[base];
-        v1 = stris[base + 1u];
-        v2 = stris[base + 2u];
+        v0 = stri(base);
+        v1 = stri(base + 1u);
+        v2 = stri(base + 2u);
     } else {
         v0 = mtris[base];
         v1 = mtris[base + 1u];
@@ -351,7 +437,7 @@ fn trace_static(r: Ray, pre: Pre, any: bool) -> Best {
     // A DDA crosses at most nu + nv tiles; the bound only guards the loop.
     for (var guard = 0; guard <= nu + nv + 2; guard++) {
         let t_exit = max(min(min(tx, ty), t1), t);
-        let h = tiles[sf.n.z + u32(iy * nu + ix)];
+        let h = tile_at(sf.n.z + u32(iy * nu + ix));
         if h.y != 0u {
             if (h.y & FLAT) != 0u {
                 // block_window: the depth window over the tile, cut at the best hit.
@@ -367,12 +453,11 @@ fn trace_static(r: Ray, pre: Pre, any: bool) -> Best {
                 let count = h.y & ~FLAT;
                 for (var bi = 0u; bi < count; bi++) {
                     for (var j = 0u; j < 8u; j++) {
-                        let zmin = blocks[first + bi].zmin[j];
-                        let zmax = blocks[first + bi].zmax[j];
-                        if !(zmax >= lo && zmin <= hi) {
+                        let z = block_z(first + bi, j);
+                        if !(z.y >= lo && z.x <= hi) {
                             continue;
                         }
-                        let tri = blocks[first + bi].tri[j];
+                        let tri = block_tri(first + bi, j);
                         var tm = r.d.w;
                         if best.tri != NONE {
                             tm = best.t;
@@ -417,10 +502,10 @@ fn trace_static(r: Ray, pre: Pre, any: bool) -> Best {
                     let s_first = s;
                     while (s - s_end) * dir <= 0 {
                         let base = sf.n.w + h.x + u32(s);
-                        let e0 = sf.m.x + starts[base];
-                        let e1 = sf.m.x + starts[base + 1u];
+                        let e0 = sf.m.x + start_at(base);
+                        let e1 = sf.m.x + start_at(base + 1u);
                         for (var ei = e0; ei < e1; ei++) {
-                            let e = entries[ei];
+                            let e = entry_at(ei);
                             if e.zmax < lo || e.zmin > hi {
                                 continue;
                             }

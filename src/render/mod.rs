@@ -70,7 +70,7 @@ pub use output::{
     FrameFile, OPTIONS_ATTRIBUTE,
 };
 pub use planning::{plan, CameraSource, FramePlan, OutputPattern, RenderPlan};
-pub use sequence::render_sequence;
+pub use sequence::{check_device, render_sequence};
 pub use shade::{CryptoBuffers, FrameBuffers, FrameWork, RayCounts, ShadeContext};
 pub use stats::{plot_png, plot_svg, stats_csv, FrameStats, FrameTotals, PLOT_BARS};
 pub use tuning_rays::tuning_rays;

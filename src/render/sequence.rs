@@ -164,6 +164,16 @@ type Device = crate::gpu::GpuDevice;
 #[cfg(not(feature = "gpu"))]
 type Device = std::convert::Infallible;
 
+/// Checks that `choice` can be served (`--device gpu`: an adapter is there and opens)
+/// before a command writes anything else (the demo writes its scene and bake first); the
+/// render opens the adapter again. `auto` and `cpu` always can.
+pub fn check_device(choice: TraceDevice) -> Result<(), RenderError> {
+    match choice {
+        TraceDevice::Gpu => open_device(choice).map(|_| ()),
+        TraceDevice::Cpu | TraceDevice::Auto => Ok(()),
+    }
+}
+
 /// The adapter `choice` asks for: `None` for the CPU (`cpu`, or `auto` without a
 /// discrete GPU).
 fn open_device(choice: TraceDevice) -> Result<Option<Device>, RenderError> {
