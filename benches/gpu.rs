@@ -11,9 +11,16 @@
 //! update's GPU time likewise: count, scan, scatter). Every GPU answer is compared with
 //! the CPU's and the mismatches printed (0 expected).
 //!
-//! `cargo bench --bench gpu -- [--size WxH] [--moving N,M] [--frames F]`. Needs a Vulkan
-//! adapter (`--device gpu`'s choice); on lavapipe (a CPU driver) use a tiny size: the
-//! figures then say nothing about a GPU, only that the benchmark runs.
+//! With `--scene FILE.glb` (the peers' generator, `../shared/peers/gen_scene.py`, which
+//! Embree's harness reads too) the triangles, the camera and the point light are the
+//! file's, posed at frames 0, S, 2S, ... (`--step S`, default 10) as the harness's
+//! `--frames 0:F·S:S` poses them: the same rays as Embree's camera, shadow and mirror
+//! rays (`benches/gpu.sh` runs both in one go).
+//!
+//! `cargo bench --bench gpu -- [--size WxH] [--moving N,M | --scene F.glb [--step S]]
+//! [--frames F]`. Needs a Vulkan adapter (`--device gpu`'s choice); on lavapipe (a CPU
+//! driver) use a tiny size: the figures then say nothing about a GPU, only that the
+//! benchmark runs.
 
 #[path = "common.rs"]
 mod common;
@@ -52,19 +59,91 @@ fn moving_frame(rng: &mut Rng, n: usize) -> Vec<[Vec3; 3]> {
 /// frame, rays, mismatches.
 type Row = (&'static str, Vec<f64>, Vec<f64>, Vec<f64>, usize, usize);
 
-fn secondary(camera: &[Ray], hits: &[Option<Hit>], light: Vec3) -> (Vec<Ray>, Vec<Ray>) {
+/// A shadow ray to the light and a mirror ray about the triangle's normal from each
+/// camera hit (`tris`: the static triangles, then the moving ones, as hits number them).
+fn secondary(
+    camera: &[Ray],
+    hits: &[Option<Hit>],
+    light: Vec3,
+    stat: &[[Vec3; 3]],
+    moving: &[[Vec3; 3]],
+) -> (Vec<Ray>, Vec<Ray>) {
     let (mut shadow, mut mirror) = (Vec::new(), Vec::new());
     for (r, h) in camera.iter().zip(hits) {
         let Some(h) = h else { continue };
+        let i = h.tri as usize;
+        let t = if i < stat.len() {
+            stat[i]
+        } else {
+            moving[i - stat.len()]
+        };
         let p = r.at(h.t);
         let d = r.dir;
         let o = p - d * 1e-4;
         shadow.push(Ray::segment(o, light - o, 0.0, 1.0 - 1e-4));
-        // A mirror about a normal picked from the ray (no shading normals here).
-        let n = Vec3::new(0.3, 1.0, -0.2).normalize();
+        let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero();
         mirror.push(Ray::segment(o, d - n * 2.0 * d.dot(n), 1e-4, f32::INFINITY));
     }
     (shadow, mirror)
+}
+
+/// One measured case: a label (the moving count), and per frame the moving triangles and
+/// the camera rays.
+struct Case {
+    label: String,
+    moving: usize,
+    frames: Vec<(Vec<[Vec3; 3]>, std::sync::Arc<Vec<Ray>>)>,
+}
+
+/// The static triangles, the light and the cases of `--scene FILE`: the file's moving
+/// triangles and camera at frames 0, step, 2·step, ...
+fn scene_cases(
+    path: &std::path::Path,
+    w: usize,
+    h: usize,
+    frames: usize,
+    step: usize,
+) -> (Vec<[Vec3; 3]>, Vec3, Vec<Case>) {
+    use subfield::render::CameraModel;
+    use subfield::scene::{ClipSelection, TriangleSoup};
+    let scene = subfield::import::load(path).unwrap_or_else(|e| {
+        eprintln!("gpu bench: {}: {e}", path.display());
+        std::process::exit(1);
+    });
+    let sel = ClipSelection::All;
+    let split = scene.split(sel);
+    let stat = scene.static_triangles(&split).positions;
+    let fps = scene.fps.unwrap_or(24.0);
+    let light = scene
+        .lights_at(sel, 0.0)
+        .first()
+        .map_or(Vec3::new(0.0, 5.5, 0.0), |l| l.position);
+    let mut soup = TriangleSoup::new();
+    let mut per = Vec::new();
+    for k in 0..frames {
+        let t = (k * step) as f32 / fps;
+        scene.dynamic_triangles_at(&split, t, &mut soup);
+        let cam = scene.camera_at(sel, t, None).unwrap_or_else(|| {
+            eprintln!("gpu bench: {} has no camera", path.display());
+            std::process::exit(1);
+        });
+        let model = CameraModel::from_scene(&cam, w as u32, h as u32);
+        let rays: Vec<Ray> = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .map(|(x, y)| model.ray(x as f32 + 0.5, y as f32 + 0.5))
+            .collect();
+        per.push((soup.positions.clone(), std::sync::Arc::new(rays)));
+    }
+    let n = per.first().map_or(0, |f| f.0.len());
+    let case = Case {
+        label: format!(
+            "{n} ({})",
+            path.file_name().map_or("".into(), |f| f.to_string_lossy())
+        ),
+        moving: n,
+        frames: per,
+    };
+    (stat, light, vec![case])
 }
 
 fn main() {
@@ -79,6 +158,8 @@ fn main() {
         .filter_map(|s| s.parse().ok())
         .collect();
     let frames: usize = arg("--frames").unwrap_or(5).max(1);
+    let scene: Option<String> = arg("--scene");
+    let step: usize = arg("--step").unwrap_or(10).max(1);
     let dev = match GpuDevice::open(AdapterPolicy::Any) {
         Ok(Some(d)) => d,
         Ok(None) => unreachable!("AdapterPolicy::Any answers an error, not None"),
@@ -92,7 +173,26 @@ fn main() {
         dev.describe(),
         rayon::current_num_threads()
     );
-    let stat = common::room(10_284);
+    let (stat, light, cases) = match &scene {
+        Some(p) => scene_cases(std::path::Path::new(p), w, h, frames, step),
+        None => {
+            let camera = std::sync::Arc::new(common::camera_rays(w, h));
+            let cases = moving
+                .iter()
+                .map(|&n| {
+                    let mut rng = Rng::new(11);
+                    Case {
+                        label: n.to_string(),
+                        moving: n,
+                        frames: (0..frames)
+                            .map(|_| (moving_frame(&mut rng, n), camera.clone()))
+                            .collect(),
+                    }
+                })
+                .collect();
+            (common::room(10_284), Vec3::new(0.0, 5.5, 0.0), cases)
+        }
+    };
     let psf = Psf::build(&stat, &PsfParams::for_static(stat.len())).expect("bake");
     let clock = Instant::now();
     let gstat = GpuStatic::upload(&dev, &psf).expect("upload");
@@ -102,36 +202,34 @@ fn main() {
         gstat.bytes() as f64 / 1e6,
         clock.elapsed().as_secs_f64() * 1e3
     );
-    let camera = common::camera_rays(w, h);
     let random = common::random_rays(w * h);
-    let light = Vec3::new(0.0, 5.5, 0.0);
     println!(
         "\n| moving | batch | rays | CPU Mrays/s | GPU Mrays/s (wall, transfers) | GPU Mrays/s (pass, timestamps) | GPU wall/CPU | mismatches |"
     );
     println!("|---|---|---|---|---|---|---|---|");
-    for &n in &moving {
-        let mut rng = Rng::new(11);
+    for case in cases {
+        let (label, n) = (case.label, case.moving);
         let mut layer = DynamicLayer::for_triangles(n);
         let mut gmov = GpuMoving::new(&dev).expect("moving part");
         gmov.set_timing(true);
         let (mut up_cpu, mut up_gpu, mut up_pass) = (Vec::new(), Vec::new(), Vec::new());
         let mut rows: Vec<Row> = Vec::new();
-        for _ in 0..frames {
-            let tris = moving_frame(&mut rng, n);
+        for (tris, camera) in &case.frames {
+            let camera: &[Ray] = camera;
             let t = Instant::now();
-            layer.update(&tris).expect("update");
+            layer.update(tris).expect("update");
             up_cpu.push(t.elapsed().as_secs_f64() * 1e3);
             let t = Instant::now();
-            gmov.update(&dev, &tris).expect("gpu update");
+            gmov.update(&dev, tris).expect("gpu update");
             dev.finish().expect("gpu update");
             up_gpu.push(t.elapsed().as_secs_f64() * 1e3);
             up_pass.push(gmov.gpu_seconds().map_or(f64::NAN, |s| s * 1e3));
             let cpu = psf.with_dynamic(&layer);
             let mut cam_hits = vec![None; camera.len()];
             cpu.intersect_batch(&camera, &mut cam_hits);
-            let (shadow, mirror) = secondary(&camera, &cam_hits, light);
+            let (shadow, mirror) = secondary(camera, &cam_hits, light, &stat, tris);
             let batches: [(&'static str, &[Ray], bool); 4] = [
-                ("camera", &camera, false),
+                ("camera", camera, false),
                 ("shadow", &shadow, true),
                 ("reflection", &mirror, false),
                 ("random", &random, false),
@@ -170,7 +268,7 @@ fn main() {
         for (name, cs, gs, ps, nrays, bad) in rows {
             let (c, g, p) = (median(cs), median(gs), median(ps));
             println!(
-                "| {n} | {name} | {nrays} | {:.2} | {:.2} | {:.2} | {:.2} | {bad} |",
+                "| {label} | {name} | {nrays} | {:.2} | {:.2} | {:.2} | {:.2} | {bad} |",
                 nrays as f64 / c / 1e6,
                 nrays as f64 / g / 1e6,
                 nrays as f64 / p / 1e6,
@@ -179,7 +277,7 @@ fn main() {
         }
         let (grid, entries) = gmov.grid();
         println!(
-            "| {n} | update (ms) | | CPU {:.2} | GPU {:.2} wall (grid {:?}, {entries} entries) | GPU {:.2} passes | | |",
+            "| {label} | update (ms) | | CPU {:.2} | GPU {:.2} wall (grid {:?}, {entries} entries) | GPU {:.2} passes | | |",
             median(up_cpu),
             median(up_gpu),
             grid,

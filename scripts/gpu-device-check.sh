@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The GPU tracer's checks on a machine with a real GPU (issue 36), as one prepared run:
-# the exactness suite (tests/gpu_vs_brute.rs) and the benchmark (benches/gpu.rs).
+# the exactness suite (tests/gpu_vs_brute.rs) and the benchmark (benches/gpu.rs), with
+# Embree's harness on the same file and frames in the same run (benches/gpu.sh's steps).
 #
 #   scripts/gpu-device-check.sh prepare   # here: release builds of both into .device/gpu/
 #   scripts/gpu-device-check.sh run       # there: runs them, figures to $OUT (or .device/out)
@@ -29,6 +30,21 @@ for l in sys.stdin:
         print(m["executable"])')
     strip -o .device/gpu/gpu_vs_brute "$test_exe"
     strip -o .device/gpu/gpu_bench "$bench_exe"
+    # The peers: the scene generator and Embree's harness, embreex for the machine's
+    # Python 3.12, the harness's C helper built here (../shared/peers/README.md).
+    peers=${PEERS:-../shared/peers}
+    mkdir -p .device/whl .device/gl
+    cp -r "$peers" .device/
+    ls .device/whl/embreex-*.whl >/dev/null 2>&1 ||
+        python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 \
+            --implementation cp --platform manylinux_2_28_x86_64 -d .device/whl embreex==4.4.0.post1
+    gcc -O3 -march=x86-64-v3 -shared -fPIC -pthread "$peers/trace_helper.c" \
+        -o .device/libtrace_helper.so
+    ls .device/gl/libvulkan1*.deb >/dev/null 2>&1 || {
+        o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'
+        mkdir -p /tmp/amd64/partial && apt-get $o update -qq && (cd .device/gl && apt-get $o download libvulkan1)
+    }
+    du -sh .device
     ls -l .device/gpu
     ;;
 run)
@@ -42,9 +58,23 @@ run)
     timeout 240 .device/gpu/gpu_vs_brute --test-threads 1 >"$out/exactness.txt" 2>&1 &&
         echo "exactness: passed" || echo "exactness: FAILED (see $out/exactness.txt)"
     # Then the figures: the museum class and 1M moving, a 1024x1024 camera (1 M rays).
-    timeout 240 .device/gpu/gpu_bench --size 1024x1024 --moving 16384,1048576 --frames 5 \
+    timeout 200 .device/gpu/gpu_bench --size 1024x1024 --moving 16384,1048576 --frames 5 \
         >"$out/bench.md" 2>&1 && echo "bench: done" || echo "bench: FAILED"
     tail -n 20 "$out/bench.md"
+    # The peers' museum file: Embree's harness and the same rays on both tracers.
+    python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/whl/*.whl
+    export PYTHONPATH=/tmp/site PEER_BUILD_DIR=/tmp/peer
+    mkdir -p /tmp/peer && cp .device/libtrace_helper.so /tmp/peer/
+    python3 .device/peers/gen_scene.py --static-tris 10284 --dynamic-tris 16384 \
+        --frames 300 --fps 30 --seed 1 --out /tmp/museum.glb >/dev/null
+    timeout 120 python3 .device/peers/embree_anchor.py /tmp/museum.glb --frames 0:50:10 \
+        --width 1024 --height 1024 --threads "$(nproc)" >"$out/embree.jsonl" 2>&1 &&
+        echo "embree: done" || echo "embree: FAILED"
+    tail -n 1 "$out/embree.jsonl"
+    timeout 120 .device/gpu/gpu_bench --scene /tmp/museum.glb --size 1024x1024 --frames 5 \
+        --step 10 >"$out/bench-museum.md" 2>&1 && echo "bench (museum.glb): done" ||
+        echo "bench (museum.glb): FAILED"
+    tail -n 8 "$out/bench-museum.md"
     ;;
 *)
     echo "usage: $0 prepare|run" >&2
