@@ -87,12 +87,14 @@ fn secondary(
     (shadow, mirror)
 }
 
-/// One measured case: a label (the moving count), and per frame the moving triangles and
-/// the camera rays.
+/// One frame of a case: the moving triangles and the camera rays.
+type Frame = (Vec<[Vec3; 3]>, std::sync::Arc<Vec<Ray>>);
+
+/// One measured case: a label (the moving count) and its frames.
 struct Case {
     label: String,
     moving: usize,
-    frames: Vec<(Vec<[Vec3; 3]>, std::sync::Arc<Vec<Ray>>)>,
+    frames: Vec<Frame>,
 }
 
 /// The static triangles, the light and the cases of `--scene FILE`: the file's moving
