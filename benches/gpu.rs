@@ -228,7 +228,7 @@ fn main() {
             up_pass.push(gmov.gpu_seconds().map_or(f64::NAN, |s| s * 1e3));
             let cpu = psf.with_dynamic(&layer);
             let mut cam_hits = vec![None; camera.len()];
-            cpu.intersect_batch(&camera, &mut cam_hits);
+            cpu.intersect_batch(camera, &mut cam_hits);
             let (shadow, mirror) = secondary(camera, &cam_hits, light, &stat, tris);
             let batches: [(&'static str, &[Ray], bool); 4] = [
                 ("camera", camera, false),
