@@ -439,7 +439,7 @@ fn stats_plot_and_the_default_range() {
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(
         lines[0],
-        "frame,time,update_ms,trace_ms,shade_ms,write_ms,primary_rays,shadow_rays,secondary_rays"
+        "frame,time,update_ms,trace_ms,shade_ms,write_ms,primary_rays,shadow_rays,secondary_rays,cpu_ms,threads"
     );
     assert_eq!(lines.len(), 8);
     for (i, l) in lines[1..].iter().enumerate() {
@@ -448,6 +448,15 @@ fn stats_plot_and_the_default_range() {
         assert!((f[1].parse::<f64>().unwrap() - i as f64 / 6.0).abs() < 1e-6);
         assert_eq!(f[6], "192", "one primary ray a pixel");
         assert!(f[7].parse::<u64>().unwrap() > 0 && f[8].parse::<u64>().unwrap() > 0);
+        // The render threads' CPU time (Linux; counted in scheduler ticks, so a frame
+        // this small may read 0): at most what its threads could spend.
+        if cfg!(target_os = "linux") {
+            let cpu: f64 = f[9].parse().unwrap();
+            let threads: f64 = f[10].parse().unwrap();
+            let wall: f64 = f[2..5].iter().map(|v| v.parse::<f64>().unwrap()).sum();
+            assert!(threads >= 1.0 && cpu >= 0.0, "{l}");
+            assert!(cpu <= threads * (wall + 10.0), "{l}");
+        }
         for v in &f[2..6] {
             assert!(v.parse::<f64>().unwrap() >= 0.0);
         }

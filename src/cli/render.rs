@@ -144,7 +144,8 @@ pub struct Args {
     /// No progress or report.
     #[arg(long, short)]
     pub quiet: bool,
-    /// Per-frame times (update, trace, shade, write) and ray counts as CSV.
+    /// Per-frame times (update, trace, shade, write), ray counts, and the CPU time the
+    /// render's threads spent on the frame (`cpu_ms`, over `threads` threads) as CSV.
     #[arg(long, value_name = "FILE.csv")]
     pub stats: Option<PathBuf>,
     /// Per-frame times as a stacked bar chart.

@@ -31,6 +31,7 @@
 
 mod aov;
 mod camera;
+mod cpu_clock;
 mod environment;
 mod errors;
 mod exr_zip;

@@ -400,6 +400,8 @@ impl Frames<'_> {
             let mut next_soup = TriangleSoup::new();
             let mut scratch = FrameScratch::default();
             let mut preview_pending = preview_frame;
+            // The render threads' CPU time a frame, beside its wall time (`--stats`).
+            let cpu_clock = super::cpu_clock::CpuClock::of_pool();
             for (index, frame) in plan.frames.iter().enumerate() {
                 while let Ok(r) = done_rx.try_recv() {
                     written.finish(r, on_event);
@@ -432,6 +434,7 @@ impl Frames<'_> {
                 if let Some(fb) = written.spare.take() {
                     scratch.recycle(fb);
                 }
+                let cpu_start = cpu_clock.as_ref().and_then(|c| c.now_ns());
                 match self.render_one(
                     static_bounds,
                     &mut tracing,
@@ -440,7 +443,11 @@ impl Frames<'_> {
                     &mut scratch,
                     frame,
                 ) {
-                    Ok((fb, header, st)) => {
+                    Ok((fb, header, mut st)) => {
+                        if let Some(c) = &cpu_clock {
+                            st.cpu_ms = c.ms_since(cpu_start);
+                            st.threads = c.threads();
+                        }
                         let job = Job {
                             index,
                             path,
@@ -618,6 +625,8 @@ impl Frames<'_> {
                 shade_ms: work.shade.as_secs_f64() * 1e3,
                 write_ms: 0.0,
                 rays: work.rays,
+                cpu_ms: None,
+                threads: 0,
             },
         ))
     }

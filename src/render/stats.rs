@@ -23,16 +23,22 @@ pub struct FrameStats {
     /// Encoding and writing the EXR (on the writer thread, overlapping the next frame).
     pub write_ms: f64,
     pub rays: RayCounts,
+    /// CPU time of the render's threads (its pool and the frame loop) over update, trace
+    /// and shade; `None` where the system does not say (see `cpu_clock`).
+    pub cpu_ms: Option<f64>,
+    /// How many threads `cpu_ms` counts (0 with it `None`).
+    pub threads: usize,
 }
 
 /// The CSV's first line.
 pub(crate) const CSV_HEADER: &str =
-    "frame,time,update_ms,trace_ms,shade_ms,write_ms,primary_rays,shadow_rays,secondary_rays\n";
+    "frame,time,update_ms,trace_ms,shade_ms,write_ms,primary_rays,shadow_rays,secondary_rays,cpu_ms,threads\n";
 
 /// One CSV row (with its line end).
 pub(crate) fn csv_row(f: &FrameStats) -> String {
+    let cpu = f.cpu_ms.map_or(String::new(), |c| format!("{c:.3}"));
     format!(
-        "{},{:.6},{:.3},{:.3},{:.3},{:.3},{},{},{}\n",
+        "{},{:.6},{:.3},{:.3},{:.3},{:.3},{},{},{},{cpu},{}\n",
         f.frame,
         f.time,
         f.update_ms,
@@ -41,7 +47,8 @@ pub(crate) fn csv_row(f: &FrameStats) -> String {
         f.write_ms,
         f.rays.primary,
         f.rays.shadow,
-        f.rays.secondary
+        f.rays.secondary,
+        f.threads
     )
 }
 
@@ -104,6 +111,7 @@ impl PlotBars {
                 sum.trace_ms += f.trace_ms;
                 sum.shade_ms += f.shade_ms;
                 sum.write_ms += f.write_ms;
+                sum.cpu_ms = sum.cpu_ms.zip(f.cpu_ms).map(|(a, b)| a + b);
                 *n += 1;
             }
             _ => {
@@ -128,6 +136,7 @@ impl PlotBars {
                     s.0.trace_ms += o.trace_ms;
                     s.0.shade_ms += o.shade_ms;
                     s.0.write_ms += o.write_ms;
+                    s.0.cpu_ms = s.0.cpu_ms.zip(o.cpu_ms).map(|(a, b)| a + b);
                     s.1 += n;
                 }
                 s
@@ -149,6 +158,7 @@ impl PlotBars {
                     trace_ms: s.trace_ms / k,
                     shade_ms: s.shade_ms / k,
                     write_ms: s.write_ms / k,
+                    cpu_ms: s.cpu_ms.map(|c| c / k),
                     ..*s
                 }
             })
@@ -512,6 +522,8 @@ mod tests {
                     shadow: 50,
                     secondary: 7,
                 },
+                cpu_ms: (i != 1).then_some(30.0),
+                threads: 2,
             })
             .collect()
     }
@@ -521,7 +533,12 @@ mod tests {
         let csv = stats_csv(&frames());
         let lines: Vec<&str> = csv.lines().collect();
         assert_eq!(lines.len(), 4);
-        assert_eq!(lines[2], "1,0.041667,1.000,11.000,5.000,2.500,100,50,7");
+        assert_eq!(
+            lines[1],
+            "0,0.000000,1.000,10.000,5.000,2.500,100,50,7,30.000,2"
+        );
+        // No CPU time known: an empty field.
+        assert_eq!(lines[2], "1,0.041667,1.000,11.000,5.000,2.500,100,50,7,,2");
     }
 
     /// However many frames, the plot keeps at most PLOT_BARS bars, each the mean of
