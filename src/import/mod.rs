@@ -28,6 +28,8 @@ mod error;
 mod folder;
 mod gltf_read;
 mod gltf_write;
+#[cfg(feature = "usd")]
+mod usd;
 mod validate;
 
 use std::path::Path;
@@ -58,12 +60,27 @@ pub fn load(path: &Path) -> Result<Scene, ImportError> {
     if is_aff {
         return aff::load_scene(path);
     }
+    if is_usd(ext) {
+        #[cfg(feature = "usd")]
+        return usd::load(path);
+        #[cfg(not(feature = "usd"))]
+        return Err(ImportError::UsdNotBuilt {
+            path: path.to_path_buf(),
+        });
+    }
     if is_blend(path, ext) {
         return Err(ImportError::BlendFile {
             path: path.to_path_buf(),
         });
     }
     gltf_read::load(path)
+}
+
+/// Whether the extension names a USD file (`.usd`, `.usda`, `.usdc`, `.usdz`).
+fn is_usd(ext: &str) -> bool {
+    ["usd", "usda", "usdc", "usdz"]
+        .iter()
+        .any(|u| ext.eq_ignore_ascii_case(u))
 }
 
 /// Whether `path` is a Blender file: named `.blend` (or a backup, `.blend1`, `.blend2`…)
