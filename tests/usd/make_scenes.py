@@ -16,6 +16,9 @@ Scenes:
                  velocities; a still camera.
   clips/shot.usda  the shatter animation as one file a frame (clips/frame.N.usda),
                  stitched into value clips by UsdUtils.StitchClips (usdstitchclips).
+  shatter.usdz   shatter.usda packaged (UsdUtils.CreateNewUsdzPackage).
+  looks.usda     UsdPreviewSurface materials (one with a diffuseColor texture), a sphere
+                 light and a distant light.
   bad/...        broken inputs (see bad_inputs()).
 """
 import json
@@ -142,6 +145,70 @@ def author_fluid(stage):
     cam.CreateHorizontalApertureAttr(36.0)
     cam.CreateVerticalApertureAttr(24.0)
     cam.AddTranslateOp().Set(Gf.Vec3d(0.2, 0.3, 6.0))
+
+
+def write_png(path, w, h, pixel):
+    """An RGB PNG, written by hand (zlib), so the script needs no imaging library."""
+    import struct
+    import zlib
+
+    raw = b"".join(b"\x00" + b"".join(bytes(pixel(x, y)) for x in range(w)) for y in range(h))
+
+    def chunk(tag, data):
+        c = struct.pack(">I", len(data)) + tag + data
+        return c + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
+
+    png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+    png += chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b"")
+    with open(path, "wb") as f:
+        f.write(png)
+
+
+def author_looks(path):
+    """UsdPreviewSurface materials (constant inputs; a diffuseColor texture), lights."""
+    from pxr import UsdLux, UsdShade
+
+    stage = Usd.Stage.CreateNew(path)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    write_png(os.path.join(os.path.dirname(path), "checker.png"), 4, 4,
+              lambda x, y: (255, 0, 0) if (x + y) % 2 else (0, 0, 255))
+    for k, name in enumerate(("Plain", "Textured")):
+        m = UsdGeom.Mesh.Define(stage, "/World/%s" % name)
+        x = 2.0 * k
+        m.CreatePointsAttr([(x, 0, 0), (x + 1, 0, 0), (x + 1, 1, 0), (x, 1, 0)])
+        m.CreateFaceVertexCountsAttr([4])
+        m.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
+        st = UsdGeom.PrimvarsAPI(m).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                  UsdGeom.Tokens.faceVarying)
+        st.Set([(0, 0), (1, 0), (1, 1), (0, 1)])
+        mat = UsdShade.Material.Define(stage, "/World/Looks/%s" % name)
+        sh = UsdShade.Shader.Define(stage, "/World/Looks/%s/Surface" % name)
+        sh.CreateIdAttr("UsdPreviewSurface")
+        sh.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.25)
+        sh.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.75)
+        sh.CreateInput("emissiveColor", Sdf.ValueTypeNames.Color3f).Set((0.5, 0.25, 0.0))
+        sh.CreateInput("opacity", Sdf.ValueTypeNames.Float).Set(1.0)
+        if name == "Plain":
+            sh.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set((0.8, 0.2, 0.1))
+        else:
+            tex = UsdShade.Shader.Define(stage, "/World/Looks/%s/Tex" % name)
+            tex.CreateIdAttr("UsdUVTexture")
+            tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("./checker.png")
+            out = tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+            sh.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(out)
+        mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+        UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(mat)
+    sphere = UsdLux.SphereLight.Define(stage, "/World/Bulb")
+    sphere.CreateIntensityAttr(1000.0)
+    sphere.CreateExposureAttr(1.0)
+    sphere.CreateRadiusAttr(0.1)
+    sphere.CreateColorAttr((1.0, 0.5, 0.25))
+    UsdGeom.Xformable(sphere).AddTranslateOp().Set(Gf.Vec3d(0, 3, 2))
+    sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
+    sun.CreateIntensityAttr(50000.0)
+    sun.CreateAngleAttr(0.53)
+    stage.GetRootLayer().Save()
 
 
 def new_stage(path, start, end):
@@ -271,6 +338,11 @@ def main():
     UsdGeom.SetStageMetersPerUnit(s, 0.01)
     s.SetTimeCodesPerSecond(24)
     s.GetRootLayer().Save()
+
+    # The shatter scene as a usdz package.
+    UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(shatter), os.path.join(out, "shatter.usdz"))
+
+    author_looks(os.path.join(out, "looks.usda"))
 
     bad_inputs(os.path.join(out, "bad"))
 

@@ -7,7 +7,9 @@
 //!   xformOps become one clip of linear TRS channels keyed at their sample times;
 //! * `UsdGeomMesh`: `points`, `faceVertexCounts` / `faceVertexIndices` (polygons as
 //!   fans, `orientation = leftHanded` reversed), `normals` and `primvars:st` (vertex or
-//!   face-varying, indexed or not), `primvars:displayColor` (constant) as the base colour;
+//!   face-varying, indexed or not; `t` flipped into the model's `v`), the bound
+//!   `UsdPreviewSurface` (with a `diffuseColor` texture), else `primvars:displayColor`
+//!   (its first value) as the base colour;
 //!   time-sampled `points` (and per-sample face lists, `velocities`) become a
 //!   [`PointCache`];
 //! * `UsdGeomCamera` (focal length, apertures, clipping range, projection);
@@ -31,9 +33,9 @@ use openusd::usd::{self, Prim, SchemaBase, SchemaKind, Stage, TimeCode};
 use openusd::{sdf, tf};
 
 use crate::scene::{
-    Animation, CameraDef, Channel, Falloff, Interpolation, LightDef, LightKind, Material, Mesh,
-    Node, NodeTransform, PointCache, PointSample, Primitive, Projection, Property, Scene, Topology,
-    Warning, LUMENS_PER_WATT,
+    AlphaMode, Animation, CameraDef, Channel, Falloff, Image, Interpolation, LightDef, LightKind,
+    Material, Mesh, Node, NodeTransform, PointCache, PointSample, Primitive, Projection, Property,
+    Scene, Texture, TextureRef, Topology, Warning, Wrap, LUMENS_PER_WATT,
 };
 
 use super::ImportError;
@@ -144,8 +146,8 @@ struct Reader<'a> {
     /// Things read partly: one warning each.
     notes: BTreeMap<&'static str, String>,
     channels: Vec<Channel>,
-    /// `displayColor` (as bits) → material index.
-    colors: HashMap<[u32; 3], u32>,
+    /// Material prim path (or `displayColor:` and the colour's bits) → material index.
+    materials: HashMap<String, u32>,
     meters: f32,
 }
 
@@ -171,7 +173,7 @@ impl<'a> Reader<'a> {
             unread: BTreeMap::new(),
             notes: BTreeMap::new(),
             channels: Vec::new(),
-            colors: HashMap::new(),
+            materials: HashMap::new(),
             meters: 1.0,
         }
     }
@@ -457,13 +459,18 @@ impl<'a> Reader<'a> {
         let Some(v) = self.value(prim, name, attr, tc)? else {
             return Ok(None);
         };
-        let values = vec2s(&v).ok_or_else(|| {
-            self.err(
-                name,
-                Some(attr),
-                format!("expected an array of 2-vectors, found {}", kind(&v)),
-            )
-        })?;
+        let values = vec2s(&v)
+            .ok_or_else(|| {
+                self.err(
+                    name,
+                    Some(attr),
+                    format!("expected an array of 2-vectors, found {}", kind(&v)),
+                )
+            })?
+            .into_iter()
+            // USD's `t` runs up the image, the model's `v` (glTF's) down it.
+            .map(|st| Vec2::new(st.x, 1.0 - st.y))
+            .collect();
         let indices = self.ints(prim, name, &format!("{attr}:indices"), tc)?;
         Ok(Some(Primvar {
             values,
@@ -652,18 +659,12 @@ impl<'a> Reader<'a> {
         Ok(())
     }
 
-    /// The mesh's material: its constant `displayColor` as a plastic-like base colour
-    /// (one material per colour), else the default material.
+    /// The mesh's material: the `UsdPreviewSurface` of the material bound to it (or to
+    /// its nearest ancestor that has a binding), else its constant `displayColor` as a
+    /// plastic-like base colour, else the default material.
     fn material(&mut self, prim: &Prim, name: &str) -> Result<u32, ImportError> {
-        if prim
-            .relationship("material:binding")
-            .targets()
-            .map(|t| !t.is_empty())
-            .unwrap_or(false)
-        {
-            self.notes
-                .entry("binding")
-                .or_insert_with(|| format!("{name}: material:binding not read (UsdPreviewSurface materials are not read yet; displayColor is)"));
+        if let Some(m) = self.bound_material(prim, name)? {
+            return Ok(m);
         }
         let color = self
             .value(prim, name, "primvars:displayColor", self.t0)?
@@ -673,8 +674,8 @@ impl<'a> Reader<'a> {
         let Some(c) = color else {
             return Ok(self.scene.default_material_index());
         };
-        let key = c.to_array().map(f32::to_bits);
-        if let Some(&m) = self.colors.get(&key) {
+        let key = format!("displayColor:{:?}", c.to_array().map(f32::to_bits));
+        if let Some(&m) = self.materials.get(&key) {
             return Ok(m);
         }
         let m = self.scene.materials.len() as u32;
@@ -685,8 +686,144 @@ impl<'a> Reader<'a> {
             roughness: 0.5,
             ..Material::default()
         });
-        self.colors.insert(key, m);
+        self.materials.insert(key, m);
         Ok(m)
+    }
+
+    /// The bound `UsdPreviewSurface` as a model material (one per material prim):
+    /// `diffuseColor`, `metallic`, `roughness`, `emissiveColor`, `opacity` (blended, or
+    /// masked at `opacityThreshold`), `ior`; a `diffuseColor` texture (`UsdUVTexture`
+    /// `inputs:file`, beside the scene). `None` when nothing is bound.
+    fn bound_material(&mut self, prim: &Prim, name: &str) -> Result<Option<u32>, ImportError> {
+        use openusd::schemas::shade::{read_preview_surface, Channel, MaterialBindingAPI};
+        let bad = |r: &Self, e: anyhow::Error| r.err(name, Some("material:binding"), one_line(&e));
+        // The nearest prim (itself, then its ancestors) that applies the binding API.
+        let mut at = Some(prim.path().clone());
+        let mut api = None;
+        while let Some(p) = at {
+            if p.as_str() == "/" {
+                break;
+            }
+            if let Some(a) =
+                MaterialBindingAPI::get(&self.stage, p.clone()).map_err(|e| bad(self, e))?
+            {
+                api = Some(a);
+                break;
+            }
+            at = p.parent();
+        }
+        let Some(api) = api else {
+            return Ok(None);
+        };
+        let Some(material) = api.compute_bound_material("").map_err(|e| bad(self, e))? else {
+            return Ok(None);
+        };
+        let key = material.as_str().to_string();
+        if let Some(&m) = self.materials.get(&key) {
+            return Ok(Some(m));
+        }
+        let Some(ps) = read_preview_surface(&self.stage, &material).map_err(|e| bad(self, e))?
+        else {
+            self.notes.entry("surface").or_insert_with(|| {
+                format!("{key}: a material without a UsdPreviewSurface, not read")
+            });
+            return Ok(None);
+        };
+        let color = |c: &Channel<openusd::gf::Vec3f>, d: Vec3| match c {
+            Channel::Value(v) => Vec3::new(v.x, v.y, v.z),
+            _ => d,
+        };
+        let num = |c: &Channel<f32>, d: f32| match c {
+            Channel::Value(v) => *v,
+            _ => d,
+        };
+        // UsdPreviewSurface's defaults where an input is not authored.
+        let opacity = num(&ps.opacity, 1.0);
+        let mut m = Material {
+            name: Some(key.clone()),
+            base_color: color(&ps.diffuse_color, Vec3::splat(0.18)).extend(opacity),
+            metallic: num(&ps.metallic, 0.0),
+            roughness: num(&ps.roughness, 0.5),
+            emissive: color(&ps.emissive_color, Vec3::ZERO),
+            ior: num(&ps.ior, 1.5),
+            ..Material::default()
+        };
+        let threshold = num(&ps.opacity_threshold, 0.0);
+        if threshold > 0.0 {
+            m.alpha_mode = AlphaMode::Mask { cutoff: threshold };
+        } else if opacity < 1.0 {
+            m.alpha_mode = AlphaMode::Blend;
+        }
+        let finite = m.base_color.is_finite()
+            && m.emissive.is_finite()
+            && [m.metallic, m.roughness, m.ior, threshold]
+                .iter()
+                .all(|x| x.is_finite());
+        if !finite {
+            return Err(self.err(&ps.shader, None, "a non-finite UsdPreviewSurface input"));
+        }
+        if let Some(file) = ps.diffuse_color.texture() {
+            m.base_color = Vec3::ONE.extend(opacity);
+            m.base_color_texture = Some(self.texture(&ps.shader, file)?);
+        }
+        let others = [
+            ("emissiveColor", ps.emissive_color.texture().is_some()),
+            ("metallic", ps.metallic.texture().is_some()),
+            ("roughness", ps.roughness.texture().is_some()),
+            ("normal", ps.normal.is_set()),
+            ("opacity", ps.opacity.texture().is_some()),
+        ];
+        for (input, textured) in others {
+            if textured {
+                self.notes.entry("textures").or_insert_with(|| {
+                    format!("{key}: a UsdUVTexture on inputs:{input} not read (diffuseColor textures are)")
+                });
+            }
+        }
+        let index = self.scene.materials.len() as u32;
+        self.scene.materials.push(m);
+        self.materials.insert(key, index);
+        Ok(Some(index))
+    }
+
+    /// A `UsdUVTexture` file (relative to the scene's folder, and inside it), decoded.
+    fn texture(&mut self, shader: &str, file: &str) -> Result<TextureRef, ImportError> {
+        let folder = self.path.parent().unwrap_or(Path::new(""));
+        let bad = |r: &Self, reason: String| r.err(shader, Some("diffuseColor"), reason);
+        let resolved = super::folder::resolve_inside(folder, Path::new(file)).map_err(|why| {
+            bad(
+                self,
+                format!("texture {file:?} leaves the scene's folder ({why}); refused"),
+            )
+        })?;
+        let bytes = std::fs::read(&resolved).map_err(|e| {
+            bad(
+                self,
+                format!("texture {file:?}: cannot read {}: {e}", resolved.display()),
+            )
+        })?;
+        let decoded = image::load_from_memory(&bytes)
+            .map_err(|e| bad(self, format!("texture {file:?}: {e}")))?;
+        let rgba = decoded.to_rgba8();
+        let image = self.scene.images.len() as u32;
+        self.scene.images.push(Image {
+            name: Some(file.to_string()),
+            width: rgba.width(),
+            height: rgba.height(),
+            rgba8: rgba.into_raw(),
+        });
+        let texture = self.scene.textures.len() as u32;
+        self.scene.textures.push(Texture {
+            image,
+            wrap_s: Wrap::Repeat,
+            wrap_t: Wrap::Repeat,
+            nearest: false,
+        });
+        Ok(TextureRef {
+            texture,
+            tex_coord: 0,
+            transform: None,
+        })
     }
 
     fn float(&self, prim: &Prim, name: &str, attr: &str, default: f64) -> Result<f64, ImportError> {
