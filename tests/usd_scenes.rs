@@ -201,6 +201,18 @@ fn shattering_cache_agrees_with_usd_core() {
     let split = scene.split(ClipSelection::All);
     let s = split.summary();
     assert_eq!((s.static_triangles, s.dynamic_instances), (2, 2), "{s}");
+    // Z up turned into Y up, centimetres into metres: the ground (12 m square at z = 0
+    // in the file) lies at y = 0, spanning x and z; the camera is above it. (Depth alone
+    // would not see the turn: the whole world turns with the camera.)
+    let ground = scene.static_triangles(&split);
+    let (lo, hi) = ground.bounds().unwrap();
+    assert!(lo.y.abs() < 1e-6 && hi.y.abs() < 1e-6, "{lo} {hi}");
+    assert!(
+        (hi.x - lo.x - 12.0).abs() < 1e-4 && (hi.z - lo.z - 12.0).abs() < 1e-4,
+        "{lo} {hi}"
+    );
+    let cam = scene.camera_at(split.selection, 1.0 / 24.0, None).unwrap();
+    assert!(cam.position.y > 4.0, "{}", cam.position);
     // The shards fly apart: their spread grows by half from the first frame to the last.
     let debris = scene
         .nodes
