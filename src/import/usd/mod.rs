@@ -24,7 +24,7 @@
 mod mesh;
 mod resolver;
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::Path;
 
 use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
@@ -140,7 +140,8 @@ struct Reader<'a> {
     scene: Scene,
     /// Prim path → node.
     nodes: HashMap<String, usize>,
-    skipped: Vec<String>,
+    /// Prims in subtrees not placed (materials, shaders), by path.
+    skipped: HashSet<String>,
     /// Unread prim types → the first path of that type and how many.
     unread: BTreeMap<String, (String, usize)>,
     /// Things read partly: one warning each.
@@ -169,7 +170,7 @@ impl<'a> Reader<'a> {
                 ..Scene::default()
             },
             nodes: HashMap::new(),
-            skipped: Vec::new(),
+            skipped: HashSet::new(),
             unread: BTreeMap::new(),
             notes: BTreeMap::new(),
             channels: Vec::new(),
@@ -265,7 +266,7 @@ impl<'a> Reader<'a> {
             .as_ref()
             .is_some_and(|p| self.skipped.contains(p))
         {
-            self.skipped.push(name);
+            self.skipped.insert(name);
             return Ok(());
         }
         let prim = self.stage.prim(path.clone());
@@ -275,7 +276,7 @@ impl<'a> Reader<'a> {
             .map(|t| t.as_str().to_string())
             .unwrap_or_default();
         if SKIPPED_SUBTREES.contains(&ty.as_str()) {
-            self.skipped.push(name);
+            self.skipped.insert(name);
             return Ok(());
         }
         let parent = parent_name
