@@ -18,7 +18,7 @@ use super::progress::Progress;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The scene: .gltf, .glb, or a BART .aff / .nff file.
+    /// The scene: .gltf, .glb, USD (.usd, .usda, .usdc, .usdz), or a BART .aff / .nff file.
     pub scene: PathBuf,
     /// The baked file to write (atomically; its folder is created).
     #[arg(short, long)]

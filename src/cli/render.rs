@@ -19,7 +19,7 @@ use super::progress::Progress;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The scene: .gltf or .glb.
+    /// The scene: .gltf, .glb, USD (.usd, .usda, .usdc, .usdz), or a BART .aff / .nff file.
     pub scene: PathBuf,
     /// Output pattern; one run of '#' becomes the zero-padded frame number
     /// (out/frame.####.exr). Parent folders are created.

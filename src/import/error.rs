@@ -45,6 +45,28 @@ pub enum ImportError {
         reason: String,
     },
 
+    /// A USD stage that cannot be opened or composed (a truncated `.usdc`, a `.usda`
+    /// syntax error, a missing sublayer, reference or clip, a cycle of layers).
+    #[error("{path}: cannot read the USD stage: {reason}")]
+    UsdStage { path: PathBuf, reason: String },
+
+    /// A USD prim or attribute that cannot be read onto the model: the prim's path and
+    /// the attribute (`/World/Debris.faceVertexIndices`).
+    #[error("{path}: {prim}{}: {reason}", .attribute.as_ref().map(|a| format!(".{a}")).unwrap_or_default())]
+    Usd {
+        path: PathBuf,
+        /// The prim's path (`/World/Debris`); empty for the stage itself.
+        prim: String,
+        attribute: Option<String>,
+        reason: String,
+    },
+
+    /// A USD file, in a build without the `usd` feature.
+    #[error(
+        "{path}: a USD file, and this build of subfield has no USD reader (the `usd` feature)"
+    )]
+    UsdNotBuilt { path: PathBuf },
+
     /// The binary container (GLB) is malformed.
     #[error("{path}: malformed GLB: {reason}")]
     Glb { path: PathBuf, reason: String },

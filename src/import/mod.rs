@@ -2,8 +2,9 @@
 //! the model out again.
 //!
 //! * [`load`]: one entry for every format we read, chosen by extension (any case):
-//!   `.aff` / `.nff` go through the BART reader ([`aff`]), everything else through the
-//!   glTF 2.0 reader (`.gltf` with external or data-URI buffers, `.glb`). Each reader
+//!   `.aff` / `.nff` go through the BART reader ([`aff`]), `.usd` / `.usda` / `.usdc` /
+//!   `.usdz` through the USD reader (the `openusd` crate; feature `usd`), everything else
+//!   through the glTF 2.0 reader (`.gltf` with external or data-URI buffers, `.glb`). Each reader
 //!   produces a [`Scene`] on its own; neither goes through the other. A Blender `.blend`
 //!   file is refused with a word on exporting glTF ([`ImportError::BlendFile`]).
 //! * [`from_gltf_slice`]: glTF or GLB bytes already in memory.
@@ -28,6 +29,8 @@ mod error;
 mod folder;
 mod gltf_read;
 mod gltf_write;
+#[cfg(feature = "usd")]
+mod usd;
 mod validate;
 
 use std::path::Path;
@@ -52,11 +55,23 @@ use crate::scene::Scene;
 ///
 /// A BART `.aff` or `.nff` file is parsed and mapped onto the model
 /// ([`aff::load_scene`]), as the file `subfield convert` writes would import.
+///
+/// A USD file (`.usd`, `.usda`, `.usdc`, `.usdz`), with the default feature `usd`: the
+/// composed stage's meshes (time-sampled points as [`PointCache`](crate::scene::PointCache)s),
+/// xforms, cameras, lights and UsdPreviewSurface materials (docs/INPUTS.md lists them).
 pub fn load(path: &Path) -> Result<Scene, ImportError> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
     let is_aff = ext.eq_ignore_ascii_case("aff") || ext.eq_ignore_ascii_case("nff");
     if is_aff {
         return aff::load_scene(path);
+    }
+    if is_usd(ext) {
+        #[cfg(feature = "usd")]
+        return usd::load(path);
+        #[cfg(not(feature = "usd"))]
+        return Err(ImportError::UsdNotBuilt {
+            path: path.to_path_buf(),
+        });
     }
     if is_blend(path, ext) {
         return Err(ImportError::BlendFile {
@@ -64,6 +79,13 @@ pub fn load(path: &Path) -> Result<Scene, ImportError> {
         });
     }
     gltf_read::load(path)
+}
+
+/// Whether the extension names a USD file (`.usd`, `.usda`, `.usdc`, `.usdz`).
+fn is_usd(ext: &str) -> bool {
+    ["usd", "usda", "usdc", "usdz"]
+        .iter()
+        .any(|u| ext.eq_ignore_ascii_case(u))
 }
 
 /// Whether `path` is a Blender file: named `.blend` (or a backup, `.blend1`, `.blend2`…)

@@ -13,6 +13,7 @@ use super::ImportError;
 pub fn validate(scene: &Scene) -> Result<(), ImportError> {
     let c = Check { scene };
     c.meshes()?;
+    c.point_caches()?;
     c.textures()?;
     c.skins()?;
     c.nodes()?;
@@ -41,6 +42,83 @@ impl Check<'_> {
             name: self.scene.nodes.get(node).and_then(|n| n.name.clone()),
             reason,
         }
+    }
+
+    /// Point caches: sorted and unique by primitive, which exists; times finite and
+    /// increasing, one sample each; every point and velocity finite; every triangle's
+    /// vertex, and every vertex's point, in range for every sample that shows it.
+    fn point_caches(&self) -> Result<(), ImportError> {
+        let scene = self.scene;
+        let mut last = None;
+        for (ci, c) in scene.point_caches.iter().enumerate() {
+            let at = format!(
+                "point_caches[{ci}] (meshes[{}].primitives[{}])",
+                c.mesh, c.primitive
+            );
+            let bad = |reason: &str| Err(self.model(format!("{at}: {reason}")));
+            let exists = scene
+                .meshes
+                .get(c.mesh)
+                .is_some_and(|m| c.primitive < m.primitives.len());
+            if !exists {
+                return bad("no such primitive");
+            }
+            if last >= Some((c.mesh, c.primitive)) {
+                return bad("not sorted by primitive, or listed twice");
+            }
+            last = Some((c.mesh, c.primitive));
+            if c.times.is_empty() || c.times.len() != c.samples.len() {
+                return bad("needs one time per sample, and a sample at least");
+            }
+            if c.times.iter().any(|t| !t.is_finite()) || c.times.windows(2).any(|w| w[0] >= w[1]) {
+                return bad("sample times not finite and strictly increasing");
+            }
+            for (ti, topo) in c.topologies.iter().enumerate() {
+                if let Some(uv) = &topo.uvs {
+                    if uv.iter().any(|v| !v.is_finite()) {
+                        return bad(&format!("topologies[{ti}]: non-finite uv"));
+                    }
+                }
+            }
+            for (si, smp) in c.samples.iter().enumerate() {
+                let Some(topo) = c.topologies.get(smp.topology as usize) else {
+                    return bad(&format!(
+                        "samples[{si}]: topology {} out of range",
+                        smp.topology
+                    ));
+                };
+                let np = smp.points.len();
+                if smp.points.iter().any(|p| !p.is_finite()) {
+                    return bad(&format!("samples[{si}]: non-finite point"));
+                }
+                if let Some(v) = &smp.velocities {
+                    if v.len() != np || v.iter().any(|v| !v.is_finite()) {
+                        return bad(&format!(
+                            "samples[{si}]: velocities not finite or not one per point"
+                        ));
+                    }
+                }
+                let nv = topo.vertex_count(np);
+                if topo
+                    .vertex_point
+                    .as_ref()
+                    .is_some_and(|m| m.iter().any(|&p| p as usize >= np))
+                {
+                    return bad(&format!(
+                        "samples[{si}]: a vertex shows a point past its {np}"
+                    ));
+                }
+                if topo.triangles.iter().flatten().any(|&v| v as usize >= nv) {
+                    return bad(&format!(
+                        "samples[{si}]: a triangle index past its {nv} vertices"
+                    ));
+                }
+                if topo.uvs.as_ref().is_some_and(|uv| uv.len() != nv) {
+                    return bad(&format!("samples[{si}]: uvs not one per vertex"));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Primitives: finite attributes of matching counts, indices and materials in range,

@@ -544,7 +544,7 @@ impl Frames<'_> {
         // The motion AOV: the moving triangles and the camera one frame later.
         let next = if opts.aovs.motion {
             let t1 = plan.time(frame.saturating_add(1)) as f32;
-            scene.dynamic_triangles_at(split, t1, next_soup);
+            scene.dynamic_triangles_carried(split, t1, t, next_soup);
             Some((&*next_soup, self.camera_at(t1)?))
         } else {
             None

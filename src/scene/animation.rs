@@ -127,20 +127,35 @@ impl Scene {
 
     /// Latest keyframe time of the selected clips; 0 without animation.
     pub fn duration(&self, sel: ClipSelection) -> f32 {
-        self.selected_clips(sel)
+        let keys = self
+            .selected_clips(sel)
             .iter()
             .flat_map(|a| &a.channels)
-            .filter_map(|c| c.times.last().copied())
-            .fold(0.0, f32::max)
+            .filter_map(|c| c.times.last().copied());
+        let caches = self
+            .point_caches
+            .iter()
+            .filter_map(|c| c.times.last().copied());
+        let range = self.time_range.map(|(_, end)| end);
+        keys.chain(caches).chain(range).fold(0.0, f32::max)
     }
 
-    /// Earliest and latest keyframe times of the selected clips (seconds): the
-    /// authored span a render covers by default; `None` without keys.
+    /// Earliest and latest keyframe times of the selected clips and of the point caches
+    /// (seconds): the authored span a render covers by default; `None` without keys. A
+    /// scene's own [`Scene::time_range`] (a USD stage's) takes precedence.
     pub fn key_span(&self, sel: ClipSelection) -> Option<(f32, f32)> {
+        if let Some(range) = self.time_range {
+            return Some(range);
+        }
+        let caches = self
+            .point_caches
+            .iter()
+            .filter_map(|c| Some((*c.times.first()?, *c.times.last()?)));
         self.selected_clips(sel)
             .iter()
             .flat_map(|a| &a.channels)
             .filter_map(|c| Some((*c.times.first()?, *c.times.last()?)))
+            .chain(caches)
             .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
     }
 

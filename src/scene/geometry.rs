@@ -73,9 +73,26 @@ impl Scene {
 
     /// The dynamic instances of `split` at time `t`, sampled with the clips the split was
     /// decided for (`split.selection`, so the two always agree). `out` is cleared and
-    /// refilled; triangle count and order are the same at every `t`.
+    /// refilled; triangle count and order are the same at every `t`, except where a
+    /// point cache changes its face list (a fluid surface): its triangles are those of
+    /// the sample held at `t`.
     pub fn dynamic_triangles_at(&self, split: &Split, t: f32, out: &mut TriangleSoup) {
-        self.triangles_into(&split.dynamic_instances, split.selection, t, out);
+        self.triangles_shown(&split.dynamic_instances, split.selection, t, t, out);
+    }
+
+    /// The dynamic instances' triangles shown at time `shown`, posed at `t`: the same
+    /// triangles in the same order as [`Scene::dynamic_triangles_at`] at `shown`, each
+    /// where it is at `t` (the motion AOV's next frame). A point cache whose face list
+    /// at `t` is another carries the points shown by their velocities (see
+    /// [`PointCache::points_at`](super::PointCache::points_at)).
+    pub fn dynamic_triangles_carried(
+        &self,
+        split: &Split,
+        t: f32,
+        shown: f32,
+        out: &mut TriangleSoup,
+    ) {
+        self.triangles_shown(&split.dynamic_instances, split.selection, t, shown, out);
     }
 
     /// World-space bounds of every instance of the shown scene at time `t`.
@@ -93,13 +110,69 @@ impl Scene {
         t: f32,
         out: &mut TriangleSoup,
     ) {
+        self.triangles_shown(instances, sel, t, t, out);
+    }
+
+    /// Triangles of `instances` shown at `shown` and posed at `t`, into `out`.
+    fn triangles_shown(
+        &self,
+        instances: &[Instance],
+        sel: ClipSelection,
+        t: f32,
+        shown: f32,
+        out: &mut TriangleSoup,
+    ) {
         out.clear();
         let mut scratch = std::mem::take(&mut out.scratch);
         self.pose_into(sel, t, &mut scratch.pose);
         for inst in instances {
-            self.append_instance(inst, &mut scratch, out);
+            match self.point_cache(inst.mesh, inst.primitive) {
+                Some(cache) => self.append_cached(inst, cache, t, shown, &mut scratch, out),
+                None => self.append_instance(inst, &mut scratch, out),
+            }
         }
         out.scratch = scratch;
+    }
+
+    /// A primitive of time-sampled points: the face list shown at `shown`, its points
+    /// at `t`, placed by the node's world transform; flat normals.
+    fn append_cached(
+        &self,
+        inst: &Instance,
+        cache: &super::PointCache,
+        t: f32,
+        shown: f32,
+        s: &mut Scratch,
+        out: &mut TriangleSoup,
+    ) {
+        let prim = &self.meshes[inst.mesh].primitives[inst.primitive];
+        let topo = cache.topology_at(shown);
+        cache.points_at(t, shown, &mut s.positions);
+        let m = s.pose.world[inst.node];
+        for p in &mut s.positions {
+            *p = m.transform_point3(*p);
+        }
+        let points = &s.positions;
+        let point = |v: u32| -> Vec3 {
+            let i = match &topo.vertex_point {
+                Some(map) => map.get(v as usize).map_or(usize::MAX, |&p| p as usize),
+                None => v as usize,
+            };
+            // `validate` checks every index against every sample of its topology.
+            points.get(i).copied().unwrap_or(Vec3::ZERO)
+        };
+        for &[a, b, c] in &topo.triangles {
+            let tri = [point(a), point(b), point(c)];
+            let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]).normalize_or_zero();
+            out.positions.push(tri);
+            out.normals.push([n; 3]);
+            out.uvs.push(match &topo.uvs {
+                Some(uv) => [a, b, c].map(|v| uv.get(v as usize).copied().unwrap_or(Vec2::ZERO)),
+                None => [Vec2::ZERO; 3],
+            });
+            out.material.push(prim.material);
+            out.node.push(inst.node as u32);
+        }
     }
 
     fn append_instance(&self, inst: &Instance, s: &mut Scratch, out: &mut TriangleSoup) {

@@ -13,6 +13,7 @@
 mod animation;
 mod error;
 mod geometry;
+mod points;
 mod split;
 
 use std::path::PathBuf;
@@ -22,6 +23,7 @@ use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
 pub use animation::{ClipSelection, Pose};
 pub use error::SceneError;
 pub use geometry::TriangleSoup;
+pub use points::{PointCache, PointSample, Topology};
 pub use split::{Instance, Split, SplitSummary};
 
 /// A non-fatal problem found while importing (a skipped primitive, an ignored feature).
@@ -53,6 +55,13 @@ pub struct Scene {
     pub lights: Vec<LightDef>,
     pub skins: Vec<Skin>,
     pub animations: Vec<Animation>,
+    /// Primitives whose points are given per sample time (USD time-sampled `points`),
+    /// sorted by `(mesh, primitive)`; empty for glTF and AFF scenes.
+    pub point_caches: Vec<PointCache>,
+    /// The authored time range in seconds (a USD stage's `startTimeCode..endTimeCode`
+    /// over `timeCodesPerSecond`): where set, the span a render covers by default
+    /// ([`Scene::key_span`]).
+    pub time_range: Option<(f32, f32)>,
     /// Frames per second recorded by the scene (`scenes[i].extras.fps` in glTF).
     pub fps: Option<f32>,
     /// Ambient light of the scene (linear RGB; AFF's `am`, `scenes[i].extras.ambient` in
@@ -573,6 +582,14 @@ impl Scene {
                 }
             }
         }
+    }
+
+    /// The point cache of a primitive, if its points are time-sampled.
+    pub fn point_cache(&self, mesh: usize, primitive: usize) -> Option<&PointCache> {
+        self.point_caches
+            .binary_search_by_key(&(mesh, primitive), |c| (c.mesh, c.primitive))
+            .ok()
+            .map(|i| &self.point_caches[i])
     }
 
     /// Names of the clips, as `"INDEX: NAME"` (for messages and `--animation` help).

@@ -7,7 +7,9 @@
 //!   static bake (taken at t = 0 of the same selection) already puts it;
 //! * it is skinned (the node has a skin and the primitive carries joints), whatever the
 //!   joints do — the rule of the issue, conservative and cheap to state;
-//! * a varying weights channel drives its node and the primitive has morph targets.
+//! * a varying weights channel drives its node and the primitive has morph targets;
+//! * its points are time-sampled (a [`PointCache`](super::PointCache) of two samples or
+//!   more), whatever the samples hold.
 //!
 //! Everything else is static.
 
@@ -127,7 +129,10 @@ impl Scene {
             let prim = &self.meshes[inst.mesh].primitives[inst.primitive];
             let skinned = node.skin.is_some() && prim.influence_sets() > 0;
             let morphed = morphs[inst.node] && !prim.morph_targets.is_empty();
-            if moves[inst.node] || skinned || morphed {
+            let cached = self
+                .point_cache(inst.mesh, inst.primitive)
+                .is_some_and(|c| c.samples.len() > 1);
+            if moves[inst.node] || skinned || morphed || cached {
                 split.dynamic_instances.push(inst);
             } else {
                 split.static_instances.push(inst);

@@ -1,0 +1,83 @@
+//! The folder policy (`import::folder`) for the layers a USD stage opens: sublayers,
+//! references, payloads and clip files resolve only inside the scene's folder. A path
+//! outside is not resolved (so never opened) and is remembered, for the error.
+
+use std::cell::RefCell;
+use std::io;
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+
+use openusd::ar::{Asset, DefaultResolver, ResolvedPath, Resolver};
+
+use crate::import::folder::{resolve_inside, Outside};
+
+/// The paths refused, with why.
+pub(super) type Refused = Rc<RefCell<Vec<(String, Outside)>>>;
+
+pub(super) struct FolderResolver {
+    inner: DefaultResolver,
+    /// The scene's folder, canonical.
+    folder: PathBuf,
+    refused: Refused,
+}
+
+impl FolderResolver {
+    pub(super) fn new(folder: PathBuf, refused: Refused) -> Self {
+        FolderResolver {
+            inner: DefaultResolver::new(),
+            folder,
+            refused,
+        }
+    }
+
+    /// Whether `asset_path` (an identifier: absolute, maybe `pkg.usdz[inner]`) lies
+    /// inside the folder.
+    fn check(&self, asset_path: &str) -> Result<(), Outside> {
+        let outer = asset_path.split('[').next().unwrap_or(asset_path);
+        let p = Path::new(outer);
+        let rel = if p.is_absolute() {
+            p.strip_prefix(&self.folder)
+                .map_err(|_| Outside::Absolute)?
+        } else {
+            p
+        };
+        resolve_inside(&self.folder, rel).map(|_| ())
+    }
+}
+
+impl Resolver for FolderResolver {
+    fn create_identifier(&self, asset_path: &str, anchor: Option<&ResolvedPath>) -> String {
+        self.inner.create_identifier(asset_path, anchor)
+    }
+
+    fn resolve(&self, asset_path: &str) -> Option<ResolvedPath> {
+        if let Err(why) = self.check(asset_path) {
+            self.refused
+                .borrow_mut()
+                .push((asset_path.to_string(), why));
+            return None;
+        }
+        let resolved = self.inner.resolve(asset_path)?;
+        // The resolved file too (a search path or a link may have moved it).
+        if let Err(why) = self.check(&resolved.to_string_lossy()) {
+            self.refused
+                .borrow_mut()
+                .push((asset_path.to_string(), why));
+            return None;
+        }
+        Some(resolved)
+    }
+
+    fn resolve_for_new_asset(&self, _asset_path: &str) -> Option<ResolvedPath> {
+        // The importer writes nothing.
+        None
+    }
+
+    fn open_asset(&self, resolved_path: &ResolvedPath) -> io::Result<Box<dyn Asset>> {
+        self.inner.open_asset(resolved_path)
+    }
+
+    fn identity(&self) -> String {
+        format!("subfield-folder:{}", self.folder.display())
+    }
+}
