@@ -635,6 +635,38 @@ fn a_job_bundle_runs_under_openjd_with_and_without_path_mapping() {
     assert!(log.contains("openjd_progress: 100.0"), "{log}");
     assert_eq!(frames(&dir.join("out")), frames(&dir.join("local")));
     assert!(temporaries(&dir.join("out")).is_empty());
+
+    // --measure renders the first missing frame here (the local render's bytes), times
+    // it, and leaves the rest to the bundle, in chunks filling the default 600 s.
+    let bundle2 = dir.join("bundle2");
+    let o = ok(&[
+        "submit",
+        "openjd",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&dir.join("measured/f.##.exr")),
+        "--frames",
+        "0..6",
+        "--size",
+        SIZE,
+        "--bundle",
+        s(&bundle2),
+        "--measure",
+    ]);
+    assert!(
+        stderr(&o).contains("rendered frame 0 here to measure it"),
+        "{}",
+        stderr(&o)
+    );
+    let text = std::fs::read_to_string(bundle2.join("template.yaml")).unwrap();
+    assert!(text.contains("range: \"1-5\"\n"), "{text}");
+    assert!(text.contains("targetRuntimeSeconds: 600\n"), "{text}");
+    assert_eq!(
+        frames(&dir.join("measured")),
+        frames(&dir.join("local"))[..1].to_vec()
+    );
 }
 
 /// Issue 37: GPUs asked of the farm. `submit slurm --gpus-per-task N` asks Slurm for

@@ -312,6 +312,14 @@ fn a_bake_changed_after_submission_is_refused_and_wait_names_it() {
     assert!(e.contains(&found) && e.contains(&submitted), "{e}");
     assert!(e.contains("24 of 24 frames missing"), "{e}");
     assert!(frames(&st.dir.join("farm")).is_empty());
+    // Exit 4 (a bake whose hash is not the job's) fails a task for good: each task ran
+    // once, and its script did not requeue it (it requeues on 5 alone).
+    for task in 0..2 {
+        let log = st.dir.join(format!("farm/f.logs/{job}_{task}.log"));
+        let text = std::fs::read_to_string(&log).unwrap_or_default();
+        assert_eq!(text.matches("subfield: task ").count(), 1, "{text}");
+        assert!(!text.contains("requeueing"), "{text}");
+    }
 }
 
 #[test]

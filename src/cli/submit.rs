@@ -92,6 +92,11 @@ pub struct OpenJdArgs {
     /// (default 600 s).
     #[arg(long, value_name = "S", requires = "bundle")]
     pub frame_seconds: Option<f64>,
+    /// With --bundle: render the first missing frame here, into the output, and take its
+    /// time (update, trace, shade, write) as --frame-seconds; the frame is then done.
+    /// It is this machine's time, not a farm worker's.
+    #[arg(long, requires = "bundle", conflicts_with = "frame_seconds")]
+    pub measure: bool,
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
@@ -116,6 +121,8 @@ struct Work {
     scene: PathBuf,
     baked: PathBuf,
     flags: Vec<String>,
+    /// The scene as imported (to render a frame for `--measure`).
+    scene_model: subfield::scene::Scene,
     /// Where job files go: the output pattern's folder, and the name they share.
     dir: PathBuf,
     base: String,
@@ -339,6 +346,7 @@ fn prepare(r: &render_cmd::Args, dry_run: bool, slurm_script: bool) -> anyhow::R
         scene: scene_path,
         baked,
         flags,
+        scene_model: scene,
         dir,
         base,
     })
@@ -558,7 +566,18 @@ fn openjd(a: OpenJdArgs) -> anyhow::Result<ExitCode> {
             bail!("--bundle {}: names a file, not a folder", b.display());
         }
     }
-    let w = prepare(r, false, false)?;
+    let mut w = prepare(r, false, false)?;
+    let measured = match (a.measure, w.missing.first()) {
+        (true, Some(&f)) => {
+            let secs = measure_frame(&w, f)?;
+            w.missing.remove(0);
+            if !r.quiet {
+                eprintln!("rendered frame {f} here to measure it: {secs:.3} s a frame");
+            }
+            Some(secs)
+        }
+        _ => None,
+    };
     if nothing_missing(&w, r.quiet) {
         return Ok(ExitCode::SUCCESS);
     }
@@ -588,7 +607,7 @@ fn openjd(a: OpenJdArgs) -> anyhow::Result<ExitCode> {
         }
     }
     if let Some(dir) = &a.bundle {
-        let bundle = job_bundle(&a, &w)?;
+        let bundle = job_bundle(&a, &w, measured.or(a.frame_seconds))?;
         bundle.write(dir)?;
         if !r.quiet {
             eprintln!(
@@ -609,14 +628,14 @@ fn openjd(a: OpenJdArgs) -> anyhow::Result<ExitCode> {
 
 /// The job bundle of `w`: chunks of `--chunk` frames, or as many frames as fill
 /// `--chunk-seconds` (default 600) at `--frame-seconds` each.
-fn job_bundle(a: &OpenJdArgs, w: &Work) -> anyhow::Result<JobBundle> {
+fn job_bundle(a: &OpenJdArgs, w: &Work, frame_seconds: Option<f64>) -> anyhow::Result<JobBundle> {
     const DEFAULT_CHUNK_SECONDS: u32 = 600;
-    let target = match (a.chunk_seconds, a.frame_seconds) {
+    let target = match (a.chunk_seconds, frame_seconds) {
         (Some(t), _) => Some(t),
         (None, Some(_)) => Some(DEFAULT_CHUNK_SECONDS),
         (None, None) => None,
     };
-    let chunk = match (target, a.frame_seconds) {
+    let chunk = match (target, frame_seconds) {
         // At least one frame a chunk, at most every frame in one.
         (Some(t), Some(f)) => {
             ((t as f64 / f).floor() as u64).clamp(1, w.missing.len() as u64) as u32
@@ -643,6 +662,19 @@ fn job_bundle(a: &OpenJdArgs, w: &Work) -> anyhow::Result<JobBundle> {
         stage_dir: a.render.stage_dir.clone(),
         gpu: a.render.device == subfield::render::TraceDevice::Gpu,
     })
+}
+
+/// `--measure`: renders `frame` into the output as a task would (from the bake) and
+/// returns its seconds: update, trace, shade and write, not the import or the bake's
+/// opening, which a task pays once for its whole chunk.
+fn measure_frame(w: &Work, frame: u32) -> anyhow::Result<f64> {
+    let mut o = w.opts.clone();
+    o.frames = Some(FrameSet::from_sorted(&[frame]));
+    o.baked = Some(w.baked.clone());
+    let summary = render::render_sequence(&w.scene_model, &o, &mut |_| {})
+        .with_context(|| format!("cannot render frame {frame} to measure it"))?;
+    let t = &summary.totals;
+    Ok(((t.update_ms + t.trace_ms + t.shade_ms + t.write_ms) / 1e3).max(1e-3))
 }
 
 /// The missing frames (ascending) as OpenJD tasks of at most `k` frames each, spelled as
