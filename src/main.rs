@@ -15,6 +15,7 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    cli::guard::file_size_limit_as_error();
     let args = match cli::Cli::try_parse() {
         Ok(a) => a,
         // --help and --version print in full; a usage error is one line.

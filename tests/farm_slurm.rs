@@ -322,6 +322,45 @@ fn a_bake_changed_after_submission_is_refused_and_wait_names_it() {
     }
 }
 
+/// Exit 5 (an I/O or resource failure) requeues the task, at most three times. Slurm
+/// propagates the submitting shell's file-size limit (`ulimit -f`, PropagateResourceLimits)
+/// to the task, where staging the 7 KiB bake fails with `File too large` every time: the
+/// task runs four times (the first try and three requeues) and then fails for good.
+/// Slurm holds a requeued job back for two minutes or so (its begin time); the test
+/// moves that to now each time, which changes nothing the script decides.
+#[test]
+fn a_resource_failure_requeues_the_task_three_times_then_fails() {
+    let Some(_c) = cluster("a_resource_failure_requeues_the_task_three_times_then_fails") else {
+        return;
+    };
+    let st = setup("slurm-requeue");
+    let opts = look("48x36", "1");
+    let o = Command::new("bash")
+        .arg("-c")
+        .arg("ulimit -f 4 && exec \"$0\" \"$@\"")
+        .arg(env!("CARGO_BIN_EXE_subfield"))
+        .args(submit_args(&st, &opts, &["--tasks", "1"]))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let job = job_id(&o);
+    wait_until(&format!("job {job} to leave the queue"), 120, || {
+        let q = squeue(&job);
+        if q.iter().any(|(_, state)| state == "PENDING") {
+            let _ = Command::new("scontrol")
+                .args(["update", &format!("JobId={job}"), "StartTime=now"])
+                .output();
+        }
+        q.is_empty()
+    });
+    let log = std::fs::read_to_string(st.dir.join(format!("farm/f.logs/{job}_0.log"))).unwrap();
+    assert_eq!(log.matches("subfield: task ").count(), 4, "{log}");
+    assert_eq!(log.matches("requeueing").count(), 3, "{log}");
+    assert_eq!(log.matches("File too large").count(), 4, "{log}");
+    assert!(log.contains("(restart 3)"), "{log}");
+    assert!(frames(&st.dir.join("farm")).is_empty());
+}
+
 #[test]
 fn an_unknown_partition_is_one_line_and_nothing_is_submitted() {
     let Some(_c) = cluster("an_unknown_partition_is_one_line_and_nothing_is_submitted") else {

@@ -11,6 +11,8 @@
 //! cause, then exits with status 5 (an I/O failure: a retry maps the file anew, and its
 //! hash check then says whether it is the job's). A staged bake
 //! (`--stage-dir`, `--baked-hash`) is never written again, so it cannot fault this way.
+//! **SIGXFSZ** is ignored, so that a file-size limit is an error that names the file
+//! (exit 5), not a silent kill ([`file_size_limit_as_error`]).
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -59,6 +61,19 @@ fn install() {
         sa.sa_sigaction = on_sigbus as extern "C" fn(libc::c_int) as libc::sighandler_t;
         libc::sigemptyset(&mut sa.sa_mask);
         libc::sigaction(libc::SIGBUS, &sa, std::ptr::null_mut());
+    }
+}
+
+/// A file-size limit (`ulimit -f`, RLIMIT_FSIZE, which Slurm propagates from the
+/// submitting shell) kills a process that writes past it with SIGXFSZ, without a word.
+/// Ignored, the write fails with EFBIG (`File too large`) instead, which the command
+/// reports naming the file, with exit code 5 (`cli::exit`). Programs this process starts
+/// (`sbatch`, `squeue`) inherit the ignored signal and likewise see EFBIG.
+pub fn file_size_limit_as_error() {
+    // SAFETY: signal(2) with SIG_IGN for SIGXFSZ only changes this process's disposition
+    // of that signal; no handler code runs.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
     }
 }
 

@@ -8,7 +8,7 @@ pub mod exit;
 mod generate;
 // The one module of the CLI with unsafe code (a signal handler; see its docs).
 #[allow(unsafe_code)]
-mod guard;
+pub mod guard;
 mod inspect;
 mod parse;
 mod progress;
