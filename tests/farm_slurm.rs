@@ -344,16 +344,27 @@ fn a_resource_failure_requeues_the_task_three_times_then_fails() {
         .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
     let job = job_id(&o);
-    wait_until(&format!("job {job} to leave the queue"), 120, || {
+    let log_path = st.dir.join(format!("farm/f.logs/{job}_0.log"));
+    let tries = || {
+        std::fs::read_to_string(&log_path)
+            .unwrap_or_default()
+            .matches("File too large")
+            .count()
+    };
+    // The queue can be empty for a moment while a task is requeued: wait for the fourth
+    // try's failure and an empty queue, then a little more for any further requeue.
+    wait_until(&format!("job {job} to fail four times"), 120, || {
         let q = squeue(&job);
         if q.iter().any(|(_, state)| state == "PENDING") {
             let _ = Command::new("scontrol")
                 .args(["update", &format!("JobId={job}"), "StartTime=now"])
                 .output();
         }
-        q.is_empty()
+        tries() >= 4 && q.is_empty()
     });
-    let log = std::fs::read_to_string(st.dir.join(format!("farm/f.logs/{job}_0.log"))).unwrap();
+    std::thread::sleep(Duration::from_secs(2));
+    assert!(squeue(&job).is_empty(), "requeued after the third restart");
+    let log = std::fs::read_to_string(&log_path).unwrap();
     assert_eq!(log.matches("subfield: task ").count(), 4, "{log}");
     assert_eq!(log.matches("requeueing").count(), 3, "{log}");
     assert_eq!(log.matches("File too large").count(), 4, "{log}");

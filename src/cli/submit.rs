@@ -461,7 +461,12 @@ fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::R
     };
     // squeue is cheap; a coarse poll would add its period to every wait.
     let poll = Duration::from_millis(250);
+    // A task its script requeues (exit 5) can be missing from squeue for a moment
+    // between leaving and re-entering the queue: the job is gone once the queue has
+    // stayed empty this long.
+    let settle = Duration::from_secs(2);
     let start = Instant::now();
+    let mut empty_since: Option<Instant> = None;
     loop {
         let queued = farm::slurm::queued_tasks(id)?;
         let running = queued.iter().filter(|t| t.state == "RUNNING").count();
@@ -469,7 +474,9 @@ fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::R
             written(),
             &format!("job {id}: {running} running, {} queued", queued.len()),
         );
-        if queued.is_empty() {
+        if !queued.is_empty() {
+            empty_since = None;
+        } else if empty_since.get_or_insert_with(Instant::now).elapsed() >= settle {
             break;
         }
         std::thread::sleep(poll);
