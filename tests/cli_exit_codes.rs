@@ -150,6 +150,27 @@ fn a_failed_write_is_a_resource_failure_5() {
     assert!(frames(&dir.join("out")).is_empty());
 }
 
+/// No GPU here (the Vulkan loader pointed at no driver): `--device gpu` is a resource
+/// failure, 5, since another machine may have one; the frame is not written.
+#[cfg(feature = "gpu")]
+#[test]
+fn no_gpu_adapter_is_a_resource_failure_5() {
+    let dir = temp_dir("exit-5-gpu");
+    let scene = write_scene(&dir);
+    let out = dir.join("out/f.#.exr");
+    let mut args = render_args(&scene, &out, "0");
+    args.extend(["--device", "gpu"]);
+    let o = Command::new(env!("CARGO_BIN_EXE_subfield"))
+        .args(&args)
+        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+        .output()
+        .unwrap();
+    assert_eq!(code(&o), Some(5), "{}", stderr(&o));
+    assert!(stderr(&o).contains("no GPU adapter"), "{}", stderr(&o));
+    assert!(frames(&dir.join("out")).is_empty());
+}
+
 /// SIGTERM (a farm stopping a task) and SIGINT (Ctrl-C) stop the render after the frame
 /// in flight with 143 and 130; the frames written are whole (each is the frame of an
 /// uninterrupted run, byte for byte), and the JSON log ends with an `interrupted` event
