@@ -15,6 +15,7 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    cli::guard::file_size_limit_as_error();
     let args = match cli::Cli::try_parse() {
         Ok(a) => a,
         // --help and --version print in full; a usage error is one line.
@@ -29,14 +30,15 @@ fn main() -> ExitCode {
                 .filter(|l| !l.is_empty())
                 .collect();
             eprintln!("{} (see --help)", parts.join(" "));
-            return ExitCode::from(2);
+            return ExitCode::from(cli::exit::ExitClass::Usage.code());
         }
     };
-    match cli::run(args) {
-        Ok(code) => code,
-        Err(e) => {
+    let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| cli::run(args)));
+    match run {
+        Ok(Ok(code)) => code,
+        Ok(Err(e)) => {
             // One line: the chain of causes, outermost first.
-            let mut line = format!("error: {e}");
+            let mut line = e.to_string();
             // Causes that the message already quotes are not repeated.
             for cause in e.chain().skip(1) {
                 let c = cause.to_string();
@@ -44,8 +46,18 @@ fn main() -> ExitCode {
                     line.push_str(&format!(": {c}"));
                 }
             }
-            eprintln!("{line}");
-            ExitCode::FAILURE
+            let class = cli::exit::exit_class(&e);
+            cli::report::error(&line, class);
+            ExitCode::from(class.code())
+        }
+        // The panic's message is on stderr already (the default hook wrote it).
+        Err(_) => {
+            let class = cli::exit::ExitClass::Internal;
+            cli::report::error(
+                "internal error (a panic, above): please report it with the command that caused it",
+                class,
+            );
+            ExitCode::from(class.code())
         }
     }
 }

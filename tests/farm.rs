@@ -5,7 +5,7 @@
 mod common;
 
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Output};
 
 use common::farm::{frames, need, ok, on_path, s, stderr, subfield, temporaries};
 use common::render_scene::{temp_dir, write_scene};
@@ -199,7 +199,8 @@ fn a_raw_bake_truncated_under_a_render_ends_it_with_one_line_not_a_signal() {
     let e = stderr(&o);
     use std::os::unix::process::ExitStatusExt;
     assert_eq!(o.status.signal(), None, "killed by a signal: {e}");
-    assert_eq!(o.status.code(), Some(1), "{e}");
+    // An I/O failure (DESIGN.md §4): a retry maps the file anew.
+    assert_eq!(o.status.code(), Some(5), "{e}");
     assert!(
         e.contains("raw.psf") && e.contains("truncated or overwritten"),
         "{e}"
@@ -467,6 +468,14 @@ fn an_openjd_template_run_by_openjd_gives_the_frames_of_a_local_render() {
         String::from_utf8_lossy(&run.stdout),
         String::from_utf8_lossy(&run.stderr)
     );
+    // The tasks saw OPENJD_SESSION_WORKING_DIR and printed the progress lines openjd
+    // reads: each chunk reaches 100 %, and the status names the frame.
+    let log = String::from_utf8_lossy(&run.stdout);
+    assert_eq!(log.matches("openjd_progress: 100.0").count(), 3, "{log}");
+    assert!(
+        log.contains("openjd_status: frame 2 of 2 (number 9)"),
+        "{log}"
+    );
     assert_eq!(frames_of("farm"), frames_of("local"));
     assert_eq!(frames_of("farm").len(), 10);
     assert!(temporaries(&dir.join("farm")).is_empty());
@@ -477,4 +486,263 @@ fn an_openjd_template_run_by_openjd_gives_the_frames_of_a_local_render() {
         "{}",
         stderr(&again)
     );
+}
+
+/// `openjd` with its arguments; the output when it succeeds.
+fn openjd(args: &[&str]) -> Output {
+    let o = Command::new("openjd").args(args).output().unwrap();
+    assert!(
+        o.status.success(),
+        "openjd {args:?} failed: {}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o
+}
+
+/// The `parameterValues` of a bundle's `parameter_values.yaml` as the JSON map `openjd
+/// run --job-param` takes (our YAML quotes every value as a JSON string).
+fn bundle_params(bundle: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(bundle.join("parameter_values.yaml")).unwrap();
+    let mut map = serde_json::Map::new();
+    let mut name = None;
+    for l in text.lines() {
+        if let Some(n) = l.strip_prefix("- name: ") {
+            name = Some(n.to_string());
+        } else if let Some(v) = l.strip_prefix("  value: ") {
+            let v: serde_json::Value = serde_json::from_str(v).unwrap();
+            map.insert(name.take().unwrap(), v);
+        }
+    }
+    serde_json::Value::Object(map)
+}
+
+/// Issue 40: a Deadline Cloud job bundle. `openjd check` accepts its template (PATH job
+/// parameters with their data flow, a CHUNK[INT] frame parameter of the TASK_CHUNKING
+/// extension); `openjd run` with its parameter values renders the frames of a local
+/// render, and so does a run whose path-mapping rules move the scene, the bake and the
+/// output to other folders (as a farm's workers see them).
+#[test]
+fn a_job_bundle_runs_under_openjd_with_and_without_path_mapping() {
+    if !need(
+        "a_job_bundle_runs_under_openjd_with_and_without_path_mapping",
+        on_path("openjd"),
+        "openjd (pip install openjd-cli)",
+    ) {
+        return;
+    }
+    let dir = temp_dir("farm-bundle");
+    let input = dir.join("in");
+    std::fs::create_dir_all(&input).unwrap();
+    let scene = write_scene(&input);
+    let psf = input.join("scene.psf");
+    bake(&scene, &psf, &[]);
+    ok(&[
+        "render",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&dir.join("local/f.##.exr")),
+        "--frames",
+        "0..6",
+        "--size",
+        SIZE,
+        "--quiet",
+    ]);
+    let bundle = dir.join("bundle");
+    ok(&[
+        "submit",
+        "openjd",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&dir.join("out/f.##.exr")),
+        "--frames",
+        "0..6",
+        "--size",
+        SIZE,
+        "--bundle",
+        s(&bundle),
+        "--frame-seconds",
+        "0.5",
+        "--chunk-seconds",
+        "2",
+        "--stage-dir",
+        s(&dir.join("stage")),
+        "--quiet",
+    ]);
+    let template = bundle.join("template.yaml");
+    let text = std::fs::read_to_string(&template).unwrap();
+    for want in [
+        "- TASK_CHUNKING\n",
+        "type: CHUNK[INT]\n",
+        "range: \"0-5\"\n",
+        "defaultTaskCount: 4\n",
+        "targetRuntimeSeconds: 2\n",
+        "rangeConstraint: CONTIGUOUS\n",
+        "dataFlow: OUT\n",
+    ] {
+        assert!(text.contains(want), "{want:?} not in\n{text}");
+    }
+    assert!(!text.contains("amount.worker.gpu"), "{text}");
+    let assets = std::fs::read_to_string(bundle.join("asset_references.yaml")).unwrap();
+    assert!(
+        assets.contains(s(&psf)) && assets.contains(s(&dir.join("out"))),
+        "{assets}"
+    );
+    openjd(&["check", s(&template)]);
+    let params = bundle_params(&bundle);
+    assert_eq!(params["SceneFile"], s(&scene));
+    let params_file = dir.join("params.json");
+    std::fs::write(&params_file, params.to_string()).unwrap();
+    let job_param = format!("file://{}", params_file.display());
+
+    // The inputs moved, and the output folder elsewhere: path mapping finds them.
+    let moved = dir.join("moved");
+    std::fs::create_dir_all(moved.join("in")).unwrap();
+    for f in ["scene.glb", "scene.psf"] {
+        std::fs::rename(input.join(f), moved.join("in").join(f)).unwrap();
+    }
+    let rules = serde_json::json!({
+        "version": "pathmapping-1.0",
+        "path_mapping_rules": [
+            {"source_path_format": "POSIX", "source_path": s(&input), "destination_path": s(&moved.join("in"))},
+            {"source_path_format": "POSIX", "source_path": s(&dir.join("out")), "destination_path": s(&moved.join("out"))},
+        ],
+    });
+    let rules_file = dir.join("rules.json");
+    std::fs::write(&rules_file, rules.to_string()).unwrap();
+    openjd(&[
+        "run",
+        s(&template),
+        "--job-param",
+        &job_param,
+        "--path-mapping-rules",
+        &format!("file://{}", rules_file.display()),
+    ]);
+    assert!(!dir.join("out").exists());
+    assert_eq!(frames(&moved.join("out")), frames(&dir.join("local")));
+    assert_eq!(frames(&moved.join("out")).len(), 6);
+
+    // Back where the parameter values say: the plain run.
+    for f in ["scene.glb", "scene.psf"] {
+        std::fs::rename(moved.join("in").join(f), input.join(f)).unwrap();
+    }
+    let run = openjd(&["run", s(&template), "--job-param", &job_param]);
+    let log = String::from_utf8_lossy(&run.stdout);
+    assert!(log.contains("openjd_progress: 100.0"), "{log}");
+    assert_eq!(frames(&dir.join("out")), frames(&dir.join("local")));
+    assert!(temporaries(&dir.join("out")).is_empty());
+
+    // --measure renders the first missing frame here (the local render's bytes), times
+    // it, and leaves the rest to the bundle, in chunks filling the default 600 s.
+    let bundle2 = dir.join("bundle2");
+    let o = ok(&[
+        "submit",
+        "openjd",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&dir.join("measured/f.##.exr")),
+        "--frames",
+        "0..6",
+        "--size",
+        SIZE,
+        "--bundle",
+        s(&bundle2),
+        "--measure",
+    ]);
+    assert!(
+        stderr(&o).contains("rendered frame 0 here to measure it"),
+        "{}",
+        stderr(&o)
+    );
+    let text = std::fs::read_to_string(bundle2.join("template.yaml")).unwrap();
+    assert!(text.contains("range: \"1-5\"\n"), "{text}");
+    assert!(text.contains("targetRuntimeSeconds: 600\n"), "{text}");
+    assert_eq!(
+        frames(&dir.join("measured")),
+        frames(&dir.join("local"))[..1].to_vec()
+    );
+}
+
+/// Issue 37: GPUs asked of the farm. `submit slurm --gpus-per-task N` asks Slurm for
+/// them (`--gres=gpu:N`) and renders with `--device gpu`; `submit openjd --device gpu`
+/// states a GPU as a host requirement in the template and in the bundle's, which
+/// `openjd check` accepts. Nothing here renders, so no GPU is needed.
+#[test]
+fn gpu_jobs_ask_the_farm_for_gpus() {
+    let dir = temp_dir("farm-gpu");
+    let scene = write_scene(&dir);
+    let psf = dir.join("scene.psf");
+    bake(&scene, &psf, &[]);
+    let common = |out: &str| -> Vec<String> {
+        [
+            s(&scene),
+            "--baked",
+            s(&psf),
+            "-o",
+            s(&dir.join(out).join("f.##.exr")),
+            "--frames",
+            "0..4",
+            "--size",
+            SIZE,
+            "--quiet",
+        ]
+        .iter()
+        .map(|x| x.to_string())
+        .collect()
+    };
+    let mut args = vec!["submit".to_string(), "slurm".into()];
+    args.extend(common("slurm"));
+    args.extend(["--gpus-per-task".into(), "2".into(), "--dry-run".into()]);
+    let o = ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let script = String::from_utf8(o.stdout).unwrap();
+    assert!(script.contains("#SBATCH --gres=gpu:2\n"), "{script}");
+    assert!(script.contains("--device=gpu"), "{script}");
+    // Without GPUs asked for, neither.
+    let mut args = vec!["submit".to_string(), "slurm".into()];
+    args.extend(common("slurm"));
+    args.push("--dry-run".into());
+    let o = ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let script = String::from_utf8(o.stdout).unwrap();
+    assert!(
+        !script.contains("gres") && !script.contains("--device"),
+        "{script}"
+    );
+
+    let template = dir.join("job.yaml");
+    let bundle = dir.join("bundle");
+    let mut args = vec!["submit".to_string(), "openjd".into()];
+    args.extend(common("openjd"));
+    args.extend([
+        "--device".into(),
+        "gpu".into(),
+        "--template".into(),
+        s(&template).into(),
+        "--bundle".into(),
+        s(&bundle).into(),
+    ]);
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    for t in [template, bundle.join("template.yaml")] {
+        let text = std::fs::read_to_string(&t).unwrap();
+        assert!(
+            text.contains(
+                "hostRequirements:\n    amounts:\n    - name: amount.worker.gpu\n      min: 1\n"
+            ),
+            "{text}"
+        );
+        assert!(text.contains("--device=gpu"), "{text}");
+        if on_path("openjd") {
+            let o = Command::new("openjd")
+                .arg("check")
+                .arg(&t)
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        }
+    }
 }

@@ -312,6 +312,64 @@ fn a_bake_changed_after_submission_is_refused_and_wait_names_it() {
     assert!(e.contains(&found) && e.contains(&submitted), "{e}");
     assert!(e.contains("24 of 24 frames missing"), "{e}");
     assert!(frames(&st.dir.join("farm")).is_empty());
+    // Exit 4 (a bake whose hash is not the job's) fails a task for good: each task ran
+    // once, and its script did not requeue it (it requeues on 5 alone).
+    for task in 0..2 {
+        let log = st.dir.join(format!("farm/f.logs/{job}_{task}.log"));
+        let text = std::fs::read_to_string(&log).unwrap_or_default();
+        assert_eq!(text.matches("subfield: task ").count(), 1, "{text}");
+        assert!(!text.contains("requeueing"), "{text}");
+    }
+}
+
+/// Exit 5 (an I/O or resource failure) requeues the task, at most three times. Slurm
+/// propagates the submitting shell's file-size limit (`ulimit -f`, PropagateResourceLimits)
+/// to the task, where staging the 7 KiB bake fails with `File too large` every time: the
+/// task runs four times (the first try and three requeues) and then fails for good.
+/// Slurm holds a requeued job back for two minutes or so (its begin time); the test
+/// moves that to now each time, which changes nothing the script decides.
+#[test]
+fn a_resource_failure_requeues_the_task_three_times_then_fails() {
+    let Some(_c) = cluster("a_resource_failure_requeues_the_task_three_times_then_fails") else {
+        return;
+    };
+    let st = setup("slurm-requeue");
+    let opts = look("48x36", "1");
+    let o = Command::new("bash")
+        .arg("-c")
+        .arg("ulimit -f 4 && exec \"$0\" \"$@\"")
+        .arg(env!("CARGO_BIN_EXE_subfield"))
+        .args(submit_args(&st, &opts, &["--tasks", "1"]))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let job = job_id(&o);
+    let log_path = st.dir.join(format!("farm/f.logs/{job}_0.log"));
+    let tries = || {
+        std::fs::read_to_string(&log_path)
+            .unwrap_or_default()
+            .matches("File too large")
+            .count()
+    };
+    // The queue can be empty for a moment while a task is requeued: wait for the fourth
+    // try's failure and an empty queue, then a little more for any further requeue.
+    wait_until(&format!("job {job} to fail four times"), 120, || {
+        let q = squeue(&job);
+        if q.iter().any(|(_, state)| state == "PENDING") {
+            let _ = Command::new("scontrol")
+                .args(["update", &format!("JobId={job}"), "StartTime=now"])
+                .output();
+        }
+        tries() >= 4 && q.is_empty()
+    });
+    std::thread::sleep(Duration::from_secs(2));
+    assert!(squeue(&job).is_empty(), "requeued after the third restart");
+    let log = std::fs::read_to_string(&log_path).unwrap();
+    assert_eq!(log.matches("subfield: task ").count(), 4, "{log}");
+    assert_eq!(log.matches("requeueing").count(), 3, "{log}");
+    assert_eq!(log.matches("File too large").count(), 4, "{log}");
+    assert!(log.contains("(restart 3)"), "{log}");
+    assert!(frames(&st.dir.join("farm")).is_empty());
 }
 
 #[test]

@@ -8,8 +8,11 @@
 //! mapping; if another process cuts the file short (`cp new.psf scene.psf` over it), the
 //! next touch of a lost page raises SIGBUS, which by default kills the render with exit
 //! 135 and no word of why. The handler here writes a line that names the file and the
-//! cause, then exits with status 1 like any other error. A staged bake
+//! cause, then exits with status 5 (an I/O failure: a retry maps the file anew, and its
+//! hash check then says whether it is the job's). A staged bake
 //! (`--stage-dir`, `--baked-hash`) is never written again, so it cannot fault this way.
+//! **SIGXFSZ** is ignored, so that a file-size limit is an error that names the file
+//! (exit 5), not a silent kill ([`file_size_limit_as_error`]).
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -44,8 +47,8 @@ extern "C" fn on_sigbus(_signal: libc::c_int) {
         }
     }
     // SAFETY: _exit ends the process at once without running any handler or destructor,
-    // which is what a handler for a fault must do.
-    unsafe { libc::_exit(1) }
+    // which is what a handler for a fault must do. 5: an I/O failure (`cli::exit`).
+    unsafe { libc::_exit(5) }
 }
 
 fn install() {
@@ -61,6 +64,19 @@ fn install() {
     }
 }
 
+/// A file-size limit (`ulimit -f`, RLIMIT_FSIZE, which Slurm propagates from the
+/// submitting shell) kills a process that writes past it with SIGXFSZ, without a word.
+/// Ignored, the write fails with EFBIG (`File too large`) instead, which the command
+/// reports naming the file, with exit code 5 (`cli::exit`). Programs this process starts
+/// (`sbatch`, `squeue`) inherit the ignored signal and likewise see EFBIG.
+pub fn file_size_limit_as_error() {
+    // SAFETY: signal(2) with SIG_IGN for SIGXFSZ only changes this process's disposition
+    // of that signal; no handler code runs.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
+}
+
 /// The cancel flag of the render in progress; set by the first stopping signal.
 static INTERRUPT: OnceLock<Arc<AtomicBool>> = OnceLock::new();
 
@@ -68,34 +84,51 @@ static INTERRUPT: OnceLock<Arc<AtomicBool>> = OnceLock::new();
 static SIGNAL: AtomicI32 = AtomicI32::new(0);
 
 /// The signals that stop a render after the frame in flight, each with the line the
-/// first one writes. SIGTERM is how Slurm (`scancel`, a time limit, preemption) and most
-/// farm managers stop a task before they SIGKILL it; SIGHUP is a closed terminal or ssh
-/// session.
-const STOP_SIGNALS: [(libc::c_int, &[u8]); 3] = [
+/// first one writes, as text and as a `--log-format json` event. SIGTERM is how Slurm
+/// (`scancel`, a time limit, preemption) and most farm managers stop a task before they
+/// SIGKILL it; SIGHUP is a closed terminal or ssh session.
+const STOP_SIGNALS: [(libc::c_int, &[u8], &[u8]); 3] = [
     (
         libc::SIGINT,
         b"\ninterrupt: stopping after the frame in flight (Ctrl-C again stops at once)\n",
+        b"{\"event\":\"signal\",\"signal\":\"SIGINT\",\"message\":\"stopping after the frame in flight\"}\n",
     ),
     (
         libc::SIGTERM,
         b"\nterminated (SIGTERM): stopping after the frame in flight (a second signal stops at once)\n",
+        b"{\"event\":\"signal\",\"signal\":\"SIGTERM\",\"message\":\"stopping after the frame in flight\"}\n",
     ),
     (
         libc::SIGHUP,
         b"\nhangup (SIGHUP): stopping after the frame in flight (a second signal stops at once)\n",
+        b"{\"event\":\"signal\",\"signal\":\"SIGHUP\",\"message\":\"stopping after the frame in flight\"}\n",
     ),
 ];
 const STOPPED: &[u8] =
     b"\ninterrupt: stopped at once; the frame in flight is lost, run again with --resume\n";
+const STOPPED_JSON: &[u8] = b"{\"event\":\"signal\",\"message\":\"stopped at once; the frame in flight is lost, run again with --resume\"}\n";
+
+/// Whether the handlers write JSON events (`--log-format json`) rather than text.
+static JSON_LINES: AtomicBool = AtomicBool::new(false);
+
+/// Makes the signal handlers write their lines as JSON events.
+pub fn json_lines() {
+    JSON_LINES.store(true, Ordering::SeqCst);
+}
 
 /// The exit status of a run stopped by a signal: 128 + the signal, as shells report it
 /// (130 for Ctrl-C, 143 for SIGTERM, 129 for SIGHUP).
 pub fn interrupted_exit() -> ExitCode {
+    ExitCode::from(interrupted_code())
+}
+
+/// The number [`interrupted_exit`] exits with.
+pub fn interrupted_code() -> u8 {
     let sig = match SIGNAL.load(Ordering::SeqCst) {
         0 => libc::SIGINT,
         s => s,
     };
-    ExitCode::from(u8::try_from(128 + sig).unwrap_or(130))
+    u8::try_from(128 + sig).unwrap_or(130)
 }
 
 /// A cancel flag that SIGINT, SIGTERM and SIGHUP set, with the handlers installed (once
@@ -109,7 +142,7 @@ pub fn stop_on_interrupt() -> CancelFlag {
         Arc::new(AtomicBool::new(false))
     });
     if first {
-        for (signal, _) in STOP_SIGNALS {
+        for (signal, _, _) in STOP_SIGNALS {
             install_stop(signal);
         }
     }
@@ -120,10 +153,11 @@ extern "C" fn on_stop(signal: libc::c_int) {
     if let Some(flag) = INTERRUPT.get() {
         if !flag.swap(true, Ordering::SeqCst) {
             SIGNAL.store(signal, Ordering::SeqCst);
-            let line = STOP_SIGNALS
-                .iter()
-                .find(|(s, _)| *s == signal)
-                .map_or(STOP_SIGNALS[0].1, |(_, l)| *l);
+            let json = JSON_LINES.load(Ordering::SeqCst);
+            let line = STOP_SIGNALS.iter().find(|(s, _, _)| *s == signal).map_or(
+                STOP_SIGNALS[0].1,
+                |(_, text, j)| if json { *j } else { *text },
+            );
             // SAFETY: write(2) is async-signal-safe; `line` is a static byte string.
             unsafe {
                 libc::write(2, line.as_ptr().cast(), line.len());
@@ -131,10 +165,15 @@ extern "C" fn on_stop(signal: libc::c_int) {
             return;
         }
     }
+    let line = if JSON_LINES.load(Ordering::SeqCst) {
+        STOPPED_JSON
+    } else {
+        STOPPED
+    };
     // SAFETY: as above, and _exit(2) ends the process at once without running any
     // handler or destructor (what a handler must do to stop the process).
     unsafe {
-        libc::write(2, STOPPED.as_ptr().cast(), STOPPED.len());
+        libc::write(2, line.as_ptr().cast(), line.len());
         libc::_exit(128 + signal)
     }
 }

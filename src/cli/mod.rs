@@ -4,14 +4,16 @@
 mod bake;
 mod convert;
 mod demo;
+pub mod exit;
 mod generate;
 // The one module of the CLI with unsafe code (a signal handler; see its docs).
 #[allow(unsafe_code)]
-mod guard;
+pub mod guard;
 mod inspect;
 mod parse;
 mod progress;
 mod render;
+pub mod report;
 mod submit;
 
 use std::process::ExitCode;
@@ -22,7 +24,8 @@ use clap::{Parser, Subcommand};
 #[command(
     name = "subfield",
     version,
-    about = "Ray tracing of animated scenes with unstructured motion (parallel subfields)"
+    about = "Ray tracing of animated scenes with unstructured motion (parallel subfields)",
+    after_help = exit::HELP
 )]
 pub struct Cli {
     #[command(subcommand)]

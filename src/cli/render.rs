@@ -16,6 +16,7 @@ use subfield::scene::Scene;
 
 use super::parse;
 use super::progress::Progress;
+use super::report::{self, LogFormat, ProgressFormat};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -162,6 +163,17 @@ pub struct Args {
     /// verified) and map the copy (default with --baked-hash: $TMPDIR/subfield-stage).
     #[arg(long, value_name = "DIR")]
     pub stage_dir: Option<PathBuf>,
+    /// text: lines for people and a progress bar; json: one JSON object a line on stderr
+    /// for every event (start, each frame with its file's content hash, warnings, the
+    /// end, an error with its exit code), and no bar.
+    #[arg(long, value_name = "text|json", default_value = "text")]
+    pub log_format: LogFormat,
+    /// openjd: also print `openjd_progress: P` and `openjd_status: ...` after each
+    /// frame and `openjd_fail: ...` on error, on stdout (the default when
+    /// OPENJD_SESSION_WORKING_DIR is set, as under `openjd run` and Deadline Cloud);
+    /// bar: not those lines.
+    #[arg(long, value_name = "bar|openjd")]
+    pub progress: Option<ProgressFormat>,
 }
 
 /// A content hash given on the command line.
@@ -317,6 +329,7 @@ pub fn size_from_scene(a: &Args, scene: &Scene, opts: &mut RenderOptions) {
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    report::set(a.log_format, a.progress);
     let mut opts = options(&a)?;
     super::set_threads(a.threads)?;
     let (baked, staged) = resolve_inputs(&a)?;
@@ -340,11 +353,11 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     };
     if !a.quiet {
         match (&summary.preview, &opts.preview) {
-            (Some(p), _) => eprintln!("preview: {}", p.display()),
-            (None, Some(p)) => eprintln!(
+            (Some(p), _) => report::line(&format!("preview: {}", p.display())),
+            (None, Some(p)) => report::line(&format!(
                 "no preview written to {}: every frame was skipped as complete",
                 p.path.display()
-            ),
+            )),
             (None, None) => {}
         }
     }
@@ -365,6 +378,13 @@ pub fn drive(
     let mut opts = opts.clone();
     opts.cancel = super::guard::stop_on_interrupt();
     let opts = &opts;
+    let json = report::json();
+    // The `start` event of --log-format json, made from the plan and the device.
+    let mut start = serde_json::json!({
+        "event": "start",
+        "scene": label.display().to_string(),
+        "output": opts.output.display().to_string(),
+    });
     let mut bar: Option<Progress> = None;
     // Messages wait until every check has passed, so that an error is the only line;
     // `preface` comes first (what was done before the scene was planned).
@@ -380,6 +400,16 @@ pub fn drive(
     let result = rayon::scope(|_| {
         render::render_sequence(scene, opts, &mut |e| match e {
             RenderEvent::Planned(p) => {
+                if json {
+                    start["options"] = opts
+                        .options_string(p.fps, p.ambient, p.default_light)
+                        .into();
+                    start["frame_set"] = p.set.to_string().into();
+                    start["frames"] = p.frames.iter().collect::<Vec<u32>>().into();
+                    start["fps"] = p.fps.into();
+                    start["size"] = serde_json::json!([opts.width, opts.height]);
+                    start["spp"] = opts.spp.into();
+                }
                 pending.extend(p.warnings.iter().map(|w| format!("warning: {w}")));
                 pending.push(format!(
                     "{}: {}; frames {} at {} fps, {} to render, {}x{} at {} spp",
@@ -393,7 +423,10 @@ pub fn drive(
                     opts.spp
                 ));
             }
-            RenderEvent::Device(d) => pending.push(format!("tracing on: {d}")),
+            RenderEvent::Device(d) => {
+                start["device"] = d.into();
+                pending.push(format!("tracing on: {d}"));
+            }
             RenderEvent::StaticReady {
                 triangles,
                 baked_file,
@@ -409,15 +442,28 @@ pub fn drive(
                     },
                     seconds
                 ));
-                if !quiet {
+                if !quiet || json {
                     for line in pending.drain(..) {
-                        eprintln!("{line}");
+                        report::line(&line);
                     }
+                }
+                if json {
+                    start["static"] = serde_json::json!({
+                        "triangles": triangles,
+                        "from_baked_file": baked_file,
+                        "seconds": seconds,
+                    });
+                    report::event(std::mem::take(&mut start));
                 }
             }
             RenderEvent::Frame(f) => {
-                let b = bar.get_or_insert_with(|| Progress::new("frames", f.total as u64, quiet));
+                let b = bar
+                    .get_or_insert_with(|| Progress::new("frames", f.total as u64, quiet || json));
                 done += 1;
+                if json {
+                    report::event(frame_event(f));
+                }
+                report::openjd_frame(f.frame, done as usize, f.total);
                 let extra = match &f.stats {
                     Some(s) => {
                         let secs = (s.trace_ms + s.shade_ms) / 1e3;
@@ -443,7 +489,27 @@ pub fn drive(
             }
             // Said even with --quiet: it is the outcome of the run. Not `eprintln!`,
             // which panics when stderr is gone (a terminal closed: SIGHUP).
-            let _ = writeln!(std::io::stderr().lock(), "{e}");
+            if json {
+                let mut v = serde_json::json!({
+                    "event": "interrupted",
+                    "message": e.to_string(),
+                    "exit_code": super::guard::interrupted_code(),
+                });
+                if let render::RenderError::Cancelled {
+                    written,
+                    skipped,
+                    left,
+                } = &e
+                {
+                    v["written"] = (*written).into();
+                    v["skipped"] = (*skipped).into();
+                    v["left"] = (*left).into();
+                }
+                report::event(v);
+            } else {
+                let _ = writeln!(std::io::stderr().lock(), "{e}");
+            }
+            report::openjd(&[format!("openjd_status: {e}")]);
             return Ok(None);
         }
         r => r?,
@@ -456,11 +522,27 @@ pub fn drive(
             if summary.replaced == 1 { "it was" } else { "they were" },
         );
         match &bar {
-            Some(b) => b.println(&line),
-            None => eprintln!("{line}"),
+            Some(b) if !json => b.println(&line),
+            _ => report::line(&line),
         }
     }
-    if !quiet {
+    if json {
+        let t = &summary.totals;
+        report::event(serde_json::json!({
+            "event": "end",
+            "rendered": summary.rendered,
+            "skipped": summary.skipped,
+            "replaced": summary.replaced,
+            "wall_seconds": summary.wall.as_secs_f64(),
+            "times_ms": {
+                "update": t.update_ms,
+                "trace": t.trace_ms,
+                "shade": t.shade_ms,
+                "write": t.write_ms,
+            },
+            "peak_memory_bytes": report::peak_memory(),
+        }));
+    } else if !quiet {
         let t = &summary.totals;
         let n = t.frames.max(1) as f64;
         let per = |ms: f64| ms / n;
@@ -484,4 +566,39 @@ pub fn drive(
         }
     }
     Ok(Some(summary))
+}
+
+/// The `frame` event of `--log-format json`: the frame written (with the content hash of
+/// its file's bytes, read back: what a farm can check the copy it fetches against) or
+/// skipped as complete.
+fn frame_event(f: &render::FrameReport) -> serde_json::Value {
+    let hash = std::fs::read(&f.path)
+        .ok()
+        .map(|b| ContentHash::of(&b).to_string());
+    let mut v = serde_json::json!({
+        "event": "frame",
+        "frame": f.frame,
+        "index": f.index,
+        "total": f.total,
+        "path": f.path.display().to_string(),
+        "skipped": f.skipped,
+        "hash": hash,
+        "peak_memory_bytes": report::peak_memory(),
+    });
+    if let Some(s) = &f.stats {
+        v["time"] = s.time.into();
+        v["times_ms"] = serde_json::json!({
+            "update": s.update_ms,
+            "trace": s.trace_ms,
+            "shade": s.shade_ms,
+            "write": s.write_ms,
+        });
+        v["rays"] = serde_json::json!({
+            "primary": s.rays.primary,
+            "shadow": s.rays.shadow,
+            "secondary": s.rays.secondary,
+            "total": s.rays.total(),
+        });
+    }
+    v
 }

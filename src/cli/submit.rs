@@ -9,7 +9,11 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
-use subfield::farm::{self, openjd::OpenJdJob, slurm::SlurmJob};
+use subfield::farm::{
+    self,
+    openjd::{JobBundle, OpenJdJob},
+    slurm::SlurmJob,
+};
 use subfield::format::{self, ContentHash, WriteOptions};
 use subfield::render::{self, FrameSet, FrameSpan, RenderOptions, RenderPlan};
 
@@ -48,6 +52,9 @@ pub struct SlurmArgs {
     /// CPUs per task; each task renders with that many threads.
     #[arg(long)]
     pub cpus_per_task: Option<u32>,
+    /// GPUs per task (`--gres=gpu:N`); tasks then render with --device gpu.
+    #[arg(long, value_name = "N")]
+    pub gpus_per_task: Option<u32>,
     /// Follow the job with a progress bar over the frames written; fail listing the
     /// frames still missing if any task failed.
     #[arg(long)]
@@ -65,11 +72,31 @@ pub struct OpenJdArgs {
     #[command(flatten)]
     pub render: render_cmd::Args,
     /// The job template to write (.yaml).
-    #[arg(long, value_name = "JOB.yaml")]
-    pub template: PathBuf,
-    /// Frames per task (default 8).
+    #[arg(long, value_name = "JOB.yaml", required_unless_present = "bundle")]
+    pub template: Option<PathBuf>,
+    /// Frames per task (default 8); with --bundle, the chunk size until the scheduler
+    /// has timed a chunk (defaultTaskCount), unless --frame-seconds sets it.
     #[arg(long, default_value_t = 8)]
     pub chunk: u32,
+    /// Write a Deadline Cloud job bundle into DIR (template.yaml, parameter_values.yaml,
+    /// asset_references.yaml; `deadline bundle submit DIR`): the scene, the bake and the
+    /// output folder as PATH job parameters, frames chunked by the TASK_CHUNKING
+    /// extension.
+    #[arg(long, value_name = "DIR")]
+    pub bundle: Option<PathBuf>,
+    /// With --bundle: the run time a chunk should take (targetRuntimeSeconds), seconds.
+    #[arg(long, value_name = "S", requires = "bundle")]
+    pub chunk_seconds: Option<u32>,
+    /// With --bundle: seconds a frame takes (measured from an earlier render's
+    /// --stats or --log-format json); the first chunks are then --chunk-seconds long
+    /// (default 600 s).
+    #[arg(long, value_name = "S", requires = "bundle")]
+    pub frame_seconds: Option<f64>,
+    /// With --bundle: render the first missing frame here, into the output, and take its
+    /// time (update, trace, shade, write) as --frame-seconds; the frame is then done.
+    /// It is this machine's time, not a farm worker's.
+    #[arg(long, requires = "bundle", conflicts_with = "frame_seconds")]
+    pub measure: bool,
 }
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
@@ -88,6 +115,14 @@ struct Work {
     missing: Vec<u32>,
     /// The task's `subfield render ...` without the per-engine flags.
     command: Vec<String>,
+    /// Its parts, for a job bundle whose parameters give the paths: the binary, the
+    /// scene, the bake, and the flags after the output (hashes, `--resume`, the look).
+    exe: String,
+    scene: PathBuf,
+    baked: PathBuf,
+    flags: Vec<String>,
+    /// The scene as imported (to render a frame for `--measure`).
+    scene_model: subfield::scene::Scene,
     /// Where job files go: the output pattern's folder, and the name they share.
     dir: PathBuf,
     base: String,
@@ -119,6 +154,14 @@ fn refuse_task_flags(r: &render_cmd::Args) -> anyhow::Result<()> {
         (
             r.scene_file_hash.is_some(),
             "--scene-file-hash (submit hashes the scene)",
+        ),
+        (
+            r.log_format != super::report::LogFormat::Text,
+            "--log-format (tasks log as text)",
+        ),
+        (
+            r.progress.is_some(),
+            "--progress (a task under Open Job Description prints openjd lines by itself)",
         ),
     ];
     if let Some((_, what)) = taken.iter().find(|(given, _)| *given) {
@@ -158,6 +201,10 @@ fn render_flags(r: &render_cmd::Args) -> Vec<String> {
     );
     if r.float {
         v.push("--float".into());
+    }
+    // The device is part of the job: a resubmitted job never mixes CPU and GPU frames.
+    if r.device != subfield::render::TraceDevice::Cpu {
+        v.push(format!("--device={}", r.device.name()));
     }
     v
 }
@@ -275,22 +322,31 @@ fn prepare(r: &render_cmd::Args, dry_run: bool, slurm_script: bool) -> anyhow::R
         format::hash_file(&scene_path).with_context(|| scene_path.display().to_string())?;
 
     let exe = std::env::current_exe().context("cannot tell where this subfield binary is")?;
+    let exe = exe.to_string_lossy().into_owned();
+    let mut flags = vec![
+        format!("--baked-hash={baked_hash}"),
+        format!("--scene-file-hash={scene_hash}"),
+        "--resume".into(),
+    ];
+    flags.extend(render_flags(r));
     let mut command = vec![
-        exe.to_string_lossy().into_owned(),
+        exe.clone(),
         "render".into(),
         scene_path.to_string_lossy().into_owned(),
         format!("--baked={}", baked.display()),
-        format!("--baked-hash={baked_hash}"),
-        format!("--scene-file-hash={scene_hash}"),
         format!("--output={}", opts.output.display()),
-        "--resume".into(),
     ];
-    command.extend(render_flags(r));
+    command.extend(flags.iter().cloned());
     Ok(Work {
         opts,
         plan,
         missing,
         command,
+        exe,
+        scene: scene_path,
+        baked,
+        flags,
+        scene_model: scene,
         dir,
         base,
     })
@@ -321,6 +377,10 @@ fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
     if a.cpus_per_task == Some(0) {
         bail!("--cpus-per-task 0: a task needs at least one CPU");
     }
+    if a.gpus_per_task == Some(0) {
+        bail!("--gpus-per-task 0: give at least 1, or leave it out to render on CPUs");
+    }
+
     if !a.dry_run {
         if !farm::slurm::on_path("sbatch") {
             bail!("sbatch is not on the PATH: is Slurm installed here? (nothing submitted)");
@@ -339,6 +399,10 @@ fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
     array.sort_unstable();
     array.dedup();
     let mut command = w.command.clone();
+    if a.gpus_per_task.is_some() && r.device != subfield::render::TraceDevice::Gpu {
+        command.retain(|x| !x.starts_with("--device="));
+        command.push("--device=gpu".into());
+    }
     // Every task plans the same frames as this plan, and takes its shard of them.
     command.push(format!("--frames={}", w.plan.set));
     let job = SlurmJob {
@@ -351,6 +415,7 @@ fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
         log_dir: w.dir.join(format!("{}.logs", w.base)),
         command,
         stage_dir: r.stage_dir.clone(),
+        gpus_per_task: a.gpus_per_task,
     };
     let script = job.script();
     if a.dry_run {
@@ -396,7 +461,12 @@ fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::R
     };
     // squeue is cheap; a coarse poll would add its period to every wait.
     let poll = Duration::from_millis(250);
+    // A task its script requeues (exit 5) can be missing from squeue for a moment
+    // between leaving and re-entering the queue: the job is gone once the queue has
+    // stayed empty this long.
+    let settle = Duration::from_secs(2);
     let start = Instant::now();
+    let mut empty_since: Option<Instant> = None;
     loop {
         let queued = farm::slurm::queued_tasks(id)?;
         let running = queued.iter().filter(|t| t.state == "RUNNING").count();
@@ -404,7 +474,9 @@ fn follow(id: &str, w: &Work, r: &render_cmd::Args, log_dir: &Path) -> anyhow::R
             written(),
             &format!("job {id}: {running} running, {} queued", queued.len()),
         );
-        if queued.is_empty() {
+        if !queued.is_empty() {
+            empty_since = None;
+        } else if empty_since.get_or_insert_with(Instant::now).elapsed() >= settle {
             break;
         }
         std::thread::sleep(poll);
@@ -482,40 +554,134 @@ fn openjd(a: OpenJdArgs) -> anyhow::Result<ExitCode> {
     if a.chunk == 0 {
         bail!("--chunk 0: a task needs at least one frame");
     }
-    if a.template.extension().and_then(|e| e.to_str()) != Some("yaml") {
-        bail!(
-            "--template {}: a job template is a .yaml file",
-            a.template.display()
-        );
+    if a.chunk_seconds == Some(0) {
+        bail!("--chunk-seconds 0: a chunk takes some time");
     }
-    super::check_target("--template", &a.template)?;
-    let w = prepare(r, false, false)?;
+    if let Some(f) = a.frame_seconds {
+        if !(f.is_finite() && f > 0.0) {
+            bail!("--frame-seconds {f}: must be a positive number of seconds");
+        }
+    }
+    if let Some(t) = &a.template {
+        if t.extension().and_then(|e| e.to_str()) != Some("yaml") {
+            bail!("--template {}: a job template is a .yaml file", t.display());
+        }
+        super::check_target("--template", t)?;
+    }
+    if let Some(b) = &a.bundle {
+        if b.exists() && !b.is_dir() {
+            bail!("--bundle {}: names a file, not a folder", b.display());
+        }
+    }
+    let mut w = prepare(r, false, false)?;
+    let measured = match (a.measure, w.missing.first()) {
+        (true, Some(&f)) => {
+            let secs = measure_frame(&w, f)?;
+            w.missing.remove(0);
+            if !r.quiet {
+                eprintln!("rendered frame {f} here to measure it: {secs:.3} s a frame");
+            }
+            Some(secs)
+        }
+        _ => None,
+    };
     if nothing_missing(&w, r.quiet) {
         return Ok(ExitCode::SUCCESS);
     }
-    let job = OpenJdJob {
-        name: format!("subfield render {}", w.base),
-        chunks: chunks(&w.missing, a.chunk),
-        command: w.command.clone(),
-        stage_dir: r.stage_dir.clone(),
-    };
-    if let Some(parent) = a.template.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent)
-            .with_context(|| format!("cannot create {}", parent.display()))?;
+    if let Some(t) = &a.template {
+        let job = OpenJdJob {
+            name: format!("subfield render {}", w.base),
+            chunks: chunks(&w.missing, a.chunk),
+            command: w.command.clone(),
+            stage_dir: r.stage_dir.clone(),
+            gpu: r.device == subfield::render::TraceDevice::Gpu,
+        };
+        if let Some(parent) = t.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("cannot create {}", parent.display()))?;
+        }
+        subfield::atomic::write_atomically(t, job.template().as_bytes())
+            .with_context(|| format!("cannot write {}", t.display()))?;
+        if !r.quiet {
+            eprintln!(
+                "wrote {}: {} for {} of {}; run it with `openjd run {}`",
+                t.display(),
+                plural(job.chunks.len() as u64, "task"),
+                plural(w.missing.len() as u64, "missing frame"),
+                w.plan.frames.len(),
+                t.display()
+            );
+        }
     }
-    subfield::atomic::write_atomically(&a.template, job.template().as_bytes())
-        .with_context(|| format!("cannot write {}", a.template.display()))?;
-    if !r.quiet {
-        eprintln!(
-            "wrote {}: {} for {} of {}; run it with `openjd run {}`",
-            a.template.display(),
-            plural(job.chunks.len() as u64, "task"),
-            plural(w.missing.len() as u64, "missing frame"),
-            w.plan.frames.len(),
-            a.template.display()
-        );
+    if let Some(dir) = &a.bundle {
+        let bundle = job_bundle(&a, &w, measured.or(a.frame_seconds))?;
+        bundle.write(dir)?;
+        if !r.quiet {
+            eprintln!(
+                "wrote the job bundle {}: {} in chunks of {}{}; submit it with `deadline bundle submit {}`",
+                dir.display(),
+                plural(w.missing.len() as u64, "missing frame"),
+                bundle.chunk,
+                match bundle.target_seconds {
+                    Some(s) => format!(" (resized to about {s} s each by the scheduler)"),
+                    None => String::new(),
+                },
+                dir.display()
+            );
+        }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The job bundle of `w`: chunks of `--chunk` frames, or as many frames as fill
+/// `--chunk-seconds` (default 600) at `--frame-seconds` each.
+fn job_bundle(a: &OpenJdArgs, w: &Work, frame_seconds: Option<f64>) -> anyhow::Result<JobBundle> {
+    const DEFAULT_CHUNK_SECONDS: u32 = 600;
+    let target = match (a.chunk_seconds, frame_seconds) {
+        (Some(t), _) => Some(t),
+        (None, Some(_)) => Some(DEFAULT_CHUNK_SECONDS),
+        (None, None) => None,
+    };
+    let chunk = match (target, frame_seconds) {
+        // At least one frame a chunk, at most every frame in one.
+        (Some(t), Some(f)) => {
+            ((t as f64 / f).floor() as u64).clamp(1, w.missing.len() as u64) as u32
+        }
+        _ => a.chunk,
+    };
+    let pattern_name = w
+        .opts
+        .output
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .context("-o: the pattern has no file name")?;
+    Ok(JobBundle {
+        name: format!("subfield render {}", w.base),
+        frames: w.missing.clone(),
+        chunk,
+        target_seconds: target,
+        exe: w.exe.clone(),
+        scene: w.scene.clone(),
+        baked: w.baked.clone(),
+        output_dir: subfield::atomic::folder_of(&w.opts.output),
+        pattern_name,
+        flags: w.flags.clone(),
+        stage_dir: a.render.stage_dir.clone(),
+        gpu: a.render.device == subfield::render::TraceDevice::Gpu,
+    })
+}
+
+/// `--measure`: renders `frame` into the output as a task would (from the bake) and
+/// returns its seconds: update, trace, shade and write, not the import or the bake's
+/// opening, which a task pays once for its whole chunk.
+fn measure_frame(w: &Work, frame: u32) -> anyhow::Result<f64> {
+    let mut o = w.opts.clone();
+    o.frames = Some(FrameSet::from_sorted(&[frame]));
+    o.baked = Some(w.baked.clone());
+    let summary = render::render_sequence(&w.scene_model, &o, &mut |_| {})
+        .with_context(|| format!("cannot render frame {frame} to measure it"))?;
+    let t = &summary.totals;
+    Ok(((t.update_ms + t.trace_ms + t.shade_ms + t.write_ms) / 1e3).max(1e-3))
 }
 
 /// The missing frames (ascending) as OpenJD tasks of at most `k` frames each, spelled as

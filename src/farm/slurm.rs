@@ -5,6 +5,14 @@
 //! scene file, the shard count, and a task body that stages the bake and renders its
 //! shard with `--resume`. Running it again (or `subfield submit` again) renders only
 //! what is missing; a task requeued by Slurm starts over and skips what it wrote.
+//!
+//! Requeueing follows the render's exit code (DESIGN.md §4): a task that ends with 5
+//! (an I/O or resource failure: a full disk, out of memory, a GPU lost) requeues itself
+//! with `scontrol requeue`, at most [`MAX_REQUEUES`] times, since it may succeed later
+//! or on another node; 3 (bad input) and 4 (a file whose hash is not the job's) fail the
+//! task for good, since a retry would fail the same way. Preemption and node failure are
+//! Slurm's own requeues (`--requeue`); a task stopped by a signal it was sent
+//! (`scancel`, the time limit: exit 143) is not requeued by the script.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -32,7 +40,12 @@ pub struct SlurmJob {
     pub command: Vec<String>,
     /// The node-local stage; `None`: `$SUBFIELD_STAGE_DIR`, else `$TMPDIR/subfield-stage`.
     pub stage_dir: Option<PathBuf>,
+    /// GPUs per task (`--gres=gpu:N`); the command then renders with `--device gpu`.
+    pub gpus_per_task: Option<u32>,
 }
+
+/// How many times a task requeues itself after an I/O or resource failure (exit 5).
+pub const MAX_REQUEUES: u32 = 3;
 
 /// `0-3,7,9-10`: Slurm's spelling of an index list.
 pub fn array_spec(indices: &[u32]) -> String {
@@ -89,6 +102,9 @@ impl SlurmJob {
         if let Some(c) = self.cpus_per_task {
             let _ = writeln!(s, "#SBATCH --cpus-per-task={c}");
         }
+        if let Some(g) = self.gpus_per_task {
+            let _ = writeln!(s, "#SBATCH --gres=gpu:{g}");
+        }
         let _ = writeln!(s, "set -eu");
         match &self.stage_dir {
             Some(d) => {
@@ -106,9 +122,12 @@ impl SlurmJob {
             "echo \"subfield: task ${{SLURM_ARRAY_TASK_ID}} of job ${{SLURM_ARRAY_JOB_ID}} on $(hostname), shard ${{SLURM_ARRAY_TASK_ID}}/{} (restart ${{SLURM_RESTART_COUNT:-0}})\"",
             self.shards
         );
-        let mut line = String::from("exec");
-        for a in &self.command {
-            line.push(' ');
+        // Not `exec`: the script reads the render's exit code to decide on a requeue.
+        let mut line = String::from("set +e\n");
+        for (i, a) in self.command.iter().enumerate() {
+            if i > 0 {
+                line.push(' ');
+            }
             line.push_str(&shell_quote(a));
         }
         let _ = writeln!(
@@ -116,6 +135,18 @@ impl SlurmJob {
             "{line} \\\n  --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\" --threads \"${{SLURM_CPUS_PER_TASK:-1}}\" --stage-dir \"$stage\"",
             self.shards
         );
+        let _ = writeln!(s, "rc=$?");
+        let _ = writeln!(
+            s,
+            "if [ \"$rc\" -eq 5 ] && [ \"${{SLURM_RESTART_COUNT:-0}}\" -lt {MAX_REQUEUES} ]; then"
+        );
+        let _ = writeln!(
+            s,
+            "  echo \"subfield: exit 5 (I/O or resource failure): requeueing task ${{SLURM_ARRAY_TASK_ID}} (restart ${{SLURM_RESTART_COUNT:-0}} of {MAX_REQUEUES})\""
+        );
+        let _ = writeln!(s, "  scontrol requeue \"${{SLURM_JOB_ID}}\"");
+        let _ = writeln!(s, "fi");
+        let _ = writeln!(s, "exit \"$rc\"");
         s
     }
 }
@@ -283,8 +314,10 @@ mod tests {
                 "/farm/out/frame.####.exr".into(),
             ],
             stage_dir: None,
+            gpus_per_task: Some(2),
         };
         let s = job.script();
+        assert!(s.contains("#SBATCH --gres=gpu:2\n"), "{s}");
         assert!(s.starts_with("#!/bin/bash\n"));
         assert!(s.contains("#SBATCH --array=0,2-3\n"), "{s}");
         assert!(s.contains("#SBATCH --cpus-per-task=2\n"));
@@ -301,5 +334,71 @@ mod tests {
             .status()
             .unwrap();
         assert!(check.success());
+    }
+
+    /// The script requeues its task after exit 5 only, and at most MAX_REQUEUES times;
+    /// run here with a stand-in render (`sh -c 'exit N'`) and a stand-in `scontrol`
+    /// that records its arguments.
+    #[test]
+    fn only_a_resource_failure_requeues_the_task() {
+        let dir = std::env::temp_dir().join(format!("subfield-requeue-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let log = dir.join("scontrol.log");
+        let fake = dir.join("scontrol");
+        std::fs::write(
+            &fake,
+            format!("#!/bin/sh\necho \"$@\" >> {}\n", log.display()),
+        )
+        .unwrap();
+        std::process::Command::new("chmod")
+            .args(["+x", &fake.to_string_lossy()])
+            .status()
+            .unwrap();
+        let path = format!(
+            "{}:{}",
+            dir.display(),
+            std::env::var("PATH").unwrap_or_default()
+        );
+        for (code, restarts, requeued) in [
+            (0, 0, false),
+            (3, 0, false),
+            (4, 0, false),
+            (143, 0, false),
+            (5, 0, true),
+            (5, MAX_REQUEUES - 1, true),
+            (5, MAX_REQUEUES, false),
+        ] {
+            let _ = std::fs::remove_file(&log);
+            let job = SlurmJob {
+                name: "t".into(),
+                shards: 2,
+                array: vec![0, 1],
+                partition: None,
+                time: None,
+                cpus_per_task: None,
+                log_dir: dir.clone(),
+                command: vec!["sh".into(), "-c".into(), format!("exit {code}")],
+                stage_dir: Some(dir.join("stage")),
+                gpus_per_task: None,
+            };
+            let out = Command::new("bash")
+                .arg("-c")
+                .arg(job.script())
+                .env("PATH", &path)
+                .env("SLURM_JOB_ID", "77")
+                .env("SLURM_ARRAY_JOB_ID", "70")
+                .env("SLURM_ARRAY_TASK_ID", "1")
+                .env("SLURM_RESTART_COUNT", restarts.to_string())
+                .output()
+                .unwrap();
+            assert_eq!(out.status.code(), Some(code), "exit {code}");
+            let said = std::fs::read_to_string(&log).unwrap_or_default();
+            assert_eq!(
+                said == "requeue 77\n",
+                requeued,
+                "exit {code}, restart {restarts}: scontrol got {said:?}"
+            );
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
