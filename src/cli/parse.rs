@@ -4,7 +4,9 @@
 //! library (`subfield::render`); only the string parsing lives in the CLI.
 
 use glam::Vec3;
-use subfield::render::{Aovs, FrameSet, FrameSpan, Shard, TraceDevice, MAX_FRAMES, MAX_SIDE};
+use subfield::render::{
+    Aovs, ExrCompression, FrameSet, FrameSpan, Shard, TraceDevice, MAX_FRAMES, MAX_SIDE,
+};
 
 fn bad(flag: &str, value: &str, why: impl std::fmt::Display) -> anyhow::Error {
     anyhow::anyhow!("{flag} {value:?}: {why}")
@@ -146,7 +148,23 @@ pub fn parse_vec3(flag: &str, s: &str) -> anyhow::Result<Vec3> {
     Ok(Vec3::from_array(v))
 }
 
-/// `depth,normal,albedo,position,motion,cryptomatte` in any order and subset.
+/// `--compression zip|piz|none`; `dwaa` (which DESIGN.md §4 names) is refused in one
+/// line: the `exr` crate reads DWAA but cannot write it.
+pub fn parse_compression(s: &str) -> Result<ExrCompression, String> {
+    match s.trim().to_ascii_lowercase().as_str() {
+        "zip" => Ok(ExrCompression::Zip),
+        "piz" => Ok(ExrCompression::Piz),
+        "none" => Ok(ExrCompression::None),
+        "dwaa" | "dwab" => Err(format!(
+            "{s}: not available: the exr crate this build uses reads DWA but cannot write it; \
+             use zip (the default) or piz"
+        )),
+        _ => Err(format!("{s}: not one of zip, piz, none")),
+    }
+}
+
+/// `depth,normal,albedo,position,motion,cryptomatte,diffuse,specular,transmission,emission`
+/// in any order and subset.
 pub fn parse_aovs(s: &str) -> anyhow::Result<Aovs> {
     let mut a = Aovs::default();
     for name in s.split(',').map(str::trim).filter(|n| !n.is_empty()) {
@@ -157,13 +175,17 @@ pub fn parse_aovs(s: &str) -> anyhow::Result<Aovs> {
             "position" | "P" => a.position = true,
             "motion" => a.motion = true,
             "cryptomatte" | "crypto" => a.cryptomatte = true,
+            "diffuse" => a.diffuse = true,
+            "specular" | "glossy" => a.specular = true,
+            "transmission" => a.transmission = true,
+            "emission" => a.emission = true,
             other => {
                 return Err(bad(
                     "--aov",
                     s,
                     format!(
                         "unknown AOV {other:?} (known: depth, normal, albedo, position, \
-                         motion, cryptomatte)"
+                         motion, cryptomatte, diffuse, specular, transmission, emission)"
                     ),
                 ))
             }
