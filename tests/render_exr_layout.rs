@@ -144,11 +144,17 @@ fn oiiotool_info(path: &Path) -> String {
 fn overscan_extends_the_image_plane_and_keeps_the_image_to_the_bit() {
     let dir = temp_dir("exr-overscan");
     let scene = write_scene(&dir);
+    // With a diffuse bounce that sees a background: its directions come from the seeds
+    // of the camera's pixels, which the border must not shift.
     let aovs = [
         "--aov",
         "depth,normal,diffuse,emission,cryptomatte",
         "--spp",
         "2",
+        "--diffuse-bounces",
+        "1",
+        "--background",
+        "0.2,0.25,0.3",
     ];
     let plain = dir.join("plain.exr");
     render(&scene, &plain, &aovs);
@@ -238,6 +244,10 @@ fn overscan_extends_the_image_plane_and_keeps_the_image_to_the_bit() {
             "depth",
             "--spp",
             "2",
+            "--diffuse-bounces",
+            "1",
+            "--background",
+            "0.2,0.25,0.3",
             "--preview",
             plain_preview.to_str().unwrap(),
         ],
