@@ -263,5 +263,17 @@ mod tests {
         let a = parse_aovs("position,motion,cryptomatte").unwrap();
         assert!(a.position && a.motion && a.cryptomatte && !a.depth);
         assert!(parse_aovs("depth,colour").is_err());
+        let a = parse_aovs("diffuse,specular,transmission,emission").unwrap();
+        assert_eq!(a.light_paths(), [true; 4]);
+        assert_eq!(a.names(), "diffuse,specular,transmission,emission");
+        let a = parse_aovs("emission").unwrap();
+        assert_eq!(a.light_paths(), [false, false, false, true]);
+        assert_eq!(parse_compression("piz"), Ok(ExrCompression::Piz));
+        assert_eq!(parse_compression("zip"), Ok(ExrCompression::Zip));
+        assert_eq!(parse_compression("none"), Ok(ExrCompression::None));
+        assert!(parse_compression("dwaa")
+            .unwrap_err()
+            .contains("cannot write"));
+        assert!(parse_compression("b44").is_err());
     }
 }

@@ -226,8 +226,16 @@ pub fn render_frame_with<T: Intersector>(
     let spare = scratch.spare.take().filter(|f| {
         f.width == camera.width && f.height == camera.height && f.overscan == inputs.overscan
     });
-    let (rgba, depth, normal, albedo, position, motion) = match spare {
-        Some(f) => (f.rgba, f.depth, f.normal, f.albedo, f.position, f.motion),
+    let (rgba, depth, normal, albedo, position, motion, kept_paths) = match spare {
+        Some(f) => (
+            f.rgba,
+            f.depth,
+            f.normal,
+            f.albedo,
+            f.position,
+            f.motion,
+            f.light_paths,
+        ),
         None => Default::default(),
     };
     let mut rgba = rgba;
@@ -243,9 +251,15 @@ pub fn render_frame_with<T: Intersector>(
         position: refill_opt(position, aovs.position, w * h, [0.0; 3]),
         motion: refill_opt(motion, aovs.motion, w * h, [0.0; 2]),
         crypto: None,
-        light_paths: light_paths.then(|| LightPathBuffers {
-            passes: std::array::from_fn(|_| vec![[0.0; 3]; w * h]),
-            written: aovs.light_paths(),
+        light_paths: light_paths.then(|| {
+            let mut passes = kept_paths.map(|p| p.passes).unwrap_or_default();
+            for p in &mut passes {
+                refill(p, w * h, [0.0; 3]);
+            }
+            LightPathBuffers {
+                passes,
+                written: aovs.light_paths(),
+            }
         }),
         overscan: inputs.overscan,
     };
