@@ -307,7 +307,8 @@ pub enum FrameFile {
 /// string (`subfield/options`, see
 /// [`RenderOptions::options_string`](super::RenderOptions::options_string)): every
 /// block is read and decompressed (a truncated or corrupt file is not complete), and a
-/// frame made with other options is not this run's.
+/// frame made with other options is not this run's. `width` and `height` are the data
+/// window's: the image's plus twice the `--overscan`.
 pub fn is_complete(
     path: &Path,
     width: u32,
@@ -319,7 +320,8 @@ pub fn is_complete(
     frame_file(path, width, height, aovs, pixel, options) == FrameFile::Complete
 }
 
-/// What is at `path` for a frame of this size, these channels and this options string:
+/// What is at `path` for a frame of this size (the data window's), these channels and
+/// this options string:
 /// [`is_complete`] that also tells a whole frame made with other options from a broken
 /// or missing one.
 pub fn frame_file(
