@@ -4,7 +4,9 @@
 //! library (`subfield::render`); only the string parsing lives in the CLI.
 
 use glam::Vec3;
-use subfield::render::{Aovs, FrameSet, FrameSpan, Shard, TraceDevice, MAX_FRAMES, MAX_SIDE};
+use subfield::render::{
+    Aovs, ExrCompression, FrameSet, FrameSpan, Shard, TraceDevice, MAX_FRAMES, MAX_SIDE,
+};
 
 fn bad(flag: &str, value: &str, why: impl std::fmt::Display) -> anyhow::Error {
     anyhow::anyhow!("{flag} {value:?}: {why}")
@@ -146,7 +148,23 @@ pub fn parse_vec3(flag: &str, s: &str) -> anyhow::Result<Vec3> {
     Ok(Vec3::from_array(v))
 }
 
-/// `depth,normal,albedo,position,motion,cryptomatte` in any order and subset.
+/// `--compression zip|piz|none`; `dwaa` (which DESIGN.md §4 names) is refused in one
+/// line: the `exr` crate reads DWAA but cannot write it.
+pub fn parse_compression(s: &str) -> Result<ExrCompression, String> {
+    match s.trim().to_ascii_lowercase().as_str() {
+        "zip" => Ok(ExrCompression::Zip),
+        "piz" => Ok(ExrCompression::Piz),
+        "none" => Ok(ExrCompression::None),
+        "dwaa" | "dwab" => Err(format!(
+            "{s}: not available: the exr crate this build uses reads DWA but cannot write it; \
+             use zip (the default) or piz"
+        )),
+        _ => Err(format!("{s}: not one of zip, piz, none")),
+    }
+}
+
+/// `depth,normal,albedo,position,motion,cryptomatte,diffuse,specular,transmission,emission`
+/// in any order and subset.
 pub fn parse_aovs(s: &str) -> anyhow::Result<Aovs> {
     let mut a = Aovs::default();
     for name in s.split(',').map(str::trim).filter(|n| !n.is_empty()) {
@@ -157,13 +175,17 @@ pub fn parse_aovs(s: &str) -> anyhow::Result<Aovs> {
             "position" | "P" => a.position = true,
             "motion" => a.motion = true,
             "cryptomatte" | "crypto" => a.cryptomatte = true,
+            "diffuse" => a.diffuse = true,
+            "specular" | "glossy" => a.specular = true,
+            "transmission" => a.transmission = true,
+            "emission" => a.emission = true,
             other => {
                 return Err(bad(
                     "--aov",
                     s,
                     format!(
                         "unknown AOV {other:?} (known: depth, normal, albedo, position, \
-                         motion, cryptomatte)"
+                         motion, cryptomatte, diffuse, specular, transmission, emission)"
                     ),
                 ))
             }
@@ -241,5 +263,17 @@ mod tests {
         let a = parse_aovs("position,motion,cryptomatte").unwrap();
         assert!(a.position && a.motion && a.cryptomatte && !a.depth);
         assert!(parse_aovs("depth,colour").is_err());
+        let a = parse_aovs("diffuse,specular,transmission,emission").unwrap();
+        assert_eq!(a.light_paths(), [true; 4]);
+        assert_eq!(a.names(), "diffuse,specular,transmission,emission");
+        let a = parse_aovs("emission").unwrap();
+        assert_eq!(a.light_paths(), [false, false, false, true]);
+        assert_eq!(parse_compression("piz"), Ok(ExrCompression::Piz));
+        assert_eq!(parse_compression("zip"), Ok(ExrCompression::Zip));
+        assert_eq!(parse_compression("none"), Ok(ExrCompression::None));
+        assert!(parse_compression("dwaa")
+            .unwrap_err()
+            .contains("cannot write"));
+        assert!(parse_compression("b44").is_err());
     }
 }

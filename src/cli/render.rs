@@ -116,9 +116,21 @@ pub struct Args {
     pub yfov: Option<f32>,
     /// Extra EXR channels: depth (Z), normal (N.X/Y/Z), albedo (albedo.R/G/B), position
     /// (P.X/Y/Z), motion (motion.X/Y, pixels to the next frame), cryptomatte
-    /// (CryptoObject00…, CryptoMaterial00…).
-    #[arg(long, value_name = "depth,normal,albedo,position,motion,cryptomatte")]
+    /// (CryptoObject00…, CryptoMaterial00…); light-path passes diffuse, specular,
+    /// transmission, emission (diffuse.R/G/B …, adding up to R,G,B).
+    #[arg(
+        long,
+        value_name = "depth,normal,albedo,position,motion,cryptomatte,diffuse,specular,transmission,emission"
+    )]
     pub aov: Option<String>,
+    /// EXR compression (lossless codecs only; dwaa is refused: the exr crate cannot
+    /// write it).
+    #[arg(long, value_name = "zip|piz|none", default_value = "zip", value_parser = parse::parse_compression)]
+    pub compression: render::ExrCompression,
+    /// Trace PX more pixels beyond every edge: the EXR's data window grows by PX on each
+    /// side, its display window stays the image.
+    #[arg(long, value_name = "PX", default_value_t = 0)]
+    pub overscan: u32,
     /// Cryptomatte ranks kept per pixel (two a layer).
     #[arg(long, value_name = "N", default_value_t = render::DEFAULT_CRYPTO_LEVELS)]
     pub crypto_levels: u32,
@@ -316,6 +328,8 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         shading,
         exposure: a.exposure,
         device: a.device,
+        compression: a.compression,
+        overscan: a.overscan,
         cancel: Default::default(),
     })
 }

@@ -199,6 +199,12 @@ fn render_flags(r: &render_cmd::Args) -> Vec<String> {
         (r.crypto_levels != subfield::render::DEFAULT_CRYPTO_LEVELS)
             .then(|| r.crypto_levels.to_string()),
     );
+    opt(
+        "compression",
+        (r.compression != subfield::render::ExrCompression::Zip)
+            .then(|| r.compression.name().to_string()),
+    );
+    opt("overscan", (r.overscan > 0).then(|| r.overscan.to_string()));
     if r.float {
         v.push("--float".into());
     }
@@ -239,8 +245,8 @@ fn base_name(pattern: &Path) -> String {
 fn complete(plan: &RenderPlan, opts: &RenderOptions, frame: u32) -> bool {
     render::is_complete(
         &plan.pattern.path(frame),
-        opts.width,
-        opts.height,
+        opts.width + 2 * opts.overscan,
+        opts.height + 2 * opts.overscan,
         opts.aovs,
         opts.pixel_type,
         &opts.options_string(plan.fps, plan.ambient, plan.default_light),

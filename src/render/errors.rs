@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use super::camera::MAX_EXPOSURE;
-use super::options::{MAX_FRAMES, MAX_SIDE};
+use super::options::{MAX_FRAMES, MAX_OVERSCAN, MAX_SIDE};
 
 /// A bad option value; the message names the flag as the command line spells it.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -32,6 +32,8 @@ pub enum OptionError {
     Width(u32),
     #[error("--size: the height {0} is not in 1..={MAX_SIDE}")]
     Height(u32),
+    #[error("--overscan {0}: at most {MAX_OVERSCAN} pixels")]
+    Overscan(u32),
     #[error("--spp {0}: must be in 1..=65536")]
     Spp(u32),
     #[error("--max-depth {0}: at most 64")]

@@ -63,8 +63,9 @@ pub use environment::{EnvironmentError, EnvironmentMap};
 pub use errors::{FramesProblem, OptionError, OutputFile};
 pub use mips::TextureMips;
 pub use options::{
-    Aovs, CancelFlag, FrameRange, FrameSet, FrameSpan, LookAt, PixelType, PreviewOptions,
-    RenderOptions, ShadingOptions, Shard, TraceDevice, DEFAULT_CRYPTO_LEVELS, MAX_FRAMES, MAX_SIDE,
+    Aovs, CancelFlag, ExrCompression, FrameRange, FrameSet, FrameSpan, LookAt, PixelType,
+    PreviewOptions, RenderOptions, ShadingOptions, Shard, TraceDevice, DEFAULT_CRYPTO_LEVELS,
+    MAX_FRAMES, MAX_OVERSCAN, MAX_SIDE,
 };
 pub use output::{
     channel_names, encode_exr, encode_preview, frame_file, is_complete, linear_to_srgb8, software,
@@ -72,7 +73,9 @@ pub use output::{
 };
 pub use planning::{plan, CameraSource, FramePlan, OutputPattern, RenderPlan};
 pub use sequence::{check_device, render_sequence};
-pub use shade::{CryptoBuffers, FrameBuffers, FrameWork, RayCounts, ShadeContext};
+pub use shade::{
+    CryptoBuffers, FrameBuffers, FrameWork, LightPath, LightPathBuffers, RayCounts, ShadeContext,
+};
 pub use stats::{plot_png, plot_svg, stats_csv, FrameStats, FrameTotals, PLOT_BARS};
 pub use tuning_rays::tuning_rays;
 pub use wavefront::{render_frame, sample_offset, AovInputs};

@@ -231,8 +231,9 @@ pub struct LookAt {
     pub yfov_deg: f32,
 }
 
-/// Extra EXR channels (`--aov depth,normal,albedo,position,motion,cryptomatte`). Each is
-/// computed only when asked for: a render without AOVs does none of their work.
+/// Extra EXR channels (`--aov depth,normal,albedo,position,motion,cryptomatte` and the
+/// light-path passes `diffuse,specular,transmission,emission`). Each is computed only
+/// when asked for: a render without AOVs does none of their work.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Aovs {
     /// `Z`: distance along the primary ray through the pixel centre; `+inf` on a miss.
@@ -254,6 +255,21 @@ pub struct Aovs {
     /// Ranks of Cryptomatte kept per pixel (`--crypto-levels`, default 6): two ranks a
     /// layer, so `ceil(levels / 2)` layers of each kind.
     pub crypto_levels: u32,
+    /// `diffuse.R/G/B`: light that reached the camera through a diffuse event at the
+    /// camera ray's hit (direct and bounced light, and the ambient term). The four
+    /// light-path passes add up to `R G B` (see `shade`'s [`LightPath`]).
+    ///
+    /// [`LightPath`]: super::shade::LightPath
+    pub diffuse: bool,
+    /// `specular.R/G/B`: the highlights of lights at the camera ray's hit, and all the
+    /// light its mirror or GGX reflection ray brings (whatever that ray meets next).
+    pub specular: bool,
+    /// `transmission.R/G/B`: all the light the refracted ray of the camera ray's hit
+    /// brings.
+    pub transmission: bool,
+    /// `emission.R/G/B`: emissive surfaces and the background or environment seen by
+    /// camera rays (through alpha-cut or blended surfaces too).
+    pub emission: bool,
 }
 
 /// Default of `--crypto-levels`.
@@ -269,6 +285,10 @@ impl Default for Aovs {
             motion: false,
             cryptomatte: false,
             crypto_levels: DEFAULT_CRYPTO_LEVELS,
+            diffuse: false,
+            specular: false,
+            transmission: false,
+            emission: false,
         }
     }
 }
@@ -284,12 +304,33 @@ impl Aovs {
             motion: true,
             cryptomatte: true,
             crypto_levels: DEFAULT_CRYPTO_LEVELS,
+            diffuse: true,
+            specular: true,
+            transmission: true,
+            emission: true,
         }
     }
 
     /// Whether any AOV made from the pixel-centre ray is asked for.
     pub fn any_centre(&self) -> bool {
         self.depth || self.normal || self.albedo || self.position || self.motion
+    }
+
+    /// Whether any light-path pass is asked for (then all four are traced: they are one
+    /// split of the same contributions).
+    pub fn any_light_path(&self) -> bool {
+        self.diffuse || self.specular || self.transmission || self.emission
+    }
+
+    /// The light-path passes asked for, in [`LightPath`](super::shade::LightPath) order
+    /// (`diffuse`, `specular`, `transmission`, `emission`).
+    pub fn light_paths(&self) -> [bool; 4] {
+        [
+            self.diffuse,
+            self.specular,
+            self.transmission,
+            self.emission,
+        ]
     }
 
     /// Cryptomatte layers of each kind (two ranks a layer).
@@ -310,6 +351,10 @@ impl Aovs {
             (self.position, "position"),
             (self.motion, "motion"),
             (self.cryptomatte, "cryptomatte"),
+            (self.diffuse, "diffuse"),
+            (self.specular, "specular"),
+            (self.transmission, "transmission"),
+            (self.emission, "emission"),
         ];
         all.iter()
             .filter(|(on, _)| *on)
@@ -326,6 +371,34 @@ pub enum PixelType {
     #[default]
     Half,
     Float,
+}
+
+/// How the frame's EXR is compressed (`--compression`). One part holds every channel,
+/// so the choice applies to the AOVs too; only lossless codecs are offered, so data
+/// AOVs and Cryptomatte stay exact whatever is chosen. DWAA (lossy) is refused: the
+/// `exr` crate (1.74) reads it but cannot write it (`OptionError::Compression`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ExrCompression {
+    /// OpenEXR's `ZIP_COMPRESSION` (16 lines a block), written by `exr_zip` in parallel.
+    #[default]
+    Zip,
+    /// OpenEXR's `PIZ_COMPRESSION` (wavelet + Huffman, 32 lines a block), by the `exr`
+    /// crate.
+    Piz,
+    /// No compression.
+    None,
+}
+
+impl ExrCompression {
+    /// The name `--compression` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            ExrCompression::Zip => "zip",
+            ExrCompression::Piz => "piz",
+            ExrCompression::None => "none",
+        }
+    }
 }
 
 /// A tone-mapped sRGB PNG of one frame, written beside the sequence.
@@ -460,6 +533,12 @@ pub struct RenderOptions {
     /// Where frames are traced. The options string names the device that traced (for
     /// `Auto`, the one it chose), so `--resume` re-renders frames made on the other.
     pub device: TraceDevice,
+    /// `--compression`: the EXR's codec. Lossless, so not part of the options string
+    /// (a frame resumed with another codec has the same pixels and is kept).
+    pub compression: ExrCompression,
+    /// `--overscan PX`: pixels traced beyond every edge of the image; the EXR's data
+    /// window is `−PX..W+PX−1 × −PX..H+PX−1`, its display window `0..W−1 × 0..H−1`.
+    pub overscan: u32,
     /// Stops the run after the frame in flight (Ctrl-C); not an option of the pixels.
     pub cancel: CancelFlag,
 }
@@ -488,6 +567,8 @@ impl Default for RenderOptions {
             shading: ShadingOptions::default(),
             exposure: 0.0,
             device: TraceDevice::Cpu,
+            compression: ExrCompression::Zip,
+            overscan: 0,
             cancel: CancelFlag::default(),
         }
     }
@@ -561,12 +642,21 @@ impl RenderOptions {
         }
         s += &format!(" exposure={}", self.exposure);
         s += &format!(" device={}", self.device.name());
+        // Only when asked for: frames without overscan keep the string (and bytes) they
+        // had before the option existed.
+        if self.overscan > 0 {
+            s += &format!(" overscan={}", self.overscan);
+        }
         s
     }
 }
 
 /// Largest image side accepted (keeps `W × H × spp` far from overflow).
 pub const MAX_SIDE: u32 = 32768;
+
+/// Largest `--overscan` accepted (the data window's side is at most
+/// `MAX_SIDE + 2·MAX_OVERSCAN`).
+pub const MAX_OVERSCAN: u32 = 4096;
 
 #[cfg(test)]
 mod tests {

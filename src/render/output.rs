@@ -11,8 +11,8 @@ use exr::prelude::{
 };
 
 use super::aov::{crypto_key, fps_rational, FrameHeader};
-use super::options::{Aovs, PixelType};
-use super::shade::FrameBuffers;
+use super::options::{Aovs, ExrCompression, PixelType};
+use super::shade::{FrameBuffers, LightPath};
 
 /// The header attribute holding [`RenderOptions::options_string`](super::RenderOptions).
 pub const OPTIONS_ATTRIBUTE: &str = "subfield/options";
@@ -41,6 +41,13 @@ pub fn channel_names(aovs: Aovs) -> Vec<String> {
     if aovs.motion {
         add(&["motion.X", "motion.Y"]);
     }
+    for (on, pass) in aovs.light_paths().into_iter().zip(LightPath::ALL) {
+        if on {
+            for c in ["R", "G", "B"] {
+                names.push(format!("{}.{c}", pass.name()));
+            }
+        }
+    }
     for layer in crypto_layer_names(aovs) {
         for c in ["R", "G", "B", "A"] {
             names.push(format!("{layer}.{c}"));
@@ -59,11 +66,15 @@ fn crypto_layer_names(aovs: Aovs) -> Vec<String> {
         .collect()
 }
 
-/// Written uncompressed by the `exr` crate, then ZIP-compressed sixteen lines a block by
-/// [`zip_scanlines`](super::exr_zip::zip_scanlines).
-fn encoding() -> Encoding {
+/// What the `exr` crate writes for `compression`: ZIP is written uncompressed, then
+/// ZIP-compressed sixteen lines a block by
+/// [`zip_scanlines`](super::exr_zip::zip_scanlines); PIZ by the crate itself.
+fn encoding(compression: ExrCompression) -> Encoding {
     Encoding {
-        compression: Compression::Uncompressed,
+        compression: match compression {
+            ExrCompression::Zip | ExrCompression::None => Compression::Uncompressed,
+            ExrCompression::Piz => Compression::PIZ,
+        },
         blocks: Blocks::ScanLines,
         line_order: LineOrder::Increasing,
     }
@@ -172,10 +183,12 @@ fn sort_header_attributes(bytes: &mut [u8]) {
     bytes[first..at].copy_from_slice(&out);
 }
 
-/// The EXR bytes of a frame.
+/// The EXR bytes of a frame: its data window is the buffers (the image and the
+/// overscan border, from `−overscan`), its display window the image.
 pub fn encode_exr(
     fb: &FrameBuffers,
     pixel: PixelType,
+    compression: ExrCompression,
     header: &FrameHeader,
 ) -> Result<Vec<u8>, exr::error::Error> {
     let n = fb.rgba.len();
@@ -213,6 +226,14 @@ pub fn encode_exr(
     if let Some(m) = &fb.motion {
         split(&mut list, m, ["motion.X", "motion.Y"], false);
     }
+    if let Some(lp) = &fb.light_paths {
+        for ((pass, data), on) in LightPath::ALL.iter().zip(&lp.passes).zip(lp.written) {
+            if on {
+                let names = ["R", "G", "B"].map(|c| format!("{}.{c}", pass.name()));
+                split(&mut list, data, names.each_ref().map(String::as_str), true);
+            }
+        }
+    }
     if let Some(c) = &fb.crypto {
         for (kind, ranks) in [("CryptoObject", &c.object), ("CryptoMaterial", &c.material)] {
             for layer in 0..c.levels.div_ceil(2) {
@@ -236,20 +257,34 @@ pub fn encode_exr(
         }
     }
     debug_assert!(list.iter().all(|c| c.sample_data.len() == n));
+    let (dw, dh) = fb.data_size();
+    let mut attributes = layer_attributes(header);
+    let o = i32::try_from(fb.overscan)
+        .map_err(|_| exr::error::Error::Invalid("overscan too large".into()))?;
+    attributes.layer_position = Vec2(-o, -o);
     let layer = Layer::new(
-        (fb.width as usize, fb.height as usize),
-        layer_attributes(header),
-        encoding(),
+        (dw as usize, dh as usize),
+        attributes,
+        encoding(compression),
         AnyChannels::sort(list),
     );
     let mut image = Image::from_layer(layer);
     image.attributes.chromaticities = Some(REC709_D65);
+    image.attributes.display_window = exr::meta::attribute::IntegerBounds::new(
+        Vec2(0, 0),
+        Vec2(fb.width as usize, fb.height as usize),
+    );
     let mut bytes = std::io::Cursor::new(Vec::with_capacity(n * 8));
+    // Not parallel: the writer thread must not queue work on the render's pool (see
+    // `exr_zip`), and PIZ's blocks through the crate are the only ones it compresses.
     image.write().non_parallel().to_buffered(&mut bytes)?;
     let mut bytes = bytes.into_inner();
     sort_header_attributes(&mut bytes);
-    super::exr_zip::zip_scanlines(&bytes)
-        .map_err(|e| exr::error::Error::Invalid(e.to_string().into()))
+    match compression {
+        ExrCompression::Zip => super::exr_zip::zip_scanlines(&bytes)
+            .map_err(|e| exr::error::Error::Invalid(e.to_string().into())),
+        ExrCompression::Piz | ExrCompression::None => Ok(bytes),
+    }
 }
 
 /// What a resumed run finds where a frame goes.
@@ -272,7 +307,8 @@ pub enum FrameFile {
 /// string (`subfield/options`, see
 /// [`RenderOptions::options_string`](super::RenderOptions::options_string)): every
 /// block is read and decompressed (a truncated or corrupt file is not complete), and a
-/// frame made with other options is not this run's.
+/// frame made with other options is not this run's. `width` and `height` are the data
+/// window's: the image's plus twice the `--overscan`.
 pub fn is_complete(
     path: &Path,
     width: u32,
@@ -284,7 +320,8 @@ pub fn is_complete(
     frame_file(path, width, height, aovs, pixel, options) == FrameFile::Complete
 }
 
-/// What is at `path` for a frame of this size, these channels and this options string:
+/// What is at `path` for a frame of this size (the data window's), these channels and
+/// this options string:
 /// [`is_complete`] that also tells a whole frame made with other options from a broken
 /// or missing one.
 pub fn frame_file(
@@ -360,11 +397,15 @@ pub fn linear_to_srgb8(c: f32) -> u8 {
     (s * 255.0 + 0.5) as u8
 }
 
-/// The PNG bytes of a frame: RGB clamped and sRGB-encoded.
+/// The PNG bytes of a frame: RGB clamped and sRGB-encoded, the image alone (the
+/// display window: no overscan border).
 pub fn encode_preview(fb: &FrameBuffers) -> Result<Vec<u8>, image::ImageError> {
-    let mut rgb = Vec::with_capacity(fb.rgba.len() * 3);
-    for p in &fb.rgba {
-        rgb.extend(p[..3].iter().map(|&c| linear_to_srgb8(c)));
+    let mut rgb = Vec::with_capacity((fb.width * fb.height) as usize * 3);
+    let (o, dw) = (fb.overscan as usize, fb.data_size().0 as usize);
+    for row in fb.rgba.chunks(dw.max(1)).skip(o).take(fb.height as usize) {
+        for p in &row[o..o + fb.width as usize] {
+            rgb.extend(p[..3].iter().map(|&c| linear_to_srgb8(c)));
+        }
     }
     let mut out = Vec::new();
     image::write_buffer_with_format(
@@ -380,7 +421,7 @@ pub fn encode_preview(fb: &FrameBuffers) -> Result<Vec<u8>, image::ImageError> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::shade::CryptoBuffers;
+    use super::super::shade::{CryptoBuffers, LightPathBuffers};
     use super::*;
 
     fn frame(aovs: Aovs) -> FrameBuffers {
@@ -408,6 +449,13 @@ mod tests {
                     material: (0..n * levels).map(r).collect(),
                 }
             }),
+            light_paths: aovs.any_light_path().then(|| LightPathBuffers {
+                passes: std::array::from_fn(|k| {
+                    (0..n).map(|i| [k as f32, i as f32 * 0.125, 1.0]).collect()
+                }),
+                written: aovs.light_paths(),
+            }),
+            overscan: 0,
         }
     }
 
@@ -432,13 +480,19 @@ mod tests {
         };
         let fb = frame(aovs);
         let hd = header(aovs, "spp=1");
-        let a = encode_exr(&fb, PixelType::Half, &hd).unwrap();
+        let a = encode_exr(&fb, PixelType::Half, ExrCompression::Zip, &hd).unwrap();
         // Custom attributes come out of a hash map: the sorted header makes every
         // encoding (in any process) the same bytes.
         for _ in 0..8 {
             assert_eq!(
                 a,
-                encode_exr(&fb, PixelType::Half, &header(aovs, "spp=1")).unwrap()
+                encode_exr(
+                    &fb,
+                    PixelType::Half,
+                    ExrCompression::Zip,
+                    &header(aovs, "spp=1")
+                )
+                .unwrap()
             );
         }
         let dir = std::env::temp_dir().join(format!("subfield-exr-unit-{}", std::process::id()));
@@ -465,13 +519,84 @@ mod tests {
         let layer = &img.layer_data[0];
         for c in &layer.channel_data.list {
             let name = c.name.to_string();
-            let linear = matches!(name.as_str(), "R" | "G" | "B") || name.starts_with("albedo.");
+            let linear = matches!(name.as_str(), "R" | "G" | "B")
+                || [
+                    "albedo.",
+                    "diffuse.",
+                    "specular.",
+                    "transmission.",
+                    "emission.",
+                ]
+                .iter()
+                .any(|p| name.starts_with(p));
             assert_eq!(c.quantize_linearly, linear, "{name}");
         }
         assert_eq!(layer.attributes.frames_per_second, Some((24, 1)));
         crate::atomic::write_atomically(&p, &a[..a.len() - 7]).unwrap();
         assert!(!is_complete(&p, 5, 3, aovs, PixelType::Half, o));
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Every codec `--compression` offers gives the same pixels back (all lossless),
+    /// with the codec named in the header; the overscan border makes the data window
+    /// larger than the display window, and the preview shows the display window only.
+    #[test]
+    fn codecs_are_lossless_and_overscan_sets_the_windows() {
+        let aovs = Aovs {
+            depth: true,
+            specular: true,
+            ..Default::default()
+        };
+        let mut fb = frame(aovs);
+        // 5x3 buffers as a 1x1 image with an overscan of 1 is 3x3: take the first 9.
+        fb.width = 1;
+        fb.height = 1;
+        fb.overscan = 1;
+        fb.rgba.truncate(9);
+        fb.depth.as_mut().unwrap().truncate(9);
+        for p in &mut fb.light_paths.as_mut().unwrap().passes {
+            p.truncate(9);
+        }
+        let hd = header(aovs, "o");
+        let mut raw = None;
+        for (c, want) in [
+            (ExrCompression::None, Compression::Uncompressed),
+            (ExrCompression::Zip, Compression::ZIP16),
+            (ExrCompression::Piz, Compression::PIZ),
+        ] {
+            let bytes = encode_exr(&fb, PixelType::Half, c, &hd).unwrap();
+            let img = exr::prelude::read()
+                .no_deep_data()
+                .largest_resolution_level()
+                .all_channels()
+                .first_valid_layer()
+                .all_attributes()
+                .pedantic()
+                .from_buffered(std::io::Cursor::new(&bytes))
+                .unwrap();
+            let l = &img.layer_data;
+            assert_eq!(l.encoding.compression, want);
+            assert_eq!(l.size, Vec2(3, 3));
+            assert_eq!(l.attributes.layer_position, Vec2(-1, -1));
+            assert_eq!(img.attributes.display_window.position, Vec2(0, 0));
+            assert_eq!(img.attributes.display_window.size, Vec2(1, 1));
+            let chans: Vec<_> = l
+                .channel_data
+                .list
+                .iter()
+                .map(|c| (c.name.to_string(), c.sample_data.clone()))
+                .collect();
+            match &raw {
+                None => raw = Some(chans),
+                Some(r) => assert_eq!(r, &chans, "{c:?}"),
+            }
+        }
+        // The preview is the one pixel of the image: the centre of the 3x3 buffers.
+        let png = encode_preview(&fb).unwrap();
+        let img = image::load_from_memory(&png).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (1, 1));
+        let centre = fb.rgba[4];
+        assert_eq!(img.get_pixel(0, 0).0[0], linear_to_srgb8(centre[0]));
     }
 
     #[test]

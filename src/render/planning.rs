@@ -8,7 +8,7 @@ use glam::Vec3;
 
 use super::camera::{animation_bounds, aspect_warning, CameraModel, MAX_EXPOSURE};
 use super::errors::OptionError;
-use super::options::{FrameRange, FrameSet, RenderOptions, Shard, MAX_SIDE};
+use super::options::{FrameRange, FrameSet, RenderOptions, Shard, MAX_OVERSCAN, MAX_SIDE};
 use super::output::{frame_file, FrameFile};
 use super::stats;
 use super::writer::{check_target, check_writable};
@@ -235,6 +235,9 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
     }
     if !(1..=MAX_SIDE).contains(&opts.height) {
         return Err(OptionError::Height(opts.height).into());
+    }
+    if opts.overscan > MAX_OVERSCAN {
+        return Err(OptionError::Overscan(opts.overscan).into());
     }
     if !(1..=65536).contains(&opts.spp) {
         return Err(OptionError::Spp(opts.spp).into());
@@ -483,10 +486,11 @@ pub(super) fn check_outputs(plan: &RenderPlan, opts: &RenderOptions) -> Result<(
 /// when the run does not resume.
 pub(super) fn resumed(opts: &RenderOptions, path: &Path, options: &str) -> Option<FrameFile> {
     opts.resume.then(|| {
+        // The data window (the image and the overscan border) is what the file holds.
         frame_file(
             path,
-            opts.width,
-            opts.height,
+            opts.width + 2 * opts.overscan,
+            opts.height + 2 * opts.overscan,
             opts.aovs,
             opts.pixel_type,
             options,

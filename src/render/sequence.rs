@@ -10,7 +10,7 @@ use std::time::Instant;
 use glam::Vec3;
 
 use super::aov::{CryptoNames, FrameHeader};
-use super::camera::{apply_exposure, CameraModel};
+use super::camera::CameraModel;
 use super::errors::OutputFile;
 use super::mips::TextureMips;
 use super::options::{RenderOptions, ShadingOptions, TraceDevice};
@@ -571,6 +571,7 @@ impl Frames<'_> {
         let update_ms = clock.elapsed().as_secs_f64() * 1e3;
         let inputs = AovInputs {
             aovs: opts.aovs,
+            overscan: opts.overscan,
             next,
             crypto: self.crypto.as_deref(),
         };
@@ -612,7 +613,7 @@ impl Frames<'_> {
                 out
             }
         };
-        apply_exposure(&mut fb.rgba, opts.exposure);
+        fb.apply_exposure(opts.exposure);
         let header = FrameHeader::new(&camera, plan.fps, self.options.clone(), self.crypto.clone());
         Ok((
             fb,

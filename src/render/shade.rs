@@ -80,6 +80,99 @@ pub struct FrameBuffers {
     /// Screen-space motion to the next frame in pixels (`motion.X/Y`; +x right, +y down).
     pub motion: Option<Vec<[f32; 2]>>,
     pub crypto: Option<CryptoBuffers>,
+    /// The light-path passes (`--aov diffuse,specular,transmission,emission`): all four
+    /// when any is asked for.
+    pub light_paths: Option<LightPathBuffers>,
+    /// Pixels traced beyond every edge (`--overscan`): the buffers are
+    /// `(width + 2·overscan) × (height + 2·overscan)`, row 0 being `y = −overscan`;
+    /// `width` and `height` are the image's (the display window).
+    pub overscan: u32,
+}
+
+impl FrameBuffers {
+    /// Width and height of the buffers: the image and its overscan border.
+    pub fn data_size(&self) -> (u32, u32) {
+        (
+            self.width + 2 * self.overscan,
+            self.height + 2 * self.overscan,
+        )
+    }
+
+    /// `--exposure EV`: the radiance (RGB and the light-path passes) × 2^EV; alpha and
+    /// the data AOVs are left alone.
+    pub fn apply_exposure(&mut self, ev: f32) {
+        super::camera::apply_exposure(&mut self.rgba, ev);
+        if ev == 0.0 {
+            return;
+        }
+        let k = ev.exp2();
+        if let Some(lp) = &mut self.light_paths {
+            for pass in &mut lp.passes {
+                for c in pass.iter_mut().flatten() {
+                    *c *= k;
+                }
+            }
+        }
+    }
+}
+
+/// Which pass a contribution to the beauty goes to (`--aov
+/// diffuse,specular,transmission,emission`), decided as Cycles decides its passes: by
+/// the first scattering event at the camera ray's hit (pass-through of alpha-cut or
+/// blended surfaces is no event). At that hit, light from the lights through the
+/// diffuse lobe, the ambient term and diffuse bounces are `Diffuse`; the lights' glint
+/// (the Blinn–Phong highlight) and everything the mirror or GGX reflection ray brings
+/// are `Specular`; everything the refracted ray brings is `Transmission`; the hit's own
+/// emission and the background or environment a camera ray sees are `Emission`. Past
+/// the first event a path keeps its pass (a mirror seen through glass is transmission).
+/// Every contribution goes to exactly one pass, so the passes add up to the beauty.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum LightPath {
+    Diffuse = 0,
+    Specular = 1,
+    Transmission = 2,
+    Emission = 3,
+}
+
+impl LightPath {
+    /// The passes in channel-layer order.
+    pub const ALL: [LightPath; 4] = [
+        LightPath::Diffuse,
+        LightPath::Specular,
+        LightPath::Transmission,
+        LightPath::Emission,
+    ];
+
+    /// The EXR layer name (`diffuse.R` …) and the `--aov` name.
+    pub fn name(self) -> &'static str {
+        match self {
+            LightPath::Diffuse => "diffuse",
+            LightPath::Specular => "specular",
+            LightPath::Transmission => "transmission",
+            LightPath::Emission => "emission",
+        }
+    }
+}
+
+/// The four light-path passes of a frame, linear RGB a pixel, indexed by
+/// [`LightPath`] (`passes[LightPath::Specular as usize]`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LightPathBuffers {
+    pub passes: [Vec<[f32; 3]>; 4],
+    /// Which of them the EXR gets (the `--aov` names given).
+    pub written: [bool; 4],
+}
+
+/// A contribution split over the passes (indexed by [`LightPath`]).
+pub(super) type Split = [Vec3; 4];
+
+/// `c` in pass `path`, nothing in the others.
+#[inline]
+fn split_one(path: LightPath, c: Vec3) -> Split {
+    let mut s = [Vec3::ZERO; 4];
+    s[path as usize] = c;
+    s
 }
 
 /// Cryptomatte ranks of a frame: `levels` `(id, coverage)` pairs a pixel, pixel by
@@ -444,7 +537,10 @@ impl<'a> ShadeContext<'a> {
                 Some(env) => env.radiance(ray.dir),
                 None => self.options.background,
             };
-            out.add(item.sample, item.weight * seen);
+            let c = item.weight * seen;
+            out.add_split(item.sample, c, || {
+                split_one(item.path.unwrap_or(LightPath::Emission), c)
+            });
             return;
         };
         let distance = hit.t * ray.dir.length();
@@ -486,14 +582,21 @@ impl<'a> ShadeContext<'a> {
                     .map_or(Vec3::ONE, |t| t.truncate())
             }
         };
-        out.add(
+        out.add_split(
             item.sample,
             weight * (emitted + ambient * self.options.ambient),
+            || {
+                let mut split =
+                    split_one(item.path.unwrap_or(LightPath::Emission), weight * emitted);
+                split[item.path.unwrap_or(LightPath::Diffuse) as usize] +=
+                    weight * (ambient * self.options.ambient);
+                split
+            },
         );
 
         // Direct light through shadow rays.
         let origin = s.point + s.ng * eps;
-        self.direct_light(&s, &lobes, weight, origin, item.sample, out);
+        self.direct_light(&s, &lobes, weight, origin, item, out);
         if !self.area.is_empty() {
             let n = if item.depth == 0 {
                 LIGHT_SAMPLES.div_ceil(spp.max(1))
@@ -596,16 +699,52 @@ impl<'a> ShadeContext<'a> {
 
     /// Diffuse plus (when `highlight`) the capped Blinn–Phong glint, for light arriving
     /// from `to_light`.
+    #[inline]
     fn brdf(lobes: &Lobes, s: &Surface, to_light: Vec3, highlight: bool) -> Vec3 {
         let mut brdf = lobes.kd * std::f32::consts::FRAC_1_PI;
-        let shininess = Self::shininess(lobes.roughness);
-        if highlight && shininess > 0.0 {
-            let h = (to_light + lobes.v).normalize_or_zero();
-            let nh = s.ns.dot(h).max(0.0);
-            let norm = (shininess + 8.0) / (8.0 * std::f32::consts::PI);
-            brdf += lobes.f0 * (1.0 - lobes.gloss * 0.5) * (norm * nh.powf(shininess)).min(1e3);
+        if highlight {
+            if let Some(g) = Self::glint(lobes, s, to_light) {
+                brdf += g;
+            }
         }
         brdf
+    }
+
+    /// The capped Blinn–Phong glint for light arriving from `to_light`; `None` for a
+    /// surface too rough to have one.
+    #[inline]
+    fn glint(lobes: &Lobes, s: &Surface, to_light: Vec3) -> Option<Vec3> {
+        let shininess = Self::shininess(lobes.roughness);
+        if shininess <= 0.0 {
+            return None;
+        }
+        let h = (to_light + lobes.v).normalize_or_zero();
+        let nh = s.ns.dot(h).max(0.0);
+        let norm = (shininess + 8.0) / (8.0 * std::f32::consts::PI);
+        Some(lobes.f0 * (1.0 - lobes.gloss * 0.5) * (norm * nh.powf(shininess)).min(1e3))
+    }
+
+    /// What light arriving from `to_light` adds, split over the passes (`e`: the
+    /// path's weight × the light's irradiance and geometry factors): at a camera ray's
+    /// hit (`path` `None`) the diffuse lobe's part is diffuse and the glint's specular;
+    /// deeper, both go to the path's pass.
+    fn split_light(
+        lobes: &Lobes,
+        s: &Surface,
+        to_light: Vec3,
+        highlight: bool,
+        e: Vec3,
+        path: Option<LightPath>,
+    ) -> Split {
+        let d = e * (lobes.kd * std::f32::consts::FRAC_1_PI);
+        let g = match highlight.then(|| Self::glint(lobes, s, to_light)).flatten() {
+            Some(g) => e * g,
+            None => Vec3::ZERO,
+        };
+        match path {
+            Some(p) => split_one(p, d + g),
+            None => [d, g, Vec3::ZERO, Vec3::ZERO],
+        }
     }
 
     /// A shadow ray towards each light that lights `s` (from `origin`, just off the
@@ -617,7 +756,7 @@ impl<'a> ShadeContext<'a> {
         lobes: &Lobes,
         weight: Vec3,
         origin: Vec3,
-        sample: u32,
+        item: &Item,
         out: &mut BlockOut,
     ) {
         for (li, l) in self.lights.iter().enumerate() {
@@ -638,7 +777,10 @@ impl<'a> ShadeContext<'a> {
             } else {
                 Ray::new(origin, to_light)
             };
-            out.shadow(shadow, li, sample, c);
+            out.shadow(shadow, li, item.sample, c, || {
+                let e = weight * irradiance * cos_i;
+                Self::split_light(lobes, s, to_light, true, e, item.path)
+            });
         }
     }
 
@@ -715,6 +857,10 @@ impl<'a> ShadeContext<'a> {
                 batch,
                 item.sample,
                 c,
+                || {
+                    let e = weight * le * (cos_i * cos_l / (d2 * lp.pdf_area * n as f32));
+                    Self::split_light(lobes, s, to, !lobes.reflects, e, item.path)
+                },
             );
         }
     }
@@ -782,6 +928,7 @@ fn pass_through(s: &Surface, item: &Item, alpha: f32, eps: f32, cone: Cone, out:
                 diffuse: item.diffuse,
                 seed: item.seed.child(2),
                 cone,
+                path: item.path,
             },
         );
     }
@@ -850,6 +997,12 @@ fn secondary(
             width: cone.width,
             spread,
         },
+        // At the camera ray's hit the event names the pass (kind 1: refraction).
+        path: item.path.or(Some(if kind == 1 {
+            LightPath::Transmission
+        } else {
+            LightPath::Specular
+        })),
     };
     // Refraction (or total internal reflection, which adds to the reflected ray).
     let kt_w = weight * kt;
@@ -932,6 +1085,7 @@ fn diffuse_bounce(
                 width: cone.width,
                 spread: 1.0,
             },
+            path: item.path.or(Some(LightPath::Diffuse)),
         },
     );
 }
@@ -1000,6 +1154,9 @@ pub(super) struct Item {
     /// The ray's own random numbers.
     pub(super) seed: Seed,
     pub(super) cone: Cone,
+    /// The light-path pass this ray's light goes to; `None` for a camera ray (and its
+    /// pass-through continuations) until its hit decides (see [`LightPath`]).
+    pub(super) path: Option<LightPath>,
 }
 
 /// A block's shadow rays towards one light, each with what it adds to which sample
@@ -1008,11 +1165,18 @@ pub(super) struct Item {
 pub(super) struct ShadowList {
     pub(super) rays: Vec<Ray>,
     pub(super) add: Vec<(u32, Vec3)>,
+    /// `add`'s contributions split over the light-path passes (only when
+    /// [`BlockOut::light_paths`]).
+    pub(super) split: Vec<Split>,
 }
 
 #[derive(Default)]
 pub(super) struct BlockOut {
+    /// Whether the light-path passes are traced: then every contribution also goes,
+    /// split, to `split` (and the shadow lists' `split`).
+    pub(super) light_paths: bool,
     pub(super) add: Vec<(u32, Vec3)>,
+    pub(super) split: Vec<(u32, Split)>,
     pub(super) cover: Vec<(u32, f32)>,
     /// The shadow rays a light at a time (index: the light's batch, see
     /// [`ShadeContext::shade`]'s lights and the area lights' batch after them).
@@ -1025,18 +1189,26 @@ impl BlockOut {
     /// Empties every list, keeping their capacity (a frame's blocks are reused).
     pub(super) fn clear(&mut self) {
         self.add.clear();
+        self.split.clear();
         self.cover.clear();
         for l in &mut self.shadow {
             l.rays.clear();
             l.add.clear();
+            l.split.clear();
         }
         self.next_rays.clear();
         self.next_items.clear();
     }
 
-    fn add(&mut self, sample: u32, c: Vec3) {
+    /// `c` to the beauty of `sample` and, when the passes are traced, `split()` (`c`
+    /// split over them) to the passes; nothing when `c` is 0 or not finite.
+    #[inline]
+    fn add_split(&mut self, sample: u32, c: Vec3, split: impl FnOnce() -> Split) {
         if c != Vec3::ZERO && c.is_finite() {
             self.add.push((sample, c));
+            if self.light_paths {
+                self.split.push((sample, split()));
+            }
         }
     }
     fn cover(&mut self, sample: u32, c: f32) {
@@ -1044,13 +1216,26 @@ impl BlockOut {
             self.cover.push((sample, c));
         }
     }
-    fn shadow(&mut self, ray: Ray, light: usize, sample: u32, c: Vec3) {
+    /// A shadow ray towards batch `light` that adds `c` (split: `split()`) to `sample`
+    /// when unblocked.
+    #[inline]
+    fn shadow(
+        &mut self,
+        ray: Ray,
+        light: usize,
+        sample: u32,
+        c: Vec3,
+        split: impl FnOnce() -> Split,
+    ) {
         if self.shadow.len() <= light {
             self.shadow.resize_with(light + 1, ShadowList::default);
         }
         let l = &mut self.shadow[light];
         l.rays.push(ray);
         l.add.push((sample, c));
+        if self.light_paths {
+            l.split.push(split());
+        }
     }
     fn next(&mut self, ray: Ray, item: Item) {
         self.next_rays.push(ray);

@@ -13,16 +13,23 @@ use super::camera::CameraModel;
 use super::memo::{lights_kept, Mode, StaticMemo};
 use super::options::Aovs;
 use super::sampling::Seed;
-use super::shade::{BlockOut, Cone, CryptoBuffers, FrameBuffers, FrameWork, Item, ShadeContext};
+use super::shade::{
+    BlockOut, Cone, CryptoBuffers, FrameBuffers, FrameWork, Item, LightPathBuffers, ShadeContext,
+    Split,
+};
 use crate::geometry::{Hit, Intersector, Ray};
 use crate::psf::Prim;
 use crate::scene::TriangleSoup;
 
-/// Which AOVs a frame has, and what those beyond the shading need (given only when
-/// they are asked for).
+/// Which AOVs a frame has, what those beyond the shading need (given only when they
+/// are asked for), and the border traced beyond the image.
 #[derive(Clone, Copy, Default)]
 pub struct AovInputs<'a> {
     pub aovs: Aovs,
+    /// `--overscan`: pixels traced beyond every edge of the image, on the same image
+    /// plane (pixel `(x, y)` of the border is the camera's pixel `(x, y)`, `x` from
+    /// `−overscan`), so the image's own pixels are the frame without it, to the bit.
+    pub overscan: u32,
     /// For `motion`: the moving triangles posed at the next frame's time (same order as
     /// this frame's) and the camera of that time.
     pub next: Option<(&'a TriangleSoup, CameraModel)>,
@@ -47,10 +54,13 @@ pub struct FrameScratch {
     items: Vec<Item>,
     hits: Vec<Option<Hit>>,
     radiance: Vec<Vec3>,
+    /// Each sample's radiance split over the light-path passes (when traced).
+    paths: Vec<Split>,
     coverage: Vec<f32>,
     outs: Vec<BlockOut>,
     shadow_rays: Vec<Ray>,
     shadow_add: Vec<(u32, Vec3)>,
+    shadow_split: Vec<Split>,
     /// Where each light's shadow rays start in `shadow_rays` (and end: one more).
     light_start: Vec<usize>,
     blocked: Vec<bool>,
@@ -204,19 +214,33 @@ pub fn render_frame_with<T: Intersector>(
     inputs: &AovInputs<'_>,
 ) -> (FrameBuffers, FrameWork) {
     let aovs = inputs.aovs;
-    let (w, h) = (camera.width as usize, camera.height as usize);
+    // The buffers cover the data window: the image and the overscan border. Pixel
+    // `(x, y)` of the buffers is the camera's pixel `(x − o, y − o)`.
+    let o = inputs.overscan as usize;
+    let (w, h) = (
+        camera.width as usize + 2 * o,
+        camera.height as usize + 2 * o,
+    );
     let spp = spp.max(1) as usize;
     let mut work = FrameWork::default();
-    let spare = scratch
-        .spare
-        .take()
-        .filter(|f| f.width == camera.width && f.height == camera.height);
-    let (rgba, depth, normal, albedo, position, motion) = match spare {
-        Some(f) => (f.rgba, f.depth, f.normal, f.albedo, f.position, f.motion),
+    let spare = scratch.spare.take().filter(|f| {
+        f.width == camera.width && f.height == camera.height && f.overscan == inputs.overscan
+    });
+    let (rgba, depth, normal, albedo, position, motion, kept_paths) = match spare {
+        Some(f) => (
+            f.rgba,
+            f.depth,
+            f.normal,
+            f.albedo,
+            f.position,
+            f.motion,
+            f.light_paths,
+        ),
         None => Default::default(),
     };
     let mut rgba = rgba;
     refill(&mut rgba, w * h, [0.0; 4]);
+    let light_paths = aovs.any_light_path();
     let mut fb = FrameBuffers {
         width: camera.width,
         height: camera.height,
@@ -227,16 +251,29 @@ pub fn render_frame_with<T: Intersector>(
         position: refill_opt(position, aovs.position, w * h, [0.0; 3]),
         motion: refill_opt(motion, aovs.motion, w * h, [0.0; 2]),
         crypto: None,
+        light_paths: light_paths.then(|| {
+            let mut passes = kept_paths.map(|p| p.passes).unwrap_or_default();
+            for p in &mut passes {
+                refill(p, w * h, [0.0; 3]);
+            }
+            LightPathBuffers {
+                passes,
+                written: aovs.light_paths(),
+            }
+        }),
+        overscan: inputs.overscan,
     };
     let FrameScratch {
         rays,
         items,
         hits,
         radiance,
+        paths,
         coverage,
         outs,
         shadow_rays,
         shadow_add,
+        shadow_split,
         light_start,
         blocked,
         spare: _,
@@ -258,6 +295,10 @@ pub fn render_frame_with<T: Intersector>(
         camera,
         next: inputs.next.filter(|_| aovs.motion),
     };
+    // The camera's pixel of buffer column or row `i` (negative in the border), as the
+    // hashes of the jitter and the seeds take it (wrapping: the image's own pixels keep
+    // the numbers they have without overscan).
+    let pixel = |i: u32| i.wrapping_sub(o as u32);
     let rows_per_chunk = (CHUNK_SAMPLES / (w * spp)).max(1);
     let mut y0 = 0;
     while y0 < h {
@@ -281,8 +322,9 @@ pub fn render_frame_with<T: Intersector>(
                     Some((next, at)) if next == s => at,
                     _ => walk(s),
                 };
-                let (ox, oy) = sample_offset(frame, at.x, at.y, at.k, spp as u32);
-                let ray = camera.ray(at.x as f32 + ox, at.y as f32 + oy);
+                let (x, y) = (pixel(at.x), pixel(at.y));
+                let (ox, oy) = sample_offset(frame, x, y, at.k, spp as u32);
+                let ray = camera.ray(x as i32 as f32 + ox, y as i32 as f32 + oy);
                 let mut next = at;
                 next.advance();
                 *state = Some((s + 1, next));
@@ -301,12 +343,16 @@ pub fn render_frame_with<T: Intersector>(
             passes: 0,
             bounces: 0,
             diffuse: false,
-            seed: Seed::camera(frame, at.x, at.y, at.k),
+            seed: Seed::camera(frame, pixel(at.x), pixel(at.y), at.k),
             cone,
+            path: None,
         };
         items.clear();
         work.rays.primary += nsamples as u64;
         refill(radiance, nsamples, Vec3::ZERO);
+        if light_paths {
+            refill(paths, nsamples, [Vec3::ZERO; 4]);
+        }
         refill(coverage, nsamples, 0.0f32);
         work.shade += clock.elapsed();
 
@@ -359,6 +405,7 @@ pub fn render_frame_with<T: Intersector>(
                     .enumerate()
                     .for_each(|(b, ((out, r), hs))| {
                         out.clear();
+                        out.light_paths = light_paths;
                         let mut at = walk(b * BLOCK);
                         for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
                             let item = primary_item(b * BLOCK + k, &at);
@@ -374,6 +421,7 @@ pub fn render_frame_with<T: Intersector>(
                     .zip(hits.par_chunks(BLOCK))
                     .for_each(|(((out, r), it), hs)| {
                         out.clear();
+                        out.light_paths = light_paths;
                         for ((ray, item), hit) in r.iter().zip(it).zip(hs) {
                             ctx.shade(ray, item, *hit, max_depth, spp as u32, out);
                         }
@@ -390,6 +438,7 @@ pub fn render_frame_with<T: Intersector>(
                     // would not get).
                     shadow_rays.clear();
                     shadow_add.clear();
+                    shadow_split.clear();
                     light_start.clear();
                     let lights = outs.iter().map(|o| o.shadow.len()).max().unwrap_or(0);
                     for l in 0..lights {
@@ -397,6 +446,7 @@ pub fn render_frame_with<T: Intersector>(
                         for list in outs.iter().filter_map(|o| o.shadow.get(l)) {
                             shadow_rays.extend_from_slice(&list.rays);
                             shadow_add.extend_from_slice(&list.add);
+                            shadow_split.extend_from_slice(&list.split);
                         }
                     }
                     light_start.push(shadow_rays.len());
@@ -407,6 +457,12 @@ pub fn render_frame_with<T: Intersector>(
                     for o in outs {
                         for &(s, c) in &o.add {
                             radiance[s as usize] += c;
+                        }
+                        for (s, split) in &o.split {
+                            let p = &mut paths[*s as usize];
+                            for (p, c) in p.iter_mut().zip(split) {
+                                *p += *c;
+                            }
                         }
                         for &(s, c) in &o.cover {
                             coverage[s as usize] += c;
@@ -450,6 +506,16 @@ pub fn render_frame_with<T: Intersector>(
                     radiance[s as usize] += c;
                 }
             }
+            if light_paths {
+                for ((&(s, _), split), &b) in shadow_add.iter().zip(&*shadow_split).zip(&*blocked) {
+                    if !b {
+                        let p = &mut paths[s as usize];
+                        for (p, c) in p.iter_mut().zip(split) {
+                            *p += *c;
+                        }
+                    }
+                }
+            }
             work.shade += clock.elapsed();
         }
 
@@ -460,7 +526,8 @@ pub fn render_frame_with<T: Intersector>(
                 .with_min_len(BLOCK)
                 .map(|i| {
                     let p = px0 + i;
-                    camera.ray((p % w) as f32 + 0.5, (p / w) as f32 + 0.5)
+                    let (x, y) = (pixel((p % w) as u32), pixel((p / w) as u32));
+                    camera.ray(x as i32 as f32 + 0.5, y as i32 as f32 + 0.5)
                 })
                 .collect();
             work.rays.primary += npix as u64;
@@ -490,6 +557,23 @@ pub fn render_frame_with<T: Intersector>(
                 let c = c * inv;
                 *px = [c.x, c.y, c.z, (a * inv).min(1.0)];
             });
+        if let Some(lp) = &mut fb.light_paths {
+            // Each pass averaged as the beauty is: so they add up to it, to the order of
+            // the float additions.
+            for (k, pass) in lp.passes.iter_mut().enumerate() {
+                pass[px0..px0 + npix]
+                    .par_iter_mut()
+                    .enumerate()
+                    .with_min_len(BLOCK)
+                    .for_each(|(i, px)| {
+                        let mut c = Vec3::ZERO;
+                        for split in &paths[i * spp..(i + 1) * spp] {
+                            c += split[k];
+                        }
+                        *px = (c * inv).to_array();
+                    });
+            }
+        }
         work.shade += clock.elapsed();
         y0 = y1;
     }

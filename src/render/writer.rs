@@ -83,12 +83,12 @@ pub(super) fn write_file(path: &Path, file: OutputFile, bytes: &[u8]) -> Result<
 pub(super) fn write_job(job: &Job, opts: &RenderOptions) -> Result<f64, RenderError> {
     let clock = Instant::now();
     create_parent(&job.path)?;
-    let bytes = encode_exr(&job.frame, opts.pixel_type, &job.header).map_err(|source| {
-        RenderError::Exr {
+    let bytes = encode_exr(&job.frame, opts.pixel_type, opts.compression, &job.header).map_err(
+        |source| RenderError::Exr {
             path: job.path.clone(),
             source,
-        }
-    })?;
+        },
+    )?;
     write_file(&job.path, OutputFile::Frame(job.stats.frame), &bytes)?;
     if let Some(p) = &job.preview {
         let png = encode_preview(&job.frame).map_err(|source| RenderError::Png {
