@@ -156,6 +156,8 @@ fn render_flags(r: &render_cmd::Args) -> Vec<String> {
         (r.crypto_levels != subfield::render::DEFAULT_CRYPTO_LEVELS)
             .then(|| r.crypto_levels.to_string()),
     );
+    opt("shutter", r.shutter.map(|x| x.to_string()));
+    opt("motion-steps", r.motion_steps.map(|k| k.to_string()));
     if r.float {
         v.push("--float".into());
     }
