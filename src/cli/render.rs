@@ -89,6 +89,15 @@ pub struct Args {
     /// in for bounce light.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub diffuse_bounces: u32,
+    /// Motion blur: the shutter is open for S of the frame interval (0 to 1), centred on
+    /// the frame's time; moving triangles, the camera and the lights blur. 0 (the
+    /// default) is no blur.
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
+    pub shutter: Option<f32>,
+    /// Times within the shutter at which the moving triangles, the camera and the lights
+    /// are posed, each sample tracing one (1 to 256; default 5); needs --shutter.
+    #[arg(long, value_name = "K")]
+    pub motion_steps: Option<u32>,
     /// Also write the first frame this run renders as a tone-mapped sRGB PNG.
     #[arg(long, value_name = "FILE.png")]
     pub preview: Option<PathBuf>,
@@ -330,7 +339,22 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         device: a.device,
         compression: a.compression,
         overscan: a.overscan,
+        motion_blur: motion_blur(a)?,
         cancel: Default::default(),
+    })
+}
+
+/// `--shutter` and `--motion-steps` (their ranges are the library's to check).
+fn motion_blur(a: &Args) -> anyhow::Result<Option<render::MotionBlur>> {
+    Ok(match (a.shutter, a.motion_steps) {
+        (None, None) => None,
+        (None, Some(k)) => {
+            bail!("--motion-steps {k} needs --shutter: the steps are times within the shutter")
+        }
+        (Some(s), k) => Some(render::MotionBlur {
+            shutter: s,
+            steps: k.unwrap_or(render::DEFAULT_MOTION_STEPS),
+        }),
     })
 }
 

@@ -205,6 +205,8 @@ fn render_flags(r: &render_cmd::Args) -> Vec<String> {
             .then(|| r.compression.name().to_string()),
     );
     opt("overscan", (r.overscan > 0).then(|| r.overscan.to_string()));
+    opt("shutter", r.shutter.map(|x| x.to_string()));
+    opt("motion-steps", r.motion_steps.map(|k| k.to_string()));
     if r.float {
         v.push("--float".into());
     }

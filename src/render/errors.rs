@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use super::camera::MAX_EXPOSURE;
-use super::options::{MAX_FRAMES, MAX_OVERSCAN, MAX_SIDE};
+use super::options::{MAX_FRAMES, MAX_MOTION_STEPS, MAX_OVERSCAN, MAX_SIDE};
 
 /// A bad option value; the message names the flag as the command line spells it.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -44,6 +44,10 @@ pub enum OptionError {
         "--exposure {0}: must be a number of stops between -{MAX_EXPOSURE} and {MAX_EXPOSURE}"
     )]
     Exposure(f32),
+    #[error("--shutter {0}: must be a fraction of the frame interval, from 0 to 1")]
+    Shutter(f32),
+    #[error("--motion-steps {0}: must be in 1..={MAX_MOTION_STEPS}")]
+    MotionSteps(u32),
     /// `--frames` as given (spelled back) and what is wrong with it.
     #[error("--frames {set}: {problem}")]
     Frames { set: String, problem: FramesProblem },

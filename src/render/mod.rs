@@ -63,9 +63,10 @@ pub use environment::{EnvironmentError, EnvironmentMap};
 pub use errors::{FramesProblem, OptionError, OutputFile};
 pub use mips::TextureMips;
 pub use options::{
-    Aovs, CancelFlag, ExrCompression, FrameRange, FrameSet, FrameSpan, LookAt, PixelType,
-    PreviewOptions, RenderOptions, ShadingOptions, Shard, TraceDevice, DEFAULT_CRYPTO_LEVELS,
-    MAX_FRAMES, MAX_OVERSCAN, MAX_SIDE,
+    Aovs, CancelFlag, ExrCompression, FrameRange, FrameSet, FrameSpan, LookAt, MotionBlur,
+    PixelType, PreviewOptions, RenderOptions, ShadingOptions, Shard, TraceDevice,
+    DEFAULT_CRYPTO_LEVELS, DEFAULT_MOTION_STEPS, MAX_FRAMES, MAX_MOTION_STEPS, MAX_OVERSCAN,
+    MAX_SIDE,
 };
 pub use output::{
     channel_names, encode_exr, encode_preview, frame_file, is_complete, linear_to_srgb8, software,

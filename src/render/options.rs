@@ -493,6 +493,44 @@ impl TraceDevice {
     }
 }
 
+/// Default of `--motion-steps` when `--shutter` is above 0.
+pub const DEFAULT_MOTION_STEPS: u32 = 5;
+
+/// Most `--motion-steps` a frame takes: each step is an insertion of the moving
+/// triangles, and a pixel's samples are spread over the steps (a byte a sample says which).
+pub const MAX_MOTION_STEPS: u32 = 256;
+
+/// Motion blur (`--shutter S --motion-steps K`, DESIGN.md §4; docs/IMAGES.md, "Motion
+/// blur"): the shutter is open for `shutter` of the frame interval, centred on the
+/// frame's time, and the moving triangles, the camera and the lights are posed at `steps`
+/// times within it, `t + (S/fps)·((k + 0.5)/K − 0.5)` for `k` in `0..K`. Each sample of a
+/// pixel traces one of the steps. A shutter of 0 is no blur: the frames are those made
+/// without it, to the byte.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotionBlur {
+    /// Fraction of the frame interval the shutter is open, in `[0, 1]`.
+    pub shutter: f32,
+    /// Sub-frame times, `1..=MAX_MOTION_STEPS`.
+    pub steps: u32,
+}
+
+impl MotionBlur {
+    /// The shutter open for `shutter` of a frame, at the default step count.
+    pub fn new(shutter: f32) -> MotionBlur {
+        MotionBlur {
+            shutter,
+            steps: DEFAULT_MOTION_STEPS,
+        }
+    }
+
+    /// Time of step `k` of the frame shown at `time` (seconds) at `fps`: the middle of
+    /// the `k`-th of `steps` equal parts of the shutter interval.
+    pub fn step_time(&self, time: f64, fps: f32, k: u32) -> f64 {
+        let open = self.shutter as f64 / fps as f64;
+        time + open * ((k as f64 + 0.5) / self.steps.max(1) as f64 - 0.5)
+    }
+}
+
 /// Everything `render_sequence` needs besides the scene. `Default` gives the command
 /// line's defaults (640×480, 1 spp, depth 4, half floats) and an empty output pattern.
 #[derive(Clone, Debug, PartialEq)]
@@ -539,6 +577,8 @@ pub struct RenderOptions {
     /// `--overscan PX`: pixels traced beyond every edge of the image; the EXR's data
     /// window is `−PX..W+PX−1 × −PX..H+PX−1`, its display window `0..W−1 × 0..H−1`.
     pub overscan: u32,
+    /// Motion blur; `None` (or a shutter of 0) renders each frame at its own time.
+    pub motion_blur: Option<MotionBlur>,
     /// Stops the run after the frame in flight (Ctrl-C); not an option of the pixels.
     pub cancel: CancelFlag,
 }
@@ -569,12 +609,18 @@ impl Default for RenderOptions {
             device: TraceDevice::Cpu,
             compression: ExrCompression::Zip,
             overscan: 0,
+            motion_blur: None,
             cancel: CancelFlag::default(),
         }
     }
 }
 
 impl RenderOptions {
+    /// The motion blur frames get: `None` without it or with a shutter of 0.
+    pub fn blur(&self) -> Option<MotionBlur> {
+        self.motion_blur.filter(|b| b.shutter > 0.0)
+    }
+
     /// The options that change pixels, as one string: it goes into every frame's header
     /// (`subfield/options`) and `--resume` re-renders a frame whose string differs.
     /// `fps` is the resolved rate (the plan's); `scene_ambient`, the scene's own ambient
@@ -646,6 +692,10 @@ impl RenderOptions {
         // had before the option existed.
         if self.overscan > 0 {
             s += &format!(" overscan={}", self.overscan);
+        }
+        // Only with blur: frames without it keep the string they had before it existed.
+        if let Some(b) = self.blur() {
+            s += &format!(" shutter={} motion-steps={}", b.shutter, b.steps);
         }
         s
     }

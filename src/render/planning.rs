@@ -8,7 +8,9 @@ use glam::Vec3;
 
 use super::camera::{animation_bounds, aspect_warning, CameraModel, MAX_EXPOSURE};
 use super::errors::OptionError;
-use super::options::{FrameRange, FrameSet, RenderOptions, Shard, MAX_OVERSCAN, MAX_SIDE};
+use super::options::{
+    FrameRange, FrameSet, RenderOptions, Shard, MAX_MOTION_STEPS, MAX_OVERSCAN, MAX_SIDE,
+};
 use super::output::{frame_file, FrameFile};
 use super::stats;
 use super::writer::{check_target, check_writable};
@@ -250,6 +252,14 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
     }
     if opts.shading.diffuse_bounces > 64 {
         return Err(OptionError::DiffuseBounces(opts.shading.diffuse_bounces).into());
+    }
+    if let Some(b) = opts.motion_blur {
+        if !(0.0..=1.0).contains(&b.shutter) {
+            return Err(OptionError::Shutter(b.shutter).into());
+        }
+        if !(1..=MAX_MOTION_STEPS).contains(&b.steps) {
+            return Err(OptionError::MotionSteps(b.steps).into());
+        }
     }
     // The authored range: the frames of the earliest and the latest key of the clips
     // that play; `None` without animation (or with every key at time 0).

@@ -18,9 +18,13 @@ use super::output::FrameFile;
 use super::planning::{
     check_outputs, plan, resumed, static_dynamic_split, CameraSource, RenderPlan,
 };
+use super::shade::FrameWork;
 use super::shade::{FrameBuffers, ShadeContext};
 use super::stats::{self, FrameStats, FrameTotals, PlotBars};
-use super::wavefront::{render_frame_with, AovInputs, FrameScratch};
+use super::wavefront::{
+    begin_blurred, finish_blurred, new_frame, render_pass_with, AovInputs, FrameArgs, FrameScratch,
+    StepPass,
+};
 use super::writer::{write_file, write_job, Job};
 use super::{FrameReport, RenderError, RenderEvent, RenderSummary};
 use crate::atomic::AtomicFile;
@@ -513,22 +517,14 @@ impl Frames<'_> {
         })
     }
 
-    /// Poses, updates and renders one frame; its header values.
-    fn render_one(
+    /// Poses the moving triangles at `t` into `dyn_soup` and hands them to the tracer.
+    fn pose_moving(
         &self,
-        static_bounds: Option<(Vec3, Vec3)>,
+        t: f32,
         tracing: &mut Tracing,
         dyn_soup: &mut TriangleSoup,
-        next_soup: &mut TriangleSoup,
-        scratch: &mut FrameScratch,
-        frame: u32,
-    ) -> Result<(FrameBuffers, FrameHeader, FrameStats), RenderError> {
-        let (scene, opts, plan) = (self.scene, self.opts, self.plan);
-        let (split, psf, static_soup) = (self.split, self.psf, self.static_soup);
-        let time = plan.time(frame);
-        let t = time as f32;
-        let clock = Instant::now();
-        scene.dynamic_triangles_at(split, t, dyn_soup);
+    ) -> Result<(), RenderError> {
+        self.scene.dynamic_triangles_at(self.split, t, dyn_soup);
         match tracing {
             Tracing::Cpu(dl) => dl.update(&dyn_soup.positions)?,
             #[cfg(feature = "gpu")]
@@ -540,69 +536,62 @@ impl Frames<'_> {
                     source,
                 })?,
         }
-        let camera = self.camera_at(t)?;
-        // The motion AOV: the moving triangles and the camera one frame later.
-        let next = if opts.aovs.motion {
-            let t1 = plan.time(frame.saturating_add(1)) as f32;
-            scene.dynamic_triangles_carried(split, t1, t, next_soup);
-            Some((&*next_soup, self.camera_at(t1)?))
-        } else {
-            None
-        };
-        let lights = scene.lights_at(plan.selection, t);
+        Ok(())
+    }
+
+    /// The shading context of time `t`: the lights posed then, the moving triangles as
+    /// posed in `dyn_soup`.
+    fn context<'s>(
+        &'s self,
+        t: f32,
+        static_bounds: Option<(Vec3, Vec3)>,
+        dyn_soup: &'s TriangleSoup,
+        camera: &CameraModel,
+    ) -> ShadeContext<'s> {
+        let lights = self.scene.lights_at(self.plan.selection, t);
         let bounds = match (static_bounds, dyn_soup.bounds()) {
             (Some((a, b)), Some((c, d))) => Some((a.min(c), b.max(d))),
             (a, b) => a.or(b),
         };
         let extent = bounds.map_or(1.0, |(lo, hi)| (hi - lo).length());
-        let ctx = ShadeContext::new(
-            scene,
-            static_soup,
+        ShadeContext::new(
+            self.scene,
+            self.static_soup,
             dyn_soup,
             &lights,
-            &camera,
+            camera,
             ShadingOptions {
-                default_light: plan.default_light,
-                ..opts.shading.clone()
+                default_light: self.plan.default_light,
+                ..self.opts.shading.clone()
             },
             extent,
             self.mips,
-        );
-        let update_ms = clock.elapsed().as_secs_f64() * 1e3;
-        let inputs = AovInputs {
-            aovs: opts.aovs,
-            overscan: opts.overscan,
-            next,
-            crypto: self.crypto.as_deref(),
-        };
-        // One renderer, generic over the tracer (the seam: `geometry::Intersector`).
-        let (mut fb, work) = match tracing {
+        )
+    }
+
+    /// Traces one pass of a frame into `fb` through the tracer `tracing` holds: the whole
+    /// frame (`pass` `None`) or a step of a blurred one. One renderer, generic over the
+    /// tracer (the seam: `geometry::Intersector`).
+    #[allow(clippy::too_many_arguments)]
+    fn trace(
+        &self,
+        tracing: &Tracing,
+        scratch: &mut FrameScratch,
+        ctx: &ShadeContext<'_>,
+        args: &FrameArgs<'_>,
+        pass: Option<StepPass>,
+        fb: &mut FrameBuffers,
+        work: &mut FrameWork,
+    ) -> Result<(), RenderError> {
+        match tracing {
             Tracing::Cpu(dl) => {
-                let tracer = psf.with_dynamic(dl);
-                render_frame_with(
-                    scratch,
-                    &ctx,
-                    &tracer,
-                    &camera,
-                    frame,
-                    opts.spp,
-                    opts.max_depth,
-                    &inputs,
-                )
+                let tracer = self.psf.with_dynamic(dl);
+                render_pass_with(scratch, fb, work, ctx, &tracer, args, pass);
             }
             #[cfg(feature = "gpu")]
             Tracing::Gpu(g) => {
                 let tracer = crate::gpu::GpuTracer::new(&g.dev, &g.stat, &g.moving);
-                let out = render_frame_with(
-                    scratch,
-                    &ctx,
-                    &tracer,
-                    &camera,
-                    frame,
-                    opts.spp,
-                    opts.max_depth,
-                    &inputs,
-                );
+                render_pass_with(scratch, fb, work, ctx, &tracer, args, pass);
                 // A batch that failed answered "no hit": the frame is not written.
                 if let Some(source) = tracer.take_error() {
                     return Err(RenderError::Gpu {
@@ -610,9 +599,99 @@ impl Frames<'_> {
                         source,
                     });
                 }
-                out
+            }
+        }
+        Ok(())
+    }
+
+    /// Poses, updates and renders one frame; its header values. With motion blur, once
+    /// for each time step within the shutter (`MotionBlur`), each step tracing its share
+    /// of the samples; the AOVs come from the frame's own time (the middle step when the
+    /// step count is odd, else a pass of their own).
+    fn render_one(
+        &self,
+        static_bounds: Option<(Vec3, Vec3)>,
+        tracing: &mut Tracing,
+        dyn_soup: &mut TriangleSoup,
+        next_soup: &mut TriangleSoup,
+        scratch: &mut FrameScratch,
+        frame: u32,
+    ) -> Result<(FrameBuffers, FrameHeader, FrameStats), RenderError> {
+        let (scene, opts, plan) = (self.scene, self.opts, self.plan);
+        let time = plan.time(frame);
+        let t = time as f32;
+        let clock = Instant::now();
+        let camera = self.camera_at(t)?;
+        // The motion AOV: the moving triangles and the camera one frame later.
+        let next = if opts.aovs.motion {
+            let t1 = plan.time(frame.saturating_add(1)) as f32;
+            scene.dynamic_triangles_carried(self.split, t1, t, next_soup);
+            Some((&*next_soup, self.camera_at(t1)?))
+        } else {
+            None
+        };
+        let inputs = AovInputs {
+            aovs: opts.aovs,
+            overscan: opts.overscan,
+            next,
+            crypto: self.crypto.as_deref(),
+        };
+        let mut update_ms = clock.elapsed().as_secs_f64() * 1e3;
+        let mut work = FrameWork::default();
+        let mut fb = new_frame(scratch, &camera, &inputs);
+        // The passes: (time, what each traces).
+        let passes: Vec<(f32, Option<StepPass>)> = match opts.blur() {
+            None => vec![(t, None)],
+            Some(b) => {
+                let centre = (b.steps % 2 == 1).then_some(b.steps / 2);
+                let mut v: Vec<(f32, Option<StepPass>)> = (0..b.steps)
+                    .map(|k| {
+                        let tk = if Some(k) == centre {
+                            t
+                        } else {
+                            b.step_time(time, plan.fps, k) as f32
+                        };
+                        let aovs = Some(k) == centre;
+                        (
+                            tk,
+                            Some(StepPass {
+                                samples: Some(k),
+                                aovs,
+                            }),
+                        )
+                    })
+                    .collect();
+                if centre.is_none() && opts.aovs.any_centre() {
+                    v.push((
+                        t,
+                        Some(StepPass {
+                            samples: None,
+                            aovs: true,
+                        }),
+                    ));
+                }
+                fb = begin_blurred(scratch, &camera, frame, opts.spp, b.steps, &inputs);
+                v
             }
         };
+        for (tk, pass) in passes {
+            let clock = Instant::now();
+            self.pose_moving(tk, tracing, dyn_soup)?;
+            let cam = if tk == t { camera } else { self.camera_at(tk)? };
+            let ctx = self.context(tk, static_bounds, dyn_soup, &cam);
+            update_ms += clock.elapsed().as_secs_f64() * 1e3;
+            let args = FrameArgs {
+                camera: &cam,
+                frame,
+                spp: opts.spp,
+                max_depth: opts.max_depth,
+                inputs: &inputs,
+            };
+            self.trace(tracing, scratch, &ctx, &args, pass, &mut fb, &mut work)?;
+        }
+        if opts.blur().is_some() {
+            finish_blurred(scratch, &mut fb, opts.spp);
+        }
         fb.apply_exposure(opts.exposure);
         let header = FrameHeader::new(&camera, plan.fps, self.options.clone(), self.crypto.clone());
         Ok((

@@ -67,6 +67,12 @@ pub struct FrameScratch {
     spare: Option<FrameBuffers>,
     /// The static answers of the last frame's camera and shadow rays.
     memo: StaticMemo,
+    /// Motion blur: the time step of each of the frame's samples, the samples of a
+    /// chunk a step traces (chunk numbers), and each sample's Cryptomatte ids (object,
+    /// material) until every step has traced.
+    sample_steps: Vec<u8>,
+    picked: Vec<u32>,
+    crypto_ids: Vec<[Option<u32>; 2]>,
 }
 
 impl FrameScratch {
@@ -213,56 +219,281 @@ pub fn render_frame_with<T: Intersector>(
     max_depth: u32,
     inputs: &AovInputs<'_>,
 ) -> (FrameBuffers, FrameWork) {
+    let mut fb = scratch.buffers(camera, inputs);
+    let mut work = FrameWork::default();
+    let frame = FrameArgs {
+        camera,
+        frame,
+        spp,
+        max_depth,
+        inputs,
+    };
+    trace_pass(scratch, &mut fb, &mut work, ctx, tracer, &frame, None);
+    (fb, work)
+}
+
+/// A frame's values that every pass of it shares.
+pub(super) struct FrameArgs<'a> {
+    /// The camera of the pass (of its time, with motion blur).
+    pub camera: &'a CameraModel,
+    pub frame: u32,
+    pub spp: u32,
+    pub max_depth: u32,
+    pub inputs: &'a AovInputs<'a>,
+}
+
+/// One pass of a frame traced in time steps (motion blur, see
+/// [`begin_blurred`]): the samples of step `samples` (none for `None`) and, with `aovs`,
+/// the pixel-centre AOV rays, all through the scene posed at that step's time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct StepPass {
+    pub samples: Option<u32>,
+    pub aovs: bool,
+}
+
+/// Kensler's hashed permutation of `0..l` ("Correlated Multi-Jittered Sampling", Pixar
+/// 2013): `i` in `0..l` goes to a distinct value in `0..l` chosen by `p` (cycle-walking
+/// on the next power of two).
+fn permute(mut i: u32, l: u32, p: u32) -> u32 {
+    if l <= 1 {
+        return 0;
+    }
+    let mut w = l - 1;
+    w |= w >> 1;
+    w |= w >> 2;
+    w |= w >> 4;
+    w |= w >> 8;
+    w |= w >> 16;
+    loop {
+        i ^= p;
+        i = i.wrapping_mul(0xe170_893d);
+        i ^= p >> 16;
+        i ^= (i & w) >> 4;
+        i ^= p >> 8;
+        i = i.wrapping_mul(0x0929_eb3f);
+        i ^= p >> 23;
+        i ^= (i & w) >> 1;
+        i = i.wrapping_mul(1 | p >> 27);
+        i = i.wrapping_mul(0x6935_fa69);
+        i ^= (i & w) >> 11;
+        i = i.wrapping_mul(0x74dc_b303);
+        i ^= (i & w) >> 2;
+        i = i.wrapping_mul(0x9e50_1cc3);
+        i ^= (i & w) >> 2;
+        i = i.wrapping_mul(0xc860_a3df);
+        i &= w;
+        i ^= i >> 5;
+        if i < l {
+            break;
+        }
+    }
+    i.wrapping_add(p) % l
+}
+
+/// Salt of the step hash, beyond any sample number (`--spp` is at most 65536), so that
+/// it is not the hash of a sample's jitter.
+const STEP_SALT: u32 = 0x5173_0000;
+
+/// Which of `steps` time steps sample `k` (of `spp`) of pixel `(x, y)` of `frame` traces:
+/// the pixel's samples, in an order shuffled per pixel, dealt over the steps in turn from
+/// a step drawn per pixel. So every step gets `spp / steps` samples of the pixel or one
+/// more; with fewer samples than steps, neighbouring pixels cover the other steps; and a
+/// step's samples are not those of one column of the jitter grid (which dealing them in
+/// sample order would give when the grid is as wide as the step count).
+pub fn sample_step(frame: u32, x: u32, y: u32, k: u32, spp: u32, steps: u32) -> u32 {
+    let steps = steps.max(1);
+    let h = hash([frame, x, y, STEP_SALT]);
+    let first = (h % u64::from(steps)) as u32;
+    let order = permute(k, spp.max(1), (h >> 32) as u32);
+    ((u64::from(order) + u64::from(first)) % u64::from(steps)) as u32
+}
+
+/// Starts a frame traced in `steps` time steps (motion blur): its buffers, and which step
+/// each sample traces (a byte a sample, `W × H × spp` bytes). Then one
+/// [`render_pass_with`] a step (and one for the AOVs when no step is at the frame's own
+/// time), then [`finish_blurred`].
+pub(super) fn begin_blurred(
+    scratch: &mut FrameScratch,
+    camera: &CameraModel,
+    frame: u32,
+    spp: u32,
+    steps: u32,
+    inputs: &AovInputs<'_>,
+) -> FrameBuffers {
+    let fb = scratch.buffers(camera, inputs);
+    let (w, h) = fb.data_size();
+    let (w, spp) = (w as usize, spp.max(1) as usize);
+    let n = w * h as usize * spp;
+    let o = inputs.overscan;
+    scratch.sample_steps.clear();
+    scratch
+        .sample_steps
+        .par_extend((0..n).into_par_iter().with_min_len(4 * BLOCK).map(|s| {
+            let p = s / spp;
+            // The camera's pixel (wrapping in the border, as the seeds take it).
+            let (x, y) = (
+                ((p % w) as u32).wrapping_sub(o),
+                ((p / w) as u32).wrapping_sub(o),
+            );
+            sample_step(frame, x, y, (s % spp) as u32, spp as u32, steps) as u8
+        }));
+    if fb.crypto.is_some() {
+        refill(&mut scratch.crypto_ids, n, [None; 2]);
+    }
+    fb
+}
+
+/// A frame's buffers (of `camera`'s size, the AOVs `inputs` ask for), cleared, for
+/// [`render_pass_with`] without blur.
+pub(super) fn new_frame(
+    scratch: &mut FrameScratch,
+    camera: &CameraModel,
+    inputs: &AovInputs<'_>,
+) -> FrameBuffers {
+    scratch.buffers(camera, inputs)
+}
+
+/// One pass of a frame: the whole frame into `fb` from [`new_frame`] (`pass` `None`, as
+/// [`render_frame_with`]), or a step of a blurred frame begun with [`begin_blurred`],
+/// `ctx`, `tracer` and `frame.camera` posed at the step's time, whose samples' radiance
+/// and coverage are added to `fb` (summed, not yet averaged), with the AOVs when the
+/// pass has them. `work` adds the pass's rays and times.
+pub(super) fn render_pass_with<T: Intersector>(
+    scratch: &mut FrameScratch,
+    fb: &mut FrameBuffers,
+    work: &mut FrameWork,
+    ctx: &ShadeContext<'_>,
+    tracer: &T,
+    frame: &FrameArgs<'_>,
+    pass: Option<StepPass>,
+) {
+    trace_pass(scratch, fb, work, ctx, tracer, frame, pass);
+}
+
+/// Ends a blurred frame: each pixel's sums over its samples (the beauty's and the
+/// light-path passes') divided by `spp`, and the Cryptomatte ranks of all its samples,
+/// whatever step each traced.
+pub(super) fn finish_blurred(scratch: &FrameScratch, fb: &mut FrameBuffers, spp: u32) {
+    let spp = spp.max(1) as usize;
+    let inv = 1.0 / spp as f32;
+    fb.rgba.par_iter_mut().with_min_len(BLOCK).for_each(|px| {
+        *px = [
+            px[0] * inv,
+            px[1] * inv,
+            px[2] * inv,
+            (px[3] * inv).min(1.0),
+        ]
+    });
+    if let Some(lp) = &mut fb.light_paths {
+        for pass in &mut lp.passes {
+            pass.par_iter_mut()
+                .with_min_len(BLOCK)
+                .for_each(|px| *px = (Vec3::from(*px) * inv).to_array());
+        }
+    }
+    if let Some(buf) = fb.crypto.as_mut() {
+        let levels = buf.levels;
+        let ids = &scratch.crypto_ids;
+        buf.object
+            .par_chunks_mut(levels)
+            .zip(buf.material.par_chunks_mut(levels))
+            .zip(ids.par_chunks(spp))
+            .with_min_len(BLOCK / spp + 1)
+            .for_each(|((obj, mat), samples)| {
+                let o: Vec<Option<u32>> = samples.iter().map(|s| s[0]).collect();
+                let m: Vec<Option<u32>> = samples.iter().map(|s| s[1]).collect();
+                rank(&o, levels, obj);
+                rank(&m, levels, mat);
+            });
+    }
+}
+
+impl FrameScratch {
+    /// A frame's buffers for `camera`'s image and the AOVs asked for, cleared, reusing a
+    /// written frame's allocations when they fit.
+    fn buffers(&mut self, camera: &CameraModel, inputs: &AovInputs<'_>) -> FrameBuffers {
+        let aovs = inputs.aovs;
+        // The buffers cover the data window: the image and the overscan border. Pixel
+        // `(x, y)` of the buffers is the camera's pixel `(x − o, y − o)`.
+        let o = inputs.overscan as usize;
+        let (w, h) = (
+            camera.width as usize + 2 * o,
+            camera.height as usize + 2 * o,
+        );
+        let spare = self.spare.take().filter(|f| {
+            f.width == camera.width && f.height == camera.height && f.overscan == inputs.overscan
+        });
+        let (rgba, depth, normal, albedo, position, motion, kept_paths) = match spare {
+            Some(f) => (
+                f.rgba,
+                f.depth,
+                f.normal,
+                f.albedo,
+                f.position,
+                f.motion,
+                f.light_paths,
+            ),
+            None => Default::default(),
+        };
+        let mut rgba = rgba;
+        refill(&mut rgba, w * h, [0.0; 4]);
+        let levels = aovs.crypto_levels.max(1) as usize;
+        FrameBuffers {
+            width: camera.width,
+            height: camera.height,
+            rgba,
+            depth: refill_opt(depth, aovs.depth, w * h, f32::INFINITY),
+            normal: refill_opt(normal, aovs.normal, w * h, [0.0; 3]),
+            albedo: refill_opt(albedo, aovs.albedo, w * h, [0.0; 3]),
+            position: refill_opt(position, aovs.position, w * h, [0.0; 3]),
+            motion: refill_opt(motion, aovs.motion, w * h, [0.0; 2]),
+            crypto: (inputs.crypto.is_some() && aovs.cryptomatte).then(|| CryptoBuffers {
+                levels,
+                object: vec![(0.0, 0.0); w * h * levels],
+                material: vec![(0.0, 0.0); w * h * levels],
+            }),
+            light_paths: aovs.any_light_path().then(|| {
+                let mut passes = kept_paths.map(|p| p.passes).unwrap_or_default();
+                for p in &mut passes {
+                    refill(p, w * h, [0.0; 3]);
+                }
+                LightPathBuffers {
+                    passes,
+                    written: aovs.light_paths(),
+                }
+            }),
+            overscan: inputs.overscan,
+        }
+    }
+}
+
+/// Traces and shades a frame's samples into `fb`: all of them, as one frame (`pass`
+/// `None`), or those of one time step of a blurred frame.
+fn trace_pass<T: Intersector>(
+    scratch: &mut FrameScratch,
+    fb: &mut FrameBuffers,
+    work: &mut FrameWork,
+    ctx: &ShadeContext<'_>,
+    tracer: &T,
+    args: &FrameArgs<'_>,
+    pass: Option<StepPass>,
+) {
+    let FrameArgs {
+        camera,
+        frame,
+        spp,
+        max_depth,
+        inputs,
+    } = *args;
     let aovs = inputs.aovs;
-    // The buffers cover the data window: the image and the overscan border. Pixel
-    // `(x, y)` of the buffers is the camera's pixel `(x − o, y − o)`.
+    // The data window: the image and the overscan border (see `FrameScratch::buffers`).
     let o = inputs.overscan as usize;
     let (w, h) = (
         camera.width as usize + 2 * o,
         camera.height as usize + 2 * o,
     );
     let spp = spp.max(1) as usize;
-    let mut work = FrameWork::default();
-    let spare = scratch.spare.take().filter(|f| {
-        f.width == camera.width && f.height == camera.height && f.overscan == inputs.overscan
-    });
-    let (rgba, depth, normal, albedo, position, motion, kept_paths) = match spare {
-        Some(f) => (
-            f.rgba,
-            f.depth,
-            f.normal,
-            f.albedo,
-            f.position,
-            f.motion,
-            f.light_paths,
-        ),
-        None => Default::default(),
-    };
-    let mut rgba = rgba;
-    refill(&mut rgba, w * h, [0.0; 4]);
-    let light_paths = aovs.any_light_path();
-    let mut fb = FrameBuffers {
-        width: camera.width,
-        height: camera.height,
-        rgba,
-        depth: refill_opt(depth, aovs.depth, w * h, f32::INFINITY),
-        normal: refill_opt(normal, aovs.normal, w * h, [0.0; 3]),
-        albedo: refill_opt(albedo, aovs.albedo, w * h, [0.0; 3]),
-        position: refill_opt(position, aovs.position, w * h, [0.0; 3]),
-        motion: refill_opt(motion, aovs.motion, w * h, [0.0; 2]),
-        crypto: None,
-        light_paths: light_paths.then(|| {
-            let mut passes = kept_paths.map(|p| p.passes).unwrap_or_default();
-            for p in &mut passes {
-                refill(p, w * h, [0.0; 3]);
-            }
-            LightPathBuffers {
-                passes,
-                written: aovs.light_paths(),
-            }
-        }),
-        overscan: inputs.overscan,
-    };
+    let light_paths = fb.light_paths.is_some();
     let FrameScratch {
         rays,
         items,
@@ -278,19 +509,20 @@ pub fn render_frame_with<T: Intersector>(
         blocked,
         spare: _,
         memo,
+        sample_steps,
+        picked,
+        crypto_ids,
     } = scratch;
     let layers = tracer.layers();
-    let mode = memo.begin(camera, spp, w * h, layers.is_some());
+    // The memo keeps a still camera's rays from frame to frame; a blurred frame's steps
+    // each trace other samples (and a moving camera other rays), so it stands aside.
+    let mode = memo.begin(camera, spp, w * h, layers.is_some() && pass.is_none());
     let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
-    let levels = aovs.crypto_levels.max(1) as usize;
-    if crypto.is_some() {
-        fb.crypto = Some(CryptoBuffers {
-            levels,
-            object: vec![(0.0, 0.0); w * h * levels],
-            material: vec![(0.0, 0.0); w * h * levels],
-        });
-    }
-    let any_aov = aovs.any_centre();
+    // The centre-ray AOVs: every frame's, or the one pass of a blurred frame that has them.
+    let any_aov = aovs.any_centre() && pass.is_none_or(|p| p.aovs);
+    // One sample a pixel without blur: the centre rays are the camera rays themselves.
+    let centre_batch = spp > 1 || pass.is_some();
+    let step = pass.map(|p| p.samples);
     let aov_inputs = CentreInputs {
         camera,
         next: inputs.next.filter(|_| aovs.motion),
@@ -309,28 +541,59 @@ pub fn render_frame_with<T: Intersector>(
 
         // Primary rays.
         let clock = Instant::now();
-        // In parallel into the kept buffer, each task stepping through its pixels and
-        // samples without dividing (integer division was a tenth of the rays' making),
-        // and without filling the buffer first (a serial pass over 10 MB a frame).
         let walk = |s: usize| PixelWalk::at(px0, s, w, spp);
+        let sample_ray = |at: &PixelWalk| {
+            let (x, y) = (pixel(at.x), pixel(at.y));
+            let (ox, oy) = sample_offset(frame, x, y, at.k, spp as u32);
+            camera.ray(x as i32 as f32 + ox, y as i32 as f32 + oy)
+        };
         rays.clear();
-        rays.par_extend((0..nsamples).into_par_iter().with_min_len(BLOCK).map_init(
-            || None,
-            |state: &mut Option<(usize, PixelWalk)>, s| {
-                // A task's samples come in order: step from the last one.
-                let at = match state.take() {
-                    Some((next, at)) if next == s => at,
-                    _ => walk(s),
-                };
-                let (x, y) = (pixel(at.x), pixel(at.y));
-                let (ox, oy) = sample_offset(frame, x, y, at.k, spp as u32);
-                let ray = camera.ray(x as i32 as f32 + ox, y as i32 as f32 + oy);
-                let mut next = at;
-                next.advance();
-                *state = Some((s + 1, next));
-                ray
-            },
-        ));
+        // A blurred frame's pass: the chunk's samples of its step (chunk numbers).
+        let sel: Option<&[u32]> = match step {
+            None => {
+                // In parallel into the kept buffer, each task stepping through its
+                // pixels and samples without dividing (integer division was a tenth of
+                // the rays' making), and without filling the buffer first (a serial
+                // pass over 10 MB a frame).
+                rays.par_extend((0..nsamples).into_par_iter().with_min_len(BLOCK).map_init(
+                    || None,
+                    |state: &mut Option<(usize, PixelWalk)>, s| {
+                        // A task's samples come in order: step from the last one.
+                        let at = match state.take() {
+                            Some((next, at)) if next == s => at,
+                            _ => walk(s),
+                        };
+                        let ray = sample_ray(&at);
+                        let mut next = at;
+                        next.advance();
+                        *state = Some((s + 1, next));
+                        ray
+                    },
+                ));
+                None
+            }
+            Some(k) => {
+                picked.clear();
+                if let Some(k) = k {
+                    let chunk = &sample_steps[px0 * spp..(px0 + npix) * spp];
+                    picked.par_extend(
+                        chunk
+                            .par_iter()
+                            .enumerate()
+                            .with_min_len(4 * BLOCK)
+                            .filter(|(_, &st)| u32::from(st) == k)
+                            .map(|(s, _)| s as u32),
+                    );
+                }
+                rays.par_extend(
+                    picked
+                        .par_iter()
+                        .with_min_len(BLOCK)
+                        .map(|&s| sample_ray(&walk(s as usize))),
+                );
+                Some(&picked[..])
+            }
+        };
         let cone = primary_cone(camera);
         // A camera ray's bookkeeping, made where it is shaded rather than stored: a
         // frame's 300,000 of them were 15 MB written and read again for values that
@@ -348,7 +611,7 @@ pub fn render_frame_with<T: Intersector>(
             path: None,
         };
         items.clear();
-        work.rays.primary += nsamples as u64;
+        work.rays.primary += rays.len() as u64;
         refill(radiance, nsamples, Vec3::ZERO);
         if light_paths {
             refill(paths, nsamples, [Vec3::ZERO; 4]);
@@ -379,17 +642,25 @@ pub fn render_frame_with<T: Intersector>(
             work.trace += clock.elapsed();
 
             let clock = Instant::now();
-            if first && any_aov {
+            if first && any_aov && !centre_batch {
                 // The centre rays: the primary rays themselves with one sample, else
                 // their own batch (traced below).
-                if spp == 1 {
-                    write_aovs(ctx, &aov_inputs, &mut fb, px0, rays, hits);
-                }
+                write_aovs(ctx, &aov_inputs, fb, px0, rays, hits);
             }
             if first {
-                if let (Some(names), Some(buf)) = (crypto, fb.crypto.as_mut()) {
-                    // The primary rays are the samples in order: rank each pixel's.
-                    write_crypto(ctx, names, buf, px0, spp, hits);
+                match (crypto, sel) {
+                    (Some(names), None) => {
+                        if let Some(buf) = fb.crypto.as_mut() {
+                            // The primary rays are the samples in order: rank each
+                            // pixel's.
+                            write_crypto(ctx, names, buf, px0, spp, hits);
+                        }
+                    }
+                    (Some(names), Some(sel)) => {
+                        // A step's samples: their ids kept until every step has traced.
+                        keep_crypto_ids(ctx, names, crypto_ids, px0 * spp, sel, hits);
+                    }
+                    (None, _) => {}
                 }
             }
             let blocks = rays.len().div_ceil(BLOCK);
@@ -397,22 +668,38 @@ pub fn render_frame_with<T: Intersector>(
                 outs.resize_with(blocks, BlockOut::default);
             }
             if first {
-                // The camera rays: ray `i` is sample `i`.
-                outs[..blocks]
-                    .par_iter_mut()
-                    .zip(rays.par_chunks(BLOCK))
-                    .zip(hits.par_chunks(BLOCK))
-                    .enumerate()
-                    .for_each(|(b, ((out, r), hs))| {
-                        out.clear();
-                        out.light_paths = light_paths;
-                        let mut at = walk(b * BLOCK);
-                        for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
-                            let item = primary_item(b * BLOCK + k, &at);
-                            ctx.shade(ray, &item, *hit, max_depth, spp as u32, out);
-                            at.advance();
-                        }
-                    });
+                match sel {
+                    // The camera rays: ray `i` is sample `i`.
+                    None => outs[..blocks]
+                        .par_iter_mut()
+                        .zip(rays.par_chunks(BLOCK))
+                        .zip(hits.par_chunks(BLOCK))
+                        .enumerate()
+                        .for_each(|(b, ((out, r), hs))| {
+                            out.clear();
+                            out.light_paths = light_paths;
+                            let mut at = walk(b * BLOCK);
+                            for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
+                                let item = primary_item(b * BLOCK + k, &at);
+                                ctx.shade(ray, &item, *hit, max_depth, spp as u32, out);
+                                at.advance();
+                            }
+                        }),
+                    // A step's camera rays: ray `i` is sample `sel[i]`.
+                    Some(sel) => outs[..blocks]
+                        .par_iter_mut()
+                        .zip(rays.par_chunks(BLOCK))
+                        .zip(hits.par_chunks(BLOCK))
+                        .zip(sel.par_chunks(BLOCK))
+                        .for_each(|(((out, r), hs), ss)| {
+                            out.clear();
+                            out.light_paths = light_paths;
+                            for ((ray, hit), &s) in r.iter().zip(hs).zip(ss) {
+                                let item = primary_item(s as usize, &walk(s as usize));
+                                ctx.shade(ray, &item, *hit, max_depth, spp as u32, out);
+                            }
+                        }),
+                }
             } else {
                 outs[..blocks]
                     .par_iter_mut()
@@ -519,7 +806,7 @@ pub fn render_frame_with<T: Intersector>(
             work.shade += clock.elapsed();
         }
 
-        if any_aov && spp > 1 {
+        if any_aov && centre_batch {
             let clock = Instant::now();
             let centre: Vec<Ray> = (0..npix)
                 .into_par_iter()
@@ -537,48 +824,95 @@ pub fn render_frame_with<T: Intersector>(
             tracer.intersect_batch(&centre, &mut chits);
             work.trace += clock.elapsed();
             let clock = Instant::now();
-            write_aovs(ctx, &aov_inputs, &mut fb, px0, &centre, &chits);
+            write_aovs(ctx, &aov_inputs, fb, px0, &centre, &chits);
             work.shade += clock.elapsed();
         }
 
         let clock = Instant::now();
-        let inv = 1.0 / spp as f32;
-        fb.rgba[px0..px0 + npix]
+        let sums = |i: usize| {
+            let mut c = Vec3::ZERO;
+            let mut a = 0.0;
+            for s in i * spp..(i + 1) * spp {
+                c += radiance[s];
+                a += coverage[s];
+            }
+            (c, a)
+        };
+        let pixels = fb.rgba[px0..px0 + npix]
             .par_iter_mut()
             .enumerate()
-            .with_min_len(BLOCK)
-            .for_each(|(i, px)| {
-                let mut c = Vec3::ZERO;
-                let mut a = 0.0;
-                for s in i * spp..(i + 1) * spp {
-                    c += radiance[s];
-                    a += coverage[s];
-                }
-                let c = c * inv;
-                *px = [c.x, c.y, c.z, (a * inv).min(1.0)];
-            });
+            .with_min_len(BLOCK);
+        match sel {
+            None => {
+                let inv = 1.0 / spp as f32;
+                pixels.for_each(|(i, px)| {
+                    let (c, a) = sums(i);
+                    let c = c * inv;
+                    *px = [c.x, c.y, c.z, (a * inv).min(1.0)];
+                });
+            }
+            // A step's sums added to the steps' before (`finish_blurred` averages).
+            Some(sel) if !sel.is_empty() => pixels.for_each(|(i, px)| {
+                let (c, a) = sums(i);
+                *px = [px[0] + c.x, px[1] + c.y, px[2] + c.z, px[3] + a];
+            }),
+            Some(_) => {}
+        }
         if let Some(lp) = &mut fb.light_paths {
-            // Each pass averaged as the beauty is: so they add up to it, to the order of
-            // the float additions.
-            for (k, pass) in lp.passes.iter_mut().enumerate() {
-                pass[px0..px0 + npix]
-                    .par_iter_mut()
-                    .enumerate()
-                    .with_min_len(BLOCK)
-                    .for_each(|(i, px)| {
-                        let mut c = Vec3::ZERO;
-                        for split in &paths[i * spp..(i + 1) * spp] {
-                            c += split[k];
-                        }
-                        *px = (c * inv).to_array();
-                    });
+            // Each pass averaged (or, for a step, summed) as the beauty is: so they add
+            // up to it, to the order of the float additions.
+            let (inv, add) = match sel {
+                None => (1.0 / spp as f32, false),
+                Some(sel) if !sel.is_empty() => (1.0, true),
+                Some(_) => (0.0, false),
+            };
+            if inv > 0.0 {
+                for (k, pass) in lp.passes.iter_mut().enumerate() {
+                    pass[px0..px0 + npix]
+                        .par_iter_mut()
+                        .enumerate()
+                        .with_min_len(BLOCK)
+                        .for_each(|(i, px)| {
+                            let mut c = Vec3::ZERO;
+                            for split in &paths[i * spp..(i + 1) * spp] {
+                                c += split[k];
+                            }
+                            let c = c * inv;
+                            *px = if add {
+                                (Vec3::from(*px) + c).to_array()
+                            } else {
+                                c.to_array()
+                            };
+                        });
+                }
             }
         }
         work.shade += clock.elapsed();
         y0 = y1;
     }
     memo.end(mode);
-    (fb, work)
+}
+
+/// The Cryptomatte ids of a step's camera hits (`hits[i]` is chunk sample `sel[i]`, the
+/// chunk's first sample being `base`), kept in `ids` by the frame's sample number.
+fn keep_crypto_ids(
+    ctx: &ShadeContext<'_>,
+    names: &CryptoNames,
+    ids: &mut [[Option<u32>; 2]],
+    base: usize,
+    sel: &[u32],
+    hits: &[Option<Hit>],
+) {
+    let lookup = |kind: &[u32], i: u32| kind.get(i as usize).copied();
+    for (&s, h) in sel.iter().zip(hits) {
+        let (o, m) = match h.and_then(|h| ctx.ids(&h)) {
+            Some((n, m)) => (lookup(&names.object.ids, n), lookup(&names.material.ids, m)),
+            None => (None, None),
+        };
+        if let Some(slot) = ids.get_mut(base + s as usize) {
+            *slot = [o, m];
+        }
+    }
 }
 
 /// What the centre-ray AOVs read besides the shading context.
@@ -721,5 +1055,57 @@ mod tests {
             sample_offset(7, 10, 20, 0, 4),
             sample_offset(8, 10, 20, 0, 4)
         );
+    }
+
+    #[test]
+    fn permute_is_a_bijection() {
+        for l in 1..=70u32 {
+            for p in [0u32, 1, 0xdead_beef, 0x8000_0001] {
+                let mut seen = vec![false; l as usize];
+                for i in 0..l {
+                    let j = permute(i, l, p);
+                    assert!(j < l && !seen[j as usize], "l {l} p {p:#x}: {i} → {j}");
+                    seen[j as usize] = true;
+                }
+            }
+        }
+    }
+
+    /// Every step gets `spp / steps` samples of a pixel or one more; with fewer samples
+    /// than steps, a row of pixels covers every step; and the steps' samples are not
+    /// the same cells of the jitter grid in every pixel.
+    #[test]
+    fn sample_steps_are_balanced_and_shuffled() {
+        for (spp, steps) in [(64u32, 8u32), (16, 5), (3, 8), (1, 5), (8, 1)] {
+            let mut covered = vec![false; steps as usize];
+            let mut first_cells = std::collections::HashSet::new();
+            for x in 0..40 {
+                let mut count = vec![0u32; steps as usize];
+                for k in 0..spp {
+                    let st = sample_step(9, x, 3, k, spp, steps);
+                    count[st as usize] += 1;
+                    covered[st as usize] = true;
+                }
+                let (lo, hi) = (spp / steps, spp.div_ceil(steps));
+                assert!(
+                    count.iter().all(|&c| c == lo || c == hi),
+                    "spp {spp}, {steps} steps: {count:?}"
+                );
+                if spp >= steps && steps > 1 {
+                    first_cells
+                        .insert((0..spp).find(|&k| sample_step(9, x, 3, k, spp, steps) == 0));
+                }
+            }
+            assert!(
+                covered.iter().all(|&c| c),
+                "spp {spp}, {steps} steps: a step unused"
+            );
+            if spp >= steps && steps > 1 {
+                assert!(
+                    first_cells.len() > 4,
+                    "step 0 takes the same samples: {first_cells:?}"
+                );
+            }
+        }
     }
 }
