@@ -244,6 +244,8 @@ fn header_attributes_have_the_right_values() {
     for (got, want) in chroma.iter().zip(rec709) {
         assert!((got - want).abs() < 1e-6, "{chroma:?}");
     }
+    // ... and by name, as OpenEXR 3.4's colour interop id.
+    assert_eq!(exr.text("colorInteropID"), "lin_rec709_scene");
     let options = exr.text("subfield/options");
     for part in [
         "size=64x48",
@@ -286,6 +288,7 @@ fn header_attributes_have_the_right_values() {
         "worldToCamera: ".to_string(),
         "worldToNDC: ".to_string(),
         "chromaticities: 0.64, 0.33, 0.3, 0.6, 0.15, 0.06, 0.3127, 0.329".to_string(),
+        "colorInteropID: \"lin_rec709_scene\"".to_string(),
         format!(
             "cryptomatte/{}/name: \"CryptoObject\"",
             render::crypto_key("CryptoObject")

@@ -17,7 +17,7 @@ use common::render_scene::{cube, quad, temp_dir};
 use glam::{Quat, Vec3, Vec4};
 use subfield::import;
 use subfield::render::{
-    self, Aovs, EnvironmentMap, FrameRange, PixelType, RenderOptions, ShadingOptions,
+    self, Aovs, EnvironmentMap, FrameRange, MotionBlur, PixelType, RenderOptions, ShadingOptions,
 };
 use subfield::scene::{Falloff, LightDef, LightKind, Material, Node, Scene};
 
@@ -364,6 +364,60 @@ fn passes_add_up_to_the_beauty_with_every_material_and_light() {
     let floor = at(Vec3::new(0.0, 0.0, 3.0));
     assert!(share("diffuse", floor) > 0.9, "the floor is diffuse");
     assert_eq!(share("emission", floor), 0.0, "the floor emits nothing");
+}
+
+/// Motion blur and overscan together: a blurred frame's time steps each sum the passes
+/// as they sum the beauty, so the passes still add up, in the border too; and the scene
+/// being still, the blurred frame is the unblurred one (each sample traced once, at its
+/// step, with the same seeds) to the order of the float additions, passes included.
+#[test]
+fn passes_add_up_with_motion_blur_and_overscan() {
+    let dir = temp_dir("light-paths-blur");
+    let scene = import::load(&write_scene(&dir, false)).unwrap();
+    let o = 3;
+    let base = RenderOptions {
+        pixel_type: PixelType::Float,
+        overscan: o,
+        ..every_kind_options()
+    };
+    let sharp = openexr_channels(&render(&dir, "sharp", &scene, base.clone()));
+    // An odd step count (the middle step traces the frame's own time) and an even one.
+    for steps in [3, 4] {
+        let blurred = openexr_channels(&render(
+            &dir,
+            &format!("blur{steps}"),
+            &scene,
+            RenderOptions {
+                motion_blur: Some(MotionBlur {
+                    shutter: 1.0,
+                    steps,
+                }),
+                ..base.clone()
+            },
+        ));
+        let n = (W + 2 * o as usize) * (H + 2 * o as usize);
+        assert_eq!(blurred["R"].len(), n, "the data window with its border");
+        let (e, at) = worst_sum_error(&blurred, 2e-6, 1e-7);
+        assert!(e <= 1.0, "{steps} steps: {at} ({e} tolerances)");
+        for c in [
+            "R",
+            "G",
+            "B",
+            "A",
+            "diffuse.G",
+            "specular.R",
+            "transmission.B",
+            "emission.R",
+        ] {
+            for (i, (a, b)) in sharp[c].iter().zip(&blurred[c]).enumerate() {
+                assert!(
+                    (a - b).abs() <= 1e-5 * a.abs() + 1e-6,
+                    "{steps} steps, {c} at pixel {i}: {a} sharp, {b} blurred"
+                );
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

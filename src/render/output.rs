@@ -105,6 +105,12 @@ pub const REC709_D65: exr::meta::attribute::Chromaticities = exr::meta::attribut
     white: exr::math::Vec2(0.3127, 0.3290),
 };
 
+/// The header attribute naming the colour space (OpenEXR 3.4's `colorInteropID`).
+pub const COLOR_INTEROP_ATTRIBUTE: &str = "colorInteropID";
+/// Its value for every frame: the Color Interop Forum's id of linear Rec.709
+/// primaries, D65 white, scene-referred (what `chromaticities` says in numbers).
+pub const COLOR_INTEROP_ID: &str = "lin_rec709_scene";
+
 /// The header attributes of a frame (see DESIGN.md §4): `framesPerSecond`,
 /// `worldToCamera`, `worldToNDC`, `software`, `subfield/options` and the Cryptomatte
 /// metadata. No time stamps.
@@ -119,6 +125,13 @@ fn layer_attributes(header: &FrameHeader) -> LayerAttributes {
     a.other.insert(
         text(OPTIONS_ATTRIBUTE),
         AttributeValue::Text(text(&header.options)),
+    );
+    // The colour space by name as well, as the ASWF Color Interop Forum's recommendation
+    // for OpenEXR (read by OpenEXR 3.4 and later) spells it: the same space as
+    // `chromaticities`, scene-referred linear Rec.709.
+    a.other.insert(
+        text(COLOR_INTEROP_ATTRIBUTE),
+        AttributeValue::Text(text(COLOR_INTEROP_ID)),
     );
     if let Some(c) = &header.crypto {
         for kind in [&c.object, &c.material] {
