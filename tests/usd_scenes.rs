@@ -16,7 +16,7 @@ use common::render_scene::temp_dir;
 use glam::{Mat4, Vec3};
 use serde_json::Value;
 use subfield::import;
-use subfield::render::{self, Aovs, FrameRange, RenderOptions};
+use subfield::render::{self, Aovs, FrameRange, LookAt, PixelType, RenderOptions};
 use subfield::scene::{ClipSelection, Scene, TriangleSoup};
 use subfield::{BruteForce, Intersector, Ray};
 
@@ -426,4 +426,87 @@ fn preview_surface_materials_and_lights() {
         "{}",
         sun.intensity
     );
+}
+
+/// Rect and disk lights as emitting cards (docs/INPUTS.md): the card's material has the
+/// light's radiance, `intensity · 2^exposure · color / 683` (over the area with
+/// `normalize`), a camera below sees that radiance, and the card's back is dark.
+#[test]
+fn rect_and_disk_lights_are_emitting_cards() {
+    let Some(dir) = scenes() else {
+        return;
+    };
+    let scene = import::load(&dir.join("area.usda")).unwrap();
+    let emission = |name: &str| {
+        let node = scene
+            .nodes
+            .iter()
+            .find(|n| n.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("no node {name}"));
+        let mesh = &scene.meshes[node.mesh.expect("the light's card")];
+        let m = &scene.materials[mesh.primitives[0].material as usize];
+        assert!(!m.double_sided, "{name}: emits from its front only");
+        (
+            m.emissive * m.emissive_strength,
+            mesh.primitives[0].triangles.len(),
+        )
+    };
+    // 683 nits × 2^1 × (1, 0.5, 0.25) / 683.
+    let (panel, tris) = emission("/World/Panel");
+    assert_eq!(tris, 2);
+    assert!(
+        (panel - Vec3::new(2.0, 1.0, 0.5)).abs().max_element() < 1e-6,
+        "{panel}"
+    );
+    // 100 nits normalised by the fan's area (32 triangles of radius 0.5).
+    let (spot, tris) = emission("/World/Spot");
+    let n = subfield::import::USD_DISK_SEGMENTS;
+    assert_eq!(tris, n as usize);
+    let area = 0.5 * f64::from(n) * 0.25 * (std::f64::consts::TAU / f64::from(n)).sin();
+    let want = (100.0 / 683.0 / area) as f32;
+    assert!(
+        (spot - Vec3::splat(want)).abs().max_element() < 1e-5 * want,
+        "{spot} vs {want}"
+    );
+
+    // Seen in the pixels: the centre pixel of a camera under each light, and over the
+    // panel (its back).
+    let out = temp_dir("usd-area");
+    let centre = |name: &str, from: Vec3, at: Vec3| -> Vec3 {
+        let opts = RenderOptions {
+            output: out.join(format!("{name}.#.exr")),
+            frames: Some(FrameRange { start: 0, end: 1 }.into()),
+            width: 9,
+            height: 9,
+            pixel_type: PixelType::Float,
+            look_at: Some(LookAt {
+                from,
+                at,
+                up: Vec3::Z,
+                yfov_deg: 20.0,
+            }),
+            ..Default::default()
+        };
+        render::render_sequence(&scene, &opts, &mut quiet).unwrap();
+        let (w, _, chans) = read_exr(&out.join(format!("{name}.0.exr")));
+        let i = 4 * w + 4;
+        Vec3::new(
+            channel(&chans, "R")[i],
+            channel(&chans, "G")[i],
+            channel(&chans, "B")[i],
+        )
+    };
+    let below = centre("below", Vec3::new(0.0, 0.5, 0.0), Vec3::new(0.0, 2.0, 0.0));
+    assert!(
+        (below - panel).abs().max_element() < 1e-3,
+        "under the panel: {below}"
+    );
+    let disk = centre("disk", Vec3::new(5.0, 0.5, 0.0), Vec3::new(5.0, 2.0, 0.0));
+    assert!(
+        (disk - spot).abs().max_element() < 1e-3 * want,
+        "under the disk: {disk}"
+    );
+    let above = centre("above", Vec3::new(0.0, 3.5, 0.0), Vec3::new(0.0, 2.0, 0.0));
+    assert!(above.max_element() < 1e-3, "the panel's back: {above}");
+    let _ = std::fs::remove_dir_all(&out);
 }

@@ -38,6 +38,9 @@ use std::path::Path;
 pub use error::ImportError;
 pub use folder::Outside;
 pub use gltf_write::{to_glb, to_gltf_json, write_gltf};
+/// Triangles of the fan a USD disk light becomes (an emitting card).
+#[cfg(feature = "usd")]
+pub use usd::DISK_SEGMENTS as USD_DISK_SEGMENTS;
 pub use validate::validate;
 
 use crate::scene::Scene;

@@ -19,6 +19,8 @@ Scenes:
   shatter.usdz   shatter.usda packaged (UsdUtils.CreateNewUsdzPackage).
   looks.usda     UsdPreviewSurface materials (one with a diffuseColor texture), a sphere
                  light and a distant light.
+  area.usda      Y up, metres: a rect light at y = 2 and a disk light at x = 5, y = 2, both
+                 turned to shine down (-Y), over a grey floor at y = 0.
   bad/...        broken inputs (see bad_inputs()).
 """
 import json
@@ -27,7 +29,7 @@ import os
 import random
 import sys
 
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdUtils
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdUtils
 
 FRAMES = list(range(1, 9))
 GRID = 6  # GRID x GRID faces in the shattering sheet
@@ -211,6 +213,36 @@ def author_looks(path):
     stage.GetRootLayer().Save()
 
 
+def author_area(path):
+    stage = Usd.Stage.CreateNew(path)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdGeom.Xform.Define(stage, "/World")
+    floor = UsdGeom.Mesh.Define(stage, "/World/Floor")
+    floor.CreatePointsAttr([(-10, 0, -10), (10, 0, -10), (10, 0, 10), (-10, 0, 10)])
+    floor.CreateFaceVertexCountsAttr([4])
+    floor.CreateFaceVertexIndicesAttr([0, 3, 2, 1])
+    floor.CreateDisplayColorAttr([(0.5, 0.5, 0.5)])
+    rect = UsdLux.RectLight.Define(stage, "/World/Panel")
+    rect.CreateWidthAttr(2.0)
+    rect.CreateHeightAttr(1.0)
+    rect.CreateIntensityAttr(683.0)
+    rect.CreateExposureAttr(1.0)
+    rect.CreateColorAttr((1.0, 0.5, 0.25))
+    x = UsdGeom.Xformable(rect)
+    x.AddTranslateOp().Set(Gf.Vec3d(0, 2, 0))
+    # Local -Z (the way a rect light shines) turned to world -Y.
+    x.AddRotateXOp().Set(-90.0)
+    disk = UsdLux.DiskLight.Define(stage, "/World/Spot")
+    disk.CreateRadiusAttr(0.5)
+    disk.CreateIntensityAttr(100.0)
+    disk.CreateNormalizeAttr(True)
+    x = UsdGeom.Xformable(disk)
+    x.AddTranslateOp().Set(Gf.Vec3d(5, 2, 0))
+    x.AddRotateXOp().Set(-90.0)
+    stage.GetRootLayer().Save()
+
+
 def new_stage(path, start, end):
     stage = Usd.Stage.CreateNew(path)
     stage.SetStartTimeCode(start)
@@ -343,6 +375,7 @@ def main():
     UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(shatter), os.path.join(out, "shatter.usdz"))
 
     author_looks(os.path.join(out, "looks.usda"))
+    author_area(os.path.join(out, "area.usda"))
 
     bad_inputs(os.path.join(out, "bad"))
 

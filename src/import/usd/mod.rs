@@ -13,7 +13,8 @@
 //!   time-sampled `points` (and per-sample face lists, `velocities`) become a
 //!   [`PointCache`];
 //! * `UsdGeomCamera` (focal length, apertures, clipping range, projection);
-//! * `UsdLux` sphere and distant lights (units in docs/INPUTS.md);
+//! * `UsdLux` sphere and distant lights, and rect and disk lights as emitting cards
+//!   (units in docs/INPUTS.md);
 //! * the stage's `metersPerUnit` and `upAxis` (one root node that scales to metres and
 //!   turns Z up into Y up), `timeCodesPerSecond` (the scene's fps, so frame `i` is time
 //!   code `i`), `startTimeCode` / `endTimeCode` (the default frames).
@@ -287,6 +288,7 @@ impl<'a> Reader<'a> {
             "Mesh" => self.mesh(&prim, &name, node)?,
             "Camera" => self.camera(&prim, &name, node)?,
             "SphereLight" | "DistantLight" => self.light(&prim, &name, &ty, node)?,
+            "RectLight" | "DiskLight" => self.area_light(&prim, &name, &ty, node)?,
             t if GROUPS.contains(&t) => {}
             t => {
                 let e = self.unread.entry(t.to_string()).or_insert((name, 0));
@@ -958,6 +960,123 @@ impl<'a> Reader<'a> {
         Ok(())
     }
 
+    /// A rect or disk light as an emitting card: a mesh in the light's local XY plane
+    /// (a `width × height` rectangle, or a disk of `radius` as a fan of
+    /// [`DISK_SEGMENTS`] triangles) whose front faces look down local −Z, the way the
+    /// light shines, with a black, one-sided emissive material of radiance
+    /// `intensity · 2^exposure · color / 683` (nits / 683, as the sphere light), divided
+    /// by the area when `inputs:normalize` is set. The renderer samples it as any
+    /// emissive surface (an area light with soft shadows); the card is seen by the camera
+    /// and casts shadows as an emissive surface does. It moves with its transform.
+    fn area_light(
+        &mut self,
+        prim: &Prim,
+        name: &str,
+        ty: &str,
+        node: usize,
+    ) -> Result<(), ImportError> {
+        let intensity = self.float(prim, name, "inputs:intensity", 1.0)?;
+        let exposure = self.float(prim, name, "inputs:exposure", 0.0)?;
+        let color = match self.value(prim, name, "inputs:color", self.t0)? {
+            Some(v) => vec3s(&sdf_array1(v))
+                .and_then(|c| c.first().copied())
+                .unwrap_or(Vec3::ONE),
+            None => Vec3::ONE,
+        };
+        let normalize = matches!(
+            self.value(prim, name, "inputs:normalize", self.t0)?,
+            Some(sdf::Value::Bool(true))
+        );
+        if self
+            .value(prim, name, "inputs:texture:file", self.t0)?
+            .is_some()
+        {
+            self.notes.entry("lighttexture").or_insert_with(|| {
+                format!("{name}: inputs:texture:file not read (the light's colour is uniform)")
+            });
+        }
+        let (positions, triangles, area) = if ty == "RectLight" {
+            let w = self.float(prim, name, "inputs:width", 1.0)?;
+            let h = self.float(prim, name, "inputs:height", 1.0)?;
+            if !(w > 0.0 && h > 0.0) {
+                return Err(self.err(
+                    name,
+                    Some("inputs:width"),
+                    "a rect light needs a positive width and height",
+                ));
+            }
+            let (x, y) = ((w * 0.5) as f32, (h * 0.5) as f32);
+            (
+                vec![
+                    Vec3::new(-x, -y, 0.0),
+                    Vec3::new(x, -y, 0.0),
+                    Vec3::new(x, y, 0.0),
+                    Vec3::new(-x, y, 0.0),
+                ],
+                // Clockwise seen from +Z: the front faces look down −Z.
+                vec![[0, 2, 1], [0, 3, 2]],
+                w * h,
+            )
+        } else {
+            let radius = self.float(prim, name, "inputs:radius", 0.5)?;
+            if radius.is_nan() || radius <= 0.0 {
+                return Err(self.err(
+                    name,
+                    Some("inputs:radius"),
+                    "a disk light needs a positive radius",
+                ));
+            }
+            let n = DISK_SEGMENTS;
+            let mut positions = vec![Vec3::ZERO];
+            positions.extend((0..n).map(|k| {
+                let a = std::f64::consts::TAU * f64::from(k) / f64::from(n);
+                Vec3::new((radius * a.cos()) as f32, (radius * a.sin()) as f32, 0.0)
+            }));
+            let triangles = (0..n).map(|k| [0, 1 + (k + 1) % n, 1 + k]).collect();
+            // The polygon's area, so that `normalize` divides by what is drawn.
+            let area =
+                0.5 * f64::from(n) * radius * radius * (std::f64::consts::TAU / f64::from(n)).sin();
+            (positions, triangles, area)
+        };
+        let mut nits = intensity * exposure.exp2() / LUMENS_PER_WATT;
+        if normalize {
+            // In the light's own units: the stage's scale is applied to the card later.
+            nits /= area;
+        }
+        if !(nits.is_finite() && nits >= 0.0 && color.is_finite()) {
+            return Err(self.err(
+                name,
+                Some("inputs:intensity"),
+                "not a finite, non-negative light",
+            ));
+        }
+        let material = self.scene.materials.len() as u32;
+        self.scene.materials.push(Material {
+            name: Some(name.to_string()),
+            // Black metal: no diffuse and no reflection (F0 = 0), only the emission.
+            base_color: Vec4::new(0.0, 0.0, 0.0, 1.0),
+            metallic: 1.0,
+            roughness: 1.0,
+            emissive: color,
+            emissive_strength: nits as f32,
+            double_sided: false,
+            ..Material::default()
+        });
+        let mesh = self.scene.meshes.len();
+        self.scene.meshes.push(Mesh {
+            name: Some(name.to_string()),
+            primitives: vec![Primitive {
+                positions,
+                triangles,
+                material,
+                ..Primitive::default()
+            }],
+            weights: Vec::new(),
+        });
+        self.scene.nodes[node].mesh = Some(mesh);
+        Ok(())
+    }
+
     fn finish(mut self) -> Scene {
         if !self.channels.is_empty() {
             self.scene.animations.push(Animation {
@@ -981,6 +1100,9 @@ impl<'a> Reader<'a> {
         self.scene
     }
 }
+
+/// Triangles of a disk light's fan.
+pub const DISK_SEGMENTS: u32 = 32;
 
 /// A single value seen as a one-element array, so the array readers take it.
 fn sdf_array1(v: sdf::Value) -> sdf::Value {
