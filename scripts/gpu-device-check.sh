@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The GPU tracer's checks on a machine with a real GPU (issue 36), as one prepared run:
 # the exactness suite (tests/gpu_vs_brute.rs) and the benchmark (benches/gpu.rs), with
-# Embree's harness on the same file and frames in the same run (benches/gpu.sh's steps).
+# Embree's harness on the same file and frames in the same run (benches/gpu.sh's steps);
+# then the CPU path's scaling from 1 thread to all the host's cores (benches/scaling.sh,
+# issue 38).
 #
 #   scripts/gpu-device-check.sh prepare   # here: release builds of both into .device/gpu/
 #   scripts/gpu-device-check.sh run       # there: runs them, figures to $OUT (or .device/out)
@@ -30,6 +32,9 @@ for l in sys.stdin:
         print(m["executable"])')
     strip -o .device/gpu/gpu_vs_brute "$test_exe"
     strip -o .device/gpu/gpu_bench "$bench_exe"
+    # The CPU path's scaling (issue 38) runs the release binary.
+    cargo build -q --release --bin subfield
+    strip -o .device/gpu/subfield target/release/subfield
     # The peers: the scene generator and Embree's harness, embreex for the machine's
     # Python 3.12, the harness's C helper built here (../shared/peers/README.md).
     peers=${PEERS:-../shared/peers}
@@ -75,6 +80,25 @@ run)
         --step 10 >"$out/bench-museum.md" 2>&1 && echo "bench (museum.glb): done" ||
         echo "bench (museum.glb): FAILED"
     tail -n 8 "$out/bench-museum.md"
+    # The CPU path on all the host's cores against Embree, equal work (issue 38): 1 to 16
+    # threads at 640x480, 1 and 16 at 1920x1080, both cameras; benches/efficiency.py on
+    # the 1- and 2-thread runs says where the cores wait.
+    export SUBFIELD=.device/gpu/subfield PEERS=.device/peers
+    timeout 300 bash benches/scaling.sh --threads "1,2,4,8,$(nproc)" --frames 0:24 \
+        --out /tmp/scaling >"$out/scaling.md" 2>"$out/scaling.err" &&
+        echo "scaling: done" || echo "scaling: FAILED (see $out/scaling.err)"
+    cat "$out/scaling.md"
+    timeout 200 bash benches/scaling.sh --threads "1,$(nproc)" --frames 0:12 --size 1920x1080 \
+        --out /tmp/scaling-hd >"$out/scaling-hd.md" 2>>"$out/scaling.err" &&
+        echo "scaling (1920x1080): done" || echo "scaling (1920x1080): FAILED"
+    tail -n 6 "$out/scaling-hd.md"
+    for cam in still dolly; do
+        d=/tmp/scaling/frame_${cam}_t
+        python3 benches/efficiency.py --predict "$(nproc)" "$(ls ${d}1/*.subfield.1.csv):$(ls ${d}1/*.subfield.1.wall)" \
+            "$(ls ${d}2/*.subfield.1.csv):$(ls ${d}2/*.subfield.1.wall)" >"$out/efficiency-$cam.md" 2>&1 || true
+    done
+    (cd /tmp && find scaling scaling-hd \( -name '*.csv' -o -name '*.wall' -o -name '*.md' \) -print0 |
+        tar -czf "$out/scaling-runs.tgz" --null -T -) || true
     ;;
 *)
     echo "usage: $0 prepare|run" >&2
