@@ -42,6 +42,27 @@ fn gpu_requirement(t: &mut String) {
 
 /// A YAML scalar that needs no thought: a JSON string (YAML 1.2 is a superset of JSON,
 /// and PyYAML reads these too).
+/// A step's `script`: the task's bash script embedded as the file `task`, run with the
+/// values `args` names (`{{Task.Param.Frames}}` …) as its arguments.
+fn step_script(t: &mut String, script: &str, args: &[String]) {
+    let _ = writeln!(t, "  script:");
+    let _ = writeln!(t, "    embeddedFiles:");
+    let _ = writeln!(t, "    - name: task");
+    let _ = writeln!(t, "      type: TEXT");
+    let _ = writeln!(t, "      runnable: true");
+    let _ = writeln!(t, "      data: |");
+    for line in script.lines() {
+        let _ = writeln!(t, "        {line}");
+    }
+    let _ = writeln!(t, "    actions:");
+    let _ = writeln!(t, "      onRun:");
+    let _ = writeln!(t, "        command: \"{{{{Task.File.task}}}}\"");
+    let _ = writeln!(t, "        args:");
+    for a in args {
+        let _ = writeln!(t, "        - \"{{{{{a}}}}}\"");
+    }
+}
+
 fn yaml_str(s: &str) -> String {
     serde_json::Value::String(s.to_string()).to_string()
 }
@@ -76,20 +97,7 @@ impl OpenJdJob {
         if self.gpu {
             gpu_requirement(&mut t);
         }
-        let _ = writeln!(t, "  script:");
-        let _ = writeln!(t, "    embeddedFiles:");
-        let _ = writeln!(t, "    - name: task");
-        let _ = writeln!(t, "      type: TEXT");
-        let _ = writeln!(t, "      runnable: true");
-        let _ = writeln!(t, "      data: |");
-        for line in self.task_script().lines() {
-            let _ = writeln!(t, "        {line}");
-        }
-        let _ = writeln!(t, "    actions:");
-        let _ = writeln!(t, "      onRun:");
-        let _ = writeln!(t, "        command: \"{{{{Task.File.task}}}}\"");
-        let _ = writeln!(t, "        args:");
-        let _ = writeln!(t, "        - \"{{{{Task.Param.Frames}}}}\"");
+        step_script(&mut t, &self.task_script(), &["Task.Param.Frames".into()]);
         t
     }
 
@@ -220,27 +228,16 @@ impl JobBundle {
         if self.gpu {
             gpu_requirement(&mut t);
         }
-        let _ = writeln!(t, "  script:");
-        let _ = writeln!(t, "    embeddedFiles:");
-        let _ = writeln!(t, "    - name: task");
-        let _ = writeln!(t, "      type: TEXT");
-        let _ = writeln!(t, "      runnable: true");
-        let _ = writeln!(t, "      data: |");
-        for line in self.task_script().lines() {
-            let _ = writeln!(t, "        {line}");
-        }
-        let _ = writeln!(t, "    actions:");
-        let _ = writeln!(t, "      onRun:");
-        let _ = writeln!(t, "        command: \"{{{{Task.File.task}}}}\"");
-        let _ = writeln!(t, "        args:");
-        for a in [
-            format!("Task.Param.{CHUNK_PARAM}"),
-            "Param.SceneFile".into(),
-            "Param.BakedFile".into(),
-            "Param.OutputDir".into(),
-        ] {
-            let _ = writeln!(t, "        - \"{{{{{a}}}}}\"");
-        }
+        step_script(
+            &mut t,
+            &self.task_script(),
+            &[
+                format!("Task.Param.{CHUNK_PARAM}"),
+                "Param.SceneFile".into(),
+                "Param.BakedFile".into(),
+                "Param.OutputDir".into(),
+            ],
+        );
         t
     }
 

@@ -909,12 +909,9 @@ impl<'a> Reader<'a> {
         Ok(())
     }
 
-    /// A sphere light as a point light, a distant light as a directional one. USD gives
-    /// luminance in nits (`intensity · 2^exposure`, times `color`); the model's radiance
-    /// is nits / 683 (as glTF's candela / 683). A sphere of radius `r` (metres) shows
-    /// `π r²` of it: radiant intensity `L π r²` W/sr; a distant light of angular
-    /// diameter `θ` gives irradiance `L · π sin²(θ/2)` W/m².
-    fn light(&mut self, prim: &Prim, name: &str, ty: &str, node: usize) -> Result<(), ImportError> {
+    /// A light's radiance in the model's units, `intensity · 2^exposure / 683` (USD's
+    /// nits over 683 lm/W), and its `color` (white when unauthored).
+    fn light_inputs(&self, prim: &Prim, name: &str) -> Result<(f64, Vec3), ImportError> {
         let intensity = self.float(prim, name, "inputs:intensity", 1.0)?;
         let exposure = self.float(prim, name, "inputs:exposure", 0.0)?;
         let color = match self.value(prim, name, "inputs:color", self.t0)? {
@@ -923,7 +920,16 @@ impl<'a> Reader<'a> {
                 .unwrap_or(Vec3::ONE),
             None => Vec3::ONE,
         };
-        let nits = intensity * exposure.exp2() / LUMENS_PER_WATT;
+        Ok((intensity * exposure.exp2() / LUMENS_PER_WATT, color))
+    }
+
+    /// A sphere light as a point light, a distant light as a directional one. USD gives
+    /// luminance in nits (`intensity · 2^exposure`, times `color`); the model's radiance
+    /// is nits / 683 (as glTF's candela / 683). A sphere of radius `r` (metres) shows
+    /// `π r²` of it: radiant intensity `L π r²` W/sr; a distant light of angular
+    /// diameter `θ` gives irradiance `L · π sin²(θ/2)` W/m².
+    fn light(&mut self, prim: &Prim, name: &str, ty: &str, node: usize) -> Result<(), ImportError> {
+        let (nits, color) = self.light_inputs(prim, name)?;
         let (kind, amount, falloff) = if ty == "SphereLight" {
             let r = self.float(prim, name, "inputs:radius", 0.5)? * f64::from(self.meters);
             (
@@ -975,14 +981,7 @@ impl<'a> Reader<'a> {
         ty: &str,
         node: usize,
     ) -> Result<(), ImportError> {
-        let intensity = self.float(prim, name, "inputs:intensity", 1.0)?;
-        let exposure = self.float(prim, name, "inputs:exposure", 0.0)?;
-        let color = match self.value(prim, name, "inputs:color", self.t0)? {
-            Some(v) => vec3s(&sdf_array1(v))
-                .and_then(|c| c.first().copied())
-                .unwrap_or(Vec3::ONE),
-            None => Vec3::ONE,
-        };
+        let (nits, color) = self.light_inputs(prim, name)?;
         let normalize = matches!(
             self.value(prim, name, "inputs:normalize", self.t0)?,
             Some(sdf::Value::Bool(true))
@@ -1038,7 +1037,7 @@ impl<'a> Reader<'a> {
                 0.5 * f64::from(n) * radius * radius * (std::f64::consts::TAU / f64::from(n)).sin();
             (positions, triangles, area)
         };
-        let mut nits = intensity * exposure.exp2() / LUMENS_PER_WATT;
+        let mut nits = nits;
         if normalize {
             // In the light's own units: the stage's scale is applied to the card later.
             nits /= area;
