@@ -715,32 +715,19 @@ fn trace_pass<T: Intersector>(
                     });
             }
             first = false;
-            // The blocks' lists gathered in block order, the shadow side and the rest
-            // as two tasks (each list in the same order either way).
+            // The blocks' lists gathered in block order, on six tasks: the sums into the
+            // samples (a sample's terms added in block order, as always), and each list
+            // the next level reads copied on a task of its own (each the same elements
+            // in the same order as one serial pass). Two tasks before, 5.7 ms a frame at
+            // any thread count beyond two (benches/PERF.md, issue 38).
             let outs = &outs[..blocks];
+            // A light's rays together, in block order: each light's rays are one batch
+            // through its point grid (which a batch mixing lights would not get).
+            let lights = outs.iter().map(|o| o.shadow.len()).max().unwrap_or(0);
+            let shadow_lists =
+                || (0..lights).flat_map(|l| outs.iter().filter_map(move |o| o.shadow.get(l)));
             rayon::join(
                 || {
-                    // A light's rays together, in block order: each light's rays are
-                    // one batch through its point grid (which a batch mixing lights
-                    // would not get).
-                    shadow_rays.clear();
-                    shadow_add.clear();
-                    shadow_split.clear();
-                    light_start.clear();
-                    let lights = outs.iter().map(|o| o.shadow.len()).max().unwrap_or(0);
-                    for l in 0..lights {
-                        light_start.push(shadow_rays.len());
-                        for list in outs.iter().filter_map(|o| o.shadow.get(l)) {
-                            shadow_rays.extend_from_slice(&list.rays);
-                            shadow_add.extend_from_slice(&list.add);
-                            shadow_split.extend_from_slice(&list.split);
-                        }
-                    }
-                    light_start.push(shadow_rays.len());
-                },
-                || {
-                    rays.clear();
-                    items.clear();
                     for o in outs {
                         for &(s, c) in &o.add {
                             radiance[s as usize] += c;
@@ -754,9 +741,58 @@ fn trace_pass<T: Intersector>(
                         for &(s, c) in &o.cover {
                             coverage[s as usize] += c;
                         }
-                        rays.extend_from_slice(&o.next_rays);
-                        items.extend_from_slice(&o.next_items);
                     }
+                },
+                || {
+                    rayon::join(
+                        || {
+                            rayon::join(
+                                || {
+                                    rays.clear();
+                                    for o in outs {
+                                        rays.extend_from_slice(&o.next_rays);
+                                    }
+                                },
+                                || {
+                                    items.clear();
+                                    for o in outs {
+                                        items.extend_from_slice(&o.next_items);
+                                    }
+                                },
+                            )
+                        },
+                        || {
+                            rayon::join(
+                                || {
+                                    shadow_rays.clear();
+                                    light_start.clear();
+                                    for l in 0..lights {
+                                        light_start.push(shadow_rays.len());
+                                        for list in outs.iter().filter_map(|o| o.shadow.get(l)) {
+                                            shadow_rays.extend_from_slice(&list.rays);
+                                        }
+                                    }
+                                    light_start.push(shadow_rays.len());
+                                },
+                                || {
+                                    rayon::join(
+                                        || {
+                                            shadow_add.clear();
+                                            for list in shadow_lists() {
+                                                shadow_add.extend_from_slice(&list.add);
+                                            }
+                                        },
+                                        || {
+                                            shadow_split.clear();
+                                            for list in shadow_lists() {
+                                                shadow_split.extend_from_slice(&list.split);
+                                            }
+                                        },
+                                    )
+                                },
+                            )
+                        },
+                    )
                 },
             );
             work.rays.secondary += rays.len() as u64;
