@@ -7,9 +7,15 @@
 //! points), and 1M points (333k triangles) over 3 frames. `-- shatter` or `-- million`
 //! runs one; `-- quick` makes them 10x smaller. Times are wall clock, one run of the
 //! import, the median of the frames' posing.
+//!
+//! Beside it, in the same run and on the same file, Pixar's usd-core (`pip install
+//! usd-core`, skipped with a line when `python3` cannot import `pxr`) does the same
+//! work: `Usd.Stage.Open`, then at each frame the mesh's `points` and its
+//! local-to-world transform applied to them (`benches/usd_core_peer.py`).
 
 use std::fmt::Write as _;
 use std::path::Path;
+use std::process::Command;
 use std::time::Instant;
 
 use subfield::import;
@@ -96,13 +102,41 @@ fn case(name: &str, tris: usize, frames: u32) {
     let clock = Instant::now();
     scene.dynamic_triangles_at(&split, 1.5 / fps, &mut soup);
     let sub = clock.elapsed().as_secs_f64() * 1e3;
+    let pose = median(pose);
     println!(
-        "{name}: {tris} triangles ({} points) x {frames} frames, {:.1} MB of usda: import {import_s:.2} s; posing a frame {:.2} ms (median), a sub-frame time {sub:.2} ms",
+        "{name}: {tris} triangles ({} points) x {frames} frames, {:.1} MB of usda: import {import_s:.2} s; posing a frame {pose:.2} ms (median), a sub-frame time {sub:.2} ms",
         tris * 3,
         bytes as f64 / 1e6,
-        median(pose),
     );
+    peer(name, &path, frames, import_s, pose);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// usd-core on the same file: its open and its median frame, and ours over its.
+fn peer(name: &str, path: &Path, frames: u32, import_s: f64, pose_ms: f64) {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/usd_core_peer.py");
+    let out = Command::new("python3")
+        .arg(&script)
+        .arg(path)
+        .arg(frames.to_string())
+        .output();
+    let Some(out) = out.ok().filter(|o| o.status.success()) else {
+        println!("{name}: usd-core: not run (python3 with pxr: pip install usd-core)");
+        return;
+    };
+    let text = String::from_utf8_lossy(&out.stdout);
+    let mut nums = text
+        .split_whitespace()
+        .filter_map(|w| w.parse::<f64>().ok());
+    let (Some(open_s), Some(frame_ms)) = (nums.next(), nums.next()) else {
+        println!("{name}: usd-core: no figures in {text:?}");
+        return;
+    };
+    println!(
+        "{name}: usd-core {open_s:.2} s to open, {frame_ms:.2} ms a frame (median); subfield / usd-core: import {:.2}, posing {:.2}",
+        import_s / open_s,
+        pose_ms / frame_ms,
+    );
 }
 
 fn main() {
