@@ -719,7 +719,9 @@ fn trace_pass<T: Intersector>(
             // samples (a sample's terms added in block order, as always), and each list
             // the next level reads copied on a task of its own (each the same elements
             // in the same order as one serial pass). Two tasks before, 5.7 ms a frame at
-            // any thread count beyond two (benches/PERF.md, issue 38).
+            // any thread count beyond two (benches/PERF.md, issue 38). Nested joins,
+            // not `rayon::scope` with six spawns: that was 1-4 ms a frame slower on 2
+            // threads (three alternating runs, museum class, 640x480).
             let outs = &outs[..blocks];
             // A light's rays together, in block order: each light's rays are one batch
             // through its point grid (which a batch mixing lights would not get).
