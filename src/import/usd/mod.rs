@@ -981,7 +981,7 @@ impl<'a> Reader<'a> {
         ty: &str,
         node: usize,
     ) -> Result<(), ImportError> {
-        let (nits, color) = self.light_inputs(prim, name)?;
+        let (mut nits, color) = self.light_inputs(prim, name)?;
         let normalize = matches!(
             self.value(prim, name, "inputs:normalize", self.t0)?,
             Some(sdf::Value::Bool(true))
@@ -1037,7 +1037,6 @@ impl<'a> Reader<'a> {
                 0.5 * f64::from(n) * radius * radius * (std::f64::consts::TAU / f64::from(n)).sin();
             (positions, triangles, area)
         };
-        let mut nits = nits;
         if normalize {
             // In the light's own units: the stage's scale is applied to the card later.
             nits /= area;
