@@ -409,13 +409,18 @@ impl<'a> ShadeContext<'a> {
                 || m.emissive_texture.is_some()
                 || m.normal_texture.is_some()
         });
-        let uv_area = uvs.map_or(0.0, |t| (t[1] - t[0]).perp_dot(t[2] - t[0]).abs());
-        let world_area = cross.length();
-        let cos = ng.dot(dir).abs().max(1e-4);
-        let lod = if textured && width > 0.0 && uv_area > 0.0 && world_area > 0.0 {
-            (width / cos).log2() + 0.5 * (uv_area / world_area).log2()
-        } else {
-            f32::NEG_INFINITY
+        let lod = match uvs {
+            Some(t) if textured && width > 0.0 => {
+                let uv_area = (t[1] - t[0]).perp_dot(t[2] - t[0]).abs();
+                let world_area = cross.length();
+                let cos = ng.dot(dir).abs().max(1e-4);
+                if uv_area > 0.0 && world_area > 0.0 {
+                    (width / cos).log2() + 0.5 * (uv_area / world_area).log2()
+                } else {
+                    f32::NEG_INFINITY
+                }
+            }
+            _ => f32::NEG_INFINITY,
         };
         if let (Some(m), Some(t)) = (self.material(material), uvs) {
             if m.normal_texture.is_some() {
@@ -721,7 +726,15 @@ impl<'a> ShadeContext<'a> {
         let h = (to_light + lobes.v).normalize_or_zero();
         let nh = s.ns.dot(h).max(0.0);
         let norm = (shininess + 8.0) / (8.0 * std::f32::consts::PI);
-        Some(lobes.f0 * (1.0 - lobes.gloss * 0.5) * (norm * nh.powf(shininess)).min(1e3))
+        // A whole exponent (a polished surface's is the cap, 256) by repeated squaring:
+        // libm's `powf` was a tenth of the shading, and half of that its slow path for
+        // results that underflow (benches/PERF.md, issue 38).
+        let lobe = if shininess.fract() == 0.0 {
+            nh.powi(shininess as i32)
+        } else {
+            nh.powf(shininess)
+        };
+        Some(lobes.f0 * (1.0 - lobes.gloss * 0.5) * (norm * lobe).min(1e3))
     }
 
     /// What light arriving from `to_light` adds, split over the passes (`e`: the

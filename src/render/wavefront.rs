@@ -826,20 +826,19 @@ fn trace_pass<T: Intersector>(
             work.trace += clock.elapsed();
 
             let clock = Instant::now();
-            for (&(s, c), &b) in shadow_add.iter().zip(blocked.iter()) {
-                if !b {
-                    radiance[s as usize] += c;
+            add_unblocked(radiance, light_start, shadow_add, |r, i| {
+                if !blocked[i] {
+                    *r += shadow_add[i].1;
                 }
-            }
+            });
             if light_paths {
-                for ((&(s, _), split), &b) in shadow_add.iter().zip(&*shadow_split).zip(&*blocked) {
-                    if !b {
-                        let p = &mut paths[s as usize];
-                        for (p, c) in p.iter_mut().zip(split) {
+                add_unblocked(paths, light_start, shadow_add, |p, i| {
+                    if !blocked[i] {
+                        for (p, c) in p.iter_mut().zip(&shadow_split[i]) {
                             *p += *c;
                         }
                     }
-                }
+                });
             }
             work.shade += clock.elapsed();
         }
@@ -929,6 +928,54 @@ fn trace_pass<T: Intersector>(
         y0 = y1;
     }
     memo.end(mode);
+}
+
+/// Samples a task of [`add_unblocked`] owns.
+const ADD_SAMPLES: usize = 16 * BLOCK;
+
+/// Adds each shadow ray's contribution to its sample (`add(&mut dst[sample], i)` for
+/// ray `i`), in the order of one serial pass over the rays, in parallel over ranges of
+/// samples. The rays are in light batches (`light_start`), and within a batch in the
+/// order of the items that made them, which are in sample order; so each range's rays
+/// of a batch are found by two binary searches, and every sample gets its terms in the
+/// serial pass's order (the same bytes). A batch out of sample order (which the
+/// wavefront does not make) is added by the serial pass itself. This pass was serial,
+/// 1.1–1.8 ms of a frame at any thread count (benches/PERF.md, issue 38).
+fn add_unblocked<D: Send>(
+    dst: &mut [D],
+    light_start: &[usize],
+    shadow_add: &[(u32, Vec3)],
+    add: impl Fn(&mut D, usize) + Sync,
+) {
+    let batches = || light_start.windows(2).map(|w| w[0]..w[1]);
+    let sorted = batches().all(|r| {
+        shadow_add[r]
+            .par_windows(2)
+            .with_min_len(4 * BLOCK)
+            .all(|w| w[0].0 <= w[1].0)
+    });
+    if !sorted {
+        for r in batches() {
+            for i in r {
+                add(&mut dst[shadow_add[i].0 as usize], i);
+            }
+        }
+        return;
+    }
+    dst.par_chunks_mut(ADD_SAMPLES)
+        .enumerate()
+        .for_each(|(k, chunk)| {
+            let lo = (k * ADD_SAMPLES) as u32;
+            let hi = lo + chunk.len() as u32;
+            for r in batches() {
+                let batch = &shadow_add[r.clone()];
+                let from = r.start + batch.partition_point(|e| e.0 < lo);
+                let to = r.start + batch.partition_point(|e| e.0 < hi);
+                for i in from..to {
+                    add(&mut chunk[(shadow_add[i].0 - lo) as usize], i);
+                }
+            }
+        });
 }
 
 /// The Cryptomatte ids of a step's camera hits (`hits[i]` is chunk sample `sel[i]`, the
@@ -1078,6 +1125,60 @@ fn write_crypto(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The parallel pass adds exactly what one serial pass adds, in its order (bits
+    /// compared), for batches in sample order and, through the fallback, out of it.
+    #[test]
+    fn unblocked_shadow_terms_add_as_one_serial_pass() {
+        let n = 3 * ADD_SAMPLES + 77;
+        for (seed, sorted) in [(1u64, true), (2, true), (3, false)] {
+            let mut x = seed;
+            let mut next = move || {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                x
+            };
+            let mut adds = Vec::new();
+            let mut light_start = vec![0];
+            for _ in 0..3 {
+                let mut batch: Vec<(u32, Vec3)> = (0..n / 2)
+                    .map(|_| {
+                        let v = (next() % 1000) as f32 * 1e-3 + 1e-7;
+                        (
+                            (next() % n as u64) as u32,
+                            Vec3::new(v, v * 3.0, 1.0 / (v + 1.0)),
+                        )
+                    })
+                    .collect();
+                if sorted {
+                    batch.sort_by_key(|e| e.0);
+                }
+                adds.extend(batch);
+                light_start.push(adds.len());
+            }
+            let blocked: Vec<bool> = (0..adds.len()).map(|_| next() % 3 == 0).collect();
+            let mut serial = vec![Vec3::splat(0.1); n];
+            for (&(s, c), &b) in adds.iter().zip(&blocked) {
+                if !b {
+                    serial[s as usize] += c;
+                }
+            }
+            let mut par = vec![Vec3::splat(0.1); n];
+            add_unblocked(&mut par, &light_start, &adds, |r, i| {
+                if !blocked[i] {
+                    *r += adds[i].1;
+                }
+            });
+            let bits = |v: &[Vec3]| {
+                v.iter()
+                    .flat_map(|c| c.to_array())
+                    .map(f32::to_bits)
+                    .collect::<Vec<_>>()
+            };
+            assert!(bits(&serial) == bits(&par), "seed {seed}, sorted {sorted}");
+        }
+    }
 
     #[test]
     fn samples_are_stratified_and_centred_for_one() {
