@@ -85,7 +85,8 @@ fn frames_do_not_depend_on_the_thread_count() {
 
 /// A camera that stays put (the side camera) at one sample a pixel: from the second
 /// frame on, the camera rays' static hits and the shadow rays' static answers are the
-/// ones kept from the frame before, and only the moving cube is traced again. Every
+/// ones kept from the frame before, and so are those of the mirror's and the glass's
+/// rays two levels down (`--max-depth 2`); only the moving cube is traced again. Every
 /// frame must be the bytes it is when rendered alone (nothing kept to reuse), AOVs
 /// included, whatever the thread count; and a camera that moves in some frames and stays
 /// in others changes nothing either.

@@ -4,6 +4,12 @@
 //! answers cannot change either (the static triangles do not move). A frame then
 //! traces those rays through the moving triangles alone ([`Layers`]).
 //!
+//! The same holds deeper: a mirror or a refraction off a static hit of an unmoved camera
+//! ray is the same ray every frame, and so are its hit's shadow rays where that hit is
+//! static. The first [`LEVELS_KEPT`] levels below the camera rays keep a static answer
+//! per sample with the ray it answers, and reuse it for a ray equal to the bit
+//! ([`StaticMemo::closest`], [`StaticMemo::shadows`] with `level` > 0).
+//!
 //! The hits are those of tracing the whole each frame: the static hit kept is the one
 //! the static part gives that very ray (a camera ray is the same ray when the camera is
 //! the same to the bit; a shadow ray is compared to the bit with the one kept), and the
@@ -26,6 +32,20 @@ const SHADOW_BYTES: usize = 256 << 20;
 /// The memory the kept camera-ray hits may take (20 bytes a pixel): beyond it (some 26
 /// million pixels) nothing is kept.
 const PRIMARY_BYTES: usize = 512 << 20;
+
+/// Levels below the camera rays whose static answers are kept, at most (where
+/// [`SECONDARY_BYTES`] holds them): a mirror's ray, and the ray off a second mirror.
+const LEVELS_KEPT: usize = 2;
+
+/// The memory the kept static hits of the deeper levels may take, all levels together
+/// (52 bytes a pixel and level: 32 MB at 640x480, 216 MB at 1920x1080 for two levels).
+const SECONDARY_BYTES: usize = 256 << 20;
+
+/// How many levels below the camera rays keep their static answers at `pixels` (the
+/// shadow rays of each such level as [`lights_kept`] says).
+pub(super) fn levels_kept(pixels: usize) -> usize {
+    (SECONDARY_BYTES / (std::mem::size_of::<(Ray, Option<Hit>)>() * pixels.max(1))).min(LEVELS_KEPT)
+}
 
 /// How many punctual lights' shadow answers a frame of `pixels` keeps.
 pub(super) fn lights_kept(pixels: usize) -> usize {
@@ -57,9 +77,14 @@ pub(super) struct StaticMemo {
     filled: bool,
     /// The closest static hit of each pixel's camera ray.
     primary: Vec<Option<Hit>>,
-    /// Per punctual light, per pixel: the last shadow ray from the pixel's camera hit
-    /// towards the light, and whether a static triangle blocks it.
+    /// Per level and punctual light (`level * MAX_LIGHTS + light`), per pixel: the last
+    /// shadow ray towards the light from the pixel's hit at that level, and whether a
+    /// static triangle blocks it.
     shadow: Vec<Vec<(Ray, bool)>>,
+    /// Per level below the camera rays (`level - 1`), per pixel: the last ray of that
+    /// level of the pixel's sample, and its closest static hit.
+    deeper: Vec<Vec<(Ray, Option<Hit>)>>,
+    fresh: Vec<Option<Hit>>,
     clipped: Vec<Ray>,
     moving: Vec<Option<Hit>>,
     need: Vec<u32>,
@@ -210,9 +235,125 @@ impl StaticMemo {
             .for_each(|(o, (s, m))| *o = closest_of(*s, *m));
     }
 
+    /// The closest hits of a chunk's rays of `level` (1: the rays off the camera rays'
+    /// hits; at most [`levels_kept`]) into `hits`: `rays[i]` belongs to the sample of
+    /// pixel `base + sample(i)` (of `pixels`). A static hit is kept per pixel with its ray
+    /// and reused for the same ray (the moving triangles traced up to it); a new ray is
+    /// traced through the whole (`whole`), and through the static part too where a
+    /// moving triangle is in front, to keep its static hit. Where most rays are new (a
+    /// first frame), the batch is traced through the whole in one.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn closest(
+        &mut self,
+        level: usize,
+        layers: &dyn Layers,
+        whole: Whole<'_>,
+        base: usize,
+        pixels: usize,
+        rays: &[Ray],
+        sample: &(dyn Fn(usize) -> u32 + Sync),
+        hits: &mut [Option<Hit>],
+    ) {
+        let n = rays.len();
+        if self.deeper.len() < level {
+            self.deeper.resize_with(level, Vec::new);
+        }
+        let kept = &mut self.deeper[level - 1];
+        if kept.len() != pixels {
+            kept.clear();
+            kept.resize(pixels, (EMPTY.0, None));
+        }
+        {
+            let kept = &*kept;
+            self.need.clear();
+            self.need.par_extend(
+                rays.par_iter()
+                    .enumerate()
+                    .with_min_len(1024)
+                    .filter(|&(i, r)| !same(&kept[base + sample(i) as usize].0, r))
+                    .map(|(i, _)| i as u32),
+            );
+        }
+        let statics = layers.static_count();
+        let is_moving = |h: &Option<Hit>| h.is_some_and(|h| h.tri as usize >= statics);
+        // The new rays' hits through the whole, into `fresh` (in `need`'s order).
+        let all_new = 2 * self.need.len() > n;
+        if all_new {
+            whole(rays, hits);
+        } else if !self.need.is_empty() {
+            gather(&mut self.gathered, &self.need, rays);
+            self.fresh.clear();
+            self.fresh.resize(self.need.len(), None);
+            whole(&self.gathered, &mut self.fresh);
+        }
+        // The kept rays: the moving triangles up to the static hit kept.
+        if !all_new {
+            let kept = &*kept;
+            self.clipped.clear();
+            self.clipped
+                .par_extend(rays.par_iter().enumerate().map(|(i, r)| {
+                    match &kept[base + sample(i) as usize] {
+                        // A moving triangle beyond the static hit cannot be the closest;
+                        // one at the same `t` loses the tie.
+                        (k, Some(h)) if same(k, r) => Ray { t_max: h.t, ..*r },
+                        (k, None) if same(k, r) => *r,
+                        // A new ray (its hit is `fresh`'s): a ray of zero direction,
+                        // which meets nothing.
+                        _ => EMPTY.0,
+                    }
+                }));
+            self.moving.clear();
+            self.moving.resize(n, None);
+            layers.moving_batch(&self.clipped, &mut self.moving);
+            hits.par_iter_mut()
+                .zip(self.moving.par_iter())
+                .enumerate()
+                .with_min_len(1024)
+                .for_each(|(i, (o, m))| {
+                    let (k, s) = &kept[base + sample(i) as usize];
+                    // A new ray's slot holds another ray: its hit comes from `fresh`.
+                    *o = if same(k, &rays[i]) {
+                        closest_of(*s, *m)
+                    } else {
+                        None
+                    };
+                });
+            for (&i, &h) in self.need.iter().zip(&self.fresh) {
+                hits[i as usize] = h;
+            }
+        }
+        // Keep the new rays' static hits: the whole's where it is static or none, the
+        // static part's where a moving triangle is in front.
+        self.gathered.clear();
+        for &i in &self.need {
+            let i = i as usize;
+            if is_moving(&hits[i]) {
+                self.gathered.push(rays[i]);
+            } else {
+                kept[base + sample(i) as usize] = (rays[i], hits[i]);
+            }
+        }
+        if self.gathered.is_empty() {
+            return;
+        }
+        self.moving.clear();
+        self.moving.resize(self.gathered.len(), None);
+        layers.static_batch(&self.gathered, &mut self.moving);
+        let mut statics_of = self.moving.iter();
+        for &i in &self.need {
+            let i = i as usize;
+            if is_moving(&hits[i]) {
+                if let Some(&h) = statics_of.next() {
+                    kept[base + sample(i) as usize] = (rays[i], h);
+                }
+            }
+        }
+    }
+
     /// Whether each of a chunk's shadow rays towards punctual light `light` (below
-    /// [`lights_kept`]) is blocked, into `blocked`: `rays[i]` leaves the camera hit of
-    /// pixel `base + pixel[i].0` (of `pixels`). A static answer is kept per pixel with its
+    /// [`lights_kept`]) is blocked, into `blocked`: `rays[i]` leaves the hit at `level`
+    /// (0: the camera rays'; at most [`levels_kept`]) of the sample of pixel
+    /// `base + pixel[i].0` (of `pixels`). A static answer is kept per pixel with its
     /// ray and reused for the same ray, the moving triangles traced for the rays no
     /// static one blocks. Where most rays are new (a first frame), the batch is traced
     /// through the whole (`whole`) and the static part traced for the blocked new ones
@@ -220,6 +361,7 @@ impl StaticMemo {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn shadows(
         &mut self,
+        level: usize,
         layers: &dyn Layers,
         whole: &dyn Fn(&[Ray], &mut [bool]),
         light: usize,
@@ -229,10 +371,11 @@ impl StaticMemo {
         pixel: &[(u32, Vec3)],
         blocked: &mut [bool],
     ) {
-        if self.shadow.len() <= light {
-            self.shadow.resize_with(light + 1, Vec::new);
+        let bank = level * MAX_LIGHTS + light;
+        if self.shadow.len() <= bank {
+            self.shadow.resize_with(bank + 1, Vec::new);
         }
-        let kept = &mut self.shadow[light];
+        let kept = &mut self.shadow[bank];
         if kept.len() != pixels {
             kept.clear();
             kept.resize(pixels, EMPTY);

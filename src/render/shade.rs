@@ -726,11 +726,11 @@ impl<'a> ShadeContext<'a> {
         let h = (to_light + lobes.v).normalize_or_zero();
         let nh = s.ns.dot(h).max(0.0);
         let norm = (shininess + 8.0) / (8.0 * std::f32::consts::PI);
-        // A whole exponent (a polished surface's is the cap, 256) by repeated squaring:
-        // libm's `powf` was a tenth of the shading, and half of that its slow path for
-        // results that underflow (benches/PERF.md, issue 38).
+        // A whole exponent (a polished surface's is the cap, 256) by repeated squaring,
+        // inlined: libm's `powf` was a tenth of the shading, half of that its slow path
+        // for results that underflow, and `f32::powi` a call (benches/PERF.md, issue 38).
         let lobe = if shininess.fract() == 0.0 {
-            nh.powi(shininess as i32)
+            powi(nh, shininess as u32)
         } else {
             nh.powf(shininess)
         };
@@ -887,6 +887,23 @@ impl<'a> ShadeContext<'a> {
         uvs.map_or(Vec2::ZERO, |t| {
             t[0] * (1.0 - b.x - b.y) + t[1] * b.x + t[2] * b.y
         })
+    }
+}
+
+/// `x` to the whole power `n` by binary exponentiation (the same products in the same
+/// order as compiler-rt's `__powisf2`, which `f32::powi` calls, but inlined).
+#[inline(always)]
+fn powi(mut x: f32, mut n: u32) -> f32 {
+    let mut r = 1.0;
+    loop {
+        if n & 1 == 1 {
+            r *= x;
+        }
+        n >>= 1;
+        if n == 0 {
+            return r;
+        }
+        x *= x;
     }
 }
 
@@ -1259,6 +1276,16 @@ impl BlockOut {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn powi_is_the_library_power_to_the_bit() {
+        for n in [0u32, 1, 2, 5, 7, 64, 255, 256] {
+            for x in [0.0f32, 0.3, 0.9, 0.999_9, 1.0, 1.5] {
+                let n_ = std::hint::black_box(n as i32);
+                assert_eq!(powi(x, n).to_bits(), x.powi(n_).to_bits(), "{x}^{n}");
+            }
+        }
+    }
 
     #[test]
     fn refraction_and_fresnel() {

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use super::aov::{project, rank, CryptoNames};
 use super::camera::CameraModel;
-use super::memo::{lights_kept, Mode, StaticMemo};
+use super::memo::{levels_kept, lights_kept, Mode, StaticMemo};
 use super::options::Aovs;
 use super::sampling::Seed;
 use super::shade::{
@@ -619,8 +619,10 @@ fn trace_pass<T: Intersector>(
         refill(coverage, nsamples, 0.0f32);
         work.shade += clock.elapsed();
 
-        let mut first = true;
+        // The depth level: 0 for the camera rays.
+        let mut level = 0usize;
         while !rays.is_empty() {
+            let first = level == 0;
             let clock = Instant::now();
             hits.clear();
             hits.par_extend(
@@ -629,13 +631,16 @@ fn trace_pass<T: Intersector>(
                     .with_min_len(4 * BLOCK)
                     .map(|_| None),
             );
-            // The camera rays and their shadow rays, through what the memo keeps where
-            // it serves; any other batch through the whole.
-            let memo_layers = layers.filter(|_| first && mode != Mode::Off);
+            // The camera rays, the first levels below them and their shadow rays,
+            // through what the memo keeps where it serves; any other batch through the
+            // whole.
+            let memo_layers = layers.filter(|_| mode != Mode::Off && level <= levels_kept(w * h));
+            let whole = |r: &[Ray], h: &mut [Option<Hit>]| tracer.intersect_batch(r, h);
             match memo_layers {
+                Some(l) if level == 0 => memo.primary(mode, l, &whole, px0, rays, hits),
                 Some(l) => {
-                    let whole = |r: &[Ray], h: &mut [Option<Hit>]| tracer.intersect_batch(r, h);
-                    memo.primary(mode, l, &whole, px0, rays, hits)
+                    let sample = |i: usize| items[i].sample;
+                    memo.closest(level, l, &whole, px0, w * h, rays, &sample, hits)
                 }
                 None => tracer.intersect_batch(rays, hits),
             }
@@ -714,7 +719,7 @@ fn trace_pass<T: Intersector>(
                         }
                     });
             }
-            first = false;
+            level += 1;
             // The blocks' lists gathered in block order, on six tasks: the sums into the
             // samples (a sample's terms added in block order, as always), and each list
             // the next level reads copied on a task of its own (each the same elements
@@ -802,6 +807,8 @@ fn trace_pass<T: Intersector>(
             work.shade += clock.elapsed();
 
             let clock = Instant::now();
+            // The shadow rays leave the hits of the level just shaded.
+            let shadow_level = level - 1;
             refill(blocked, shadow_rays.len(), false);
             for (l, span) in light_start.windows(2).enumerate() {
                 let (a, b) = (span[0], span[1]);
@@ -811,6 +818,7 @@ fn trace_pass<T: Intersector>(
                 match memo_layers {
                     Some(layers) if l < ctx.punctual_lights().min(lights_kept(w * h)) => memo
                         .shadows(
+                            shadow_level,
                             layers,
                             &|r: &[Ray], b: &mut [bool]| tracer.occluded_batch(r, b),
                             l,
