@@ -238,10 +238,11 @@ impl StaticMemo {
     /// The closest hits of a chunk's rays of `level` (1: the rays off the camera rays'
     /// hits; at most [`levels_kept`]) into `hits`: `rays[i]` belongs to the sample of
     /// pixel `base + sample(i)` (of `pixels`). A static hit is kept per pixel with its ray
-    /// and reused for the same ray (the moving triangles traced up to it); a new ray is
-    /// traced through the whole (`whole`), and through the static part too where a
-    /// moving triangle is in front, to keep its static hit. Where most rays are new (a
-    /// first frame), the batch is traced through the whole in one.
+    /// and reused for the same ray; a new ray is traced through the static part and its
+    /// hit kept; then every ray through the moving triangles up to its static hit.
+    /// Where most rays are new (a first frame), the batch is traced through the whole
+    /// (`whole`) in one, and through the static part where a moving triangle is in
+    /// front, to keep its static hit.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn closest(
         &mut self,
@@ -263,6 +264,7 @@ impl StaticMemo {
             kept.clear();
             kept.resize(pixels, (EMPTY.0, None));
         }
+        let slot = |i: usize| base + sample(i) as usize;
         {
             let kept = &*kept;
             self.need.clear();
@@ -270,83 +272,92 @@ impl StaticMemo {
                 rays.par_iter()
                     .enumerate()
                     .with_min_len(1024)
-                    .filter(|&(i, r)| !same(&kept[base + sample(i) as usize].0, r))
+                    .filter(|&(i, r)| !same(&kept[slot(i)].0, r))
                     .map(|(i, _)| i as u32),
             );
         }
-        let statics = layers.static_count();
-        let is_moving = |h: &Option<Hit>| h.is_some_and(|h| h.tri as usize >= statics);
-        // The new rays' hits through the whole, into `fresh` (in `need`'s order).
-        let all_new = 2 * self.need.len() > n;
-        if all_new {
+        if 2 * self.need.len() > n {
             whole(rays, hits);
-        } else if !self.need.is_empty() {
+            let statics = layers.static_count();
+            let is_moving = |h: &Option<Hit>| h.is_some_and(|h| h.tri as usize >= statics);
+            self.gathered.clear();
+            for &i in &self.need {
+                let i = i as usize;
+                if is_moving(&hits[i]) {
+                    self.gathered.push(rays[i]);
+                } else {
+                    kept[slot(i)] = (rays[i], hits[i]);
+                }
+            }
+            self.fresh.clear();
+            self.fresh.resize(self.gathered.len(), None);
+            layers.static_batch(&self.gathered, &mut self.fresh);
+            let mut statics_of = self.fresh.iter();
+            for &i in &self.need {
+                let i = i as usize;
+                if is_moving(&hits[i]) {
+                    if let Some(&h) = statics_of.next() {
+                        kept[slot(i)] = (rays[i], h);
+                    }
+                }
+            }
+            return;
+        }
+        // The new rays' static hits, kept (a batch of a few hundred rays through the
+        // static part alone: the whole's set-up for a batch was 10 ms a frame here).
+        if !self.need.is_empty() {
             gather(&mut self.gathered, &self.need, rays);
             self.fresh.clear();
             self.fresh.resize(self.need.len(), None);
-            whole(&self.gathered, &mut self.fresh);
-        }
-        // The kept rays: the moving triangles up to the static hit kept.
-        if !all_new {
-            let kept = &*kept;
-            self.clipped.clear();
-            self.clipped
-                .par_extend(rays.par_iter().enumerate().map(|(i, r)| {
-                    match &kept[base + sample(i) as usize] {
-                        // A moving triangle beyond the static hit cannot be the closest;
-                        // one at the same `t` loses the tie.
-                        (k, Some(h)) if same(k, r) => Ray { t_max: h.t, ..*r },
-                        (k, None) if same(k, r) => *r,
-                        // A new ray (its hit is `fresh`'s): a ray of zero direction,
-                        // which meets nothing.
-                        _ => EMPTY.0,
-                    }
-                }));
-            self.moving.clear();
-            self.moving.resize(n, None);
-            layers.moving_batch(&self.clipped, &mut self.moving);
-            hits.par_iter_mut()
-                .zip(self.moving.par_iter())
-                .enumerate()
-                .with_min_len(1024)
-                .for_each(|(i, (o, m))| {
-                    let (k, s) = &kept[base + sample(i) as usize];
-                    // A new ray's slot holds another ray: its hit comes from `fresh`.
-                    *o = if same(k, &rays[i]) {
-                        closest_of(*s, *m)
-                    } else {
-                        None
-                    };
-                });
+            layers.static_batch(&self.gathered, &mut self.fresh);
             for (&i, &h) in self.need.iter().zip(&self.fresh) {
-                hits[i as usize] = h;
+                let i = i as usize;
+                kept[slot(i)] = (rays[i], h);
             }
         }
-        // Keep the new rays' static hits: the whole's where it is static or none, the
-        // static part's where a moving triangle is in front.
-        self.gathered.clear();
-        for &i in &self.need {
-            let i = i as usize;
-            if is_moving(&hits[i]) {
-                self.gathered.push(rays[i]);
-            } else {
-                kept[base + sample(i) as usize] = (rays[i], hits[i]);
-            }
-        }
-        if self.gathered.is_empty() {
+        // Every ray through the moving triangles up to its static hit. Two rays of one
+        // pixel (a mirror's and a glass's) share a slot: the one it does not hold is
+        // traced through the whole.
+        let kept = &*kept;
+        self.clipped.clear();
+        self.clipped
+            .par_extend(rays.par_iter().enumerate().map(|(i, r)| {
+                match &kept[slot(i)] {
+                    // A moving triangle beyond the static hit cannot be the closest; one at
+                    // the same `t` loses the tie.
+                    (k, Some(h)) if same(k, r) => Ray { t_max: h.t, ..*r },
+                    (k, None) if same(k, r) => *r,
+                    // A ray of zero direction meets nothing.
+                    _ => EMPTY.0,
+                }
+            }));
+        self.moving.clear();
+        self.moving.resize(n, None);
+        layers.moving_batch(&self.clipped, &mut self.moving);
+        hits.par_iter_mut()
+            .zip(self.moving.par_iter())
+            .enumerate()
+            .with_min_len(1024)
+            .for_each(|(i, (o, m))| {
+                let (k, s) = &kept[slot(i)];
+                *o = if same(k, &rays[i]) {
+                    closest_of(*s, *m)
+                } else {
+                    None
+                };
+            });
+        // The rays whose slot another ray took.
+        select(&mut self.need, &self.clipped, |r| r.dir == Vec3::ZERO);
+        self.need.retain(|&i| rays[i as usize].dir != Vec3::ZERO);
+        if self.need.is_empty() {
             return;
         }
-        self.moving.clear();
-        self.moving.resize(self.gathered.len(), None);
-        layers.static_batch(&self.gathered, &mut self.moving);
-        let mut statics_of = self.moving.iter();
-        for &i in &self.need {
-            let i = i as usize;
-            if is_moving(&hits[i]) {
-                if let Some(&h) = statics_of.next() {
-                    kept[base + sample(i) as usize] = (rays[i], h);
-                }
-            }
+        gather(&mut self.gathered, &self.need, rays);
+        self.fresh.clear();
+        self.fresh.resize(self.need.len(), None);
+        whole(&self.gathered, &mut self.fresh);
+        for (&i, &h) in self.need.iter().zip(&self.fresh) {
+            hits[i as usize] = h;
         }
     }
 
