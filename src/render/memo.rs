@@ -85,6 +85,7 @@ pub(super) struct StaticMemo {
     /// level of the pixel's sample, and its closest static hit.
     deeper: Vec<Vec<(Ray, Option<Hit>)>>,
     fresh: Vec<Option<Hit>>,
+    fresh_flags: Vec<bool>,
     clipped: Vec<Ray>,
     moving: Vec<Option<Hit>>,
     need: Vec<u32>,
@@ -265,17 +266,41 @@ impl StaticMemo {
             kept.resize(pixels, (EMPTY.0, None));
         }
         let slot = |i: usize| base + sample(i) as usize;
+        // One pass over the kept slots: a kept ray's static hit into `hits` and its
+        // ray clipped there into `clipped`; a new ray marked (three passes over the
+        // slots, 30 MB each at 640x480, were 11 ms of a 28 ms level).
+        let clip = |r: &Ray, h: &Option<Hit>| match h {
+            // A moving triangle beyond the static hit cannot be the closest; one at the
+            // same `t` loses the tie.
+            Some(h) => Ray { t_max: h.t, ..*r },
+            None => *r,
+        };
+        self.fresh_flags.clear();
+        self.fresh_flags.resize(n, false);
         {
             let kept = &*kept;
-            self.need.clear();
-            self.need.par_extend(
+            self.clipped.clear();
+            self.clipped.par_extend(
                 rays.par_iter()
+                    .zip(hits.par_iter_mut())
+                    .zip(self.fresh_flags.par_iter_mut())
                     .enumerate()
                     .with_min_len(1024)
-                    .filter(|&(i, r)| !same(&kept[slot(i)].0, r))
-                    .map(|(i, _)| i as u32),
+                    .map(|(i, ((r, h), new))| {
+                        let (k, s) = &kept[slot(i)];
+                        if same(k, r) {
+                            *h = *s;
+                            clip(r, s)
+                        } else {
+                            *h = None;
+                            *new = true;
+                            // Traced below, once its static hit is known.
+                            EMPTY.0
+                        }
+                    }),
             );
         }
+        select(&mut self.need, &self.fresh_flags, |&f| f);
         if 2 * self.need.len() > n {
             whole(rays, hits);
             let statics = layers.static_count();
@@ -304,7 +329,8 @@ impl StaticMemo {
             return;
         }
         // The new rays' static hits, kept (a batch of a few hundred rays through the
-        // static part alone: the whole's set-up for a batch was 10 ms a frame here).
+        // static part alone: the whole's set-up for it was 10 ms a frame here). Two new
+        // rays of one pixel (a mirror's and a glass's) share a slot: the later keeps it.
         if !self.need.is_empty() {
             gather(&mut self.gathered, &self.need, rays);
             self.fresh.clear();
@@ -313,52 +339,18 @@ impl StaticMemo {
             for (&i, &h) in self.need.iter().zip(&self.fresh) {
                 let i = i as usize;
                 kept[slot(i)] = (rays[i], h);
+                hits[i] = h;
+                self.clipped[i] = clip(&rays[i], &h);
             }
         }
-        // Every ray through the moving triangles up to its static hit. Two rays of one
-        // pixel (a mirror's and a glass's) share a slot: the one it does not hold is
-        // traced through the whole.
-        let kept = &*kept;
-        self.clipped.clear();
-        self.clipped
-            .par_extend(rays.par_iter().enumerate().map(|(i, r)| {
-                match &kept[slot(i)] {
-                    // A moving triangle beyond the static hit cannot be the closest; one at
-                    // the same `t` loses the tie.
-                    (k, Some(h)) if same(k, r) => Ray { t_max: h.t, ..*r },
-                    (k, None) if same(k, r) => *r,
-                    // A ray of zero direction meets nothing.
-                    _ => EMPTY.0,
-                }
-            }));
+        // Every ray through the moving triangles up to its static hit.
         self.moving.clear();
         self.moving.resize(n, None);
         layers.moving_batch(&self.clipped, &mut self.moving);
         hits.par_iter_mut()
             .zip(self.moving.par_iter())
-            .enumerate()
             .with_min_len(1024)
-            .for_each(|(i, (o, m))| {
-                let (k, s) = &kept[slot(i)];
-                *o = if same(k, &rays[i]) {
-                    closest_of(*s, *m)
-                } else {
-                    None
-                };
-            });
-        // The rays whose slot another ray took.
-        select(&mut self.need, &self.clipped, |r| r.dir == Vec3::ZERO);
-        self.need.retain(|&i| rays[i as usize].dir != Vec3::ZERO);
-        if self.need.is_empty() {
-            return;
-        }
-        gather(&mut self.gathered, &self.need, rays);
-        self.fresh.clear();
-        self.fresh.resize(self.need.len(), None);
-        whole(&self.gathered, &mut self.fresh);
-        for (&i, &h) in self.need.iter().zip(&self.fresh) {
-            hits[i as usize] = h;
-        }
+            .for_each(|(h, m)| *h = closest_of(*h, *m));
     }
 
     /// Whether each of a chunk's shadow rays towards punctual light `light` (below
