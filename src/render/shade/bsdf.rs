@@ -1,0 +1,391 @@
+//! The material's lobes at a surface (Fresnel, the reflected, transmitted and diffuse
+//! weights, the capped Blinn-Phong glint for lights) and the rays they send on: mirror
+//! and GGX reflection, refraction, the diffuse bounce, the pass-through of alpha.
+
+use glam::Vec3;
+
+use super::block::{BlockOut, Item};
+use super::frame::split_one;
+use super::surface::Surface;
+use super::{
+    Cone, LightPath, ShadeContext, Split, GLOSSY_LIMIT, MAX_SHININESS, MIN_WEIGHT, MIRROR_ALPHA,
+};
+use crate::geometry::Ray;
+use crate::render::sampling::{sample_cosine, sample_ggx_vndf, smith_g1, Purpose};
+use crate::scene::Material;
+
+/// `x` to the whole power `n` by binary exponentiation (the same products in the same
+/// order as compiler-rt's `__powisf2`, which `f32::powi` calls, but inlined).
+#[inline(always)]
+pub(super) fn powi(mut x: f32, mut n: u32) -> f32 {
+    let mut r = 1.0;
+    loop {
+        if n & 1 == 1 {
+            r *= x;
+        }
+        n >>= 1;
+        if n == 0 {
+            return r;
+        }
+        x *= x;
+    }
+}
+
+/// What a surface's material makes of light, as [`ShadeContext::lobes`] finds it.
+#[derive(Clone, Copy)]
+pub(super) struct Lobes {
+    pub(super) roughness: f32,
+    pub(super) gloss: f32,
+    /// GGX width of the reflection lobe; `None` for a mirror or no reflection ray.
+    pub(super) glossy_alpha: Option<f32>,
+    /// Whether a reflection ray is traced (roughness under [`GLOSSY_LIMIT`]).
+    pub(super) reflects: bool,
+    /// Towards the viewer.
+    pub(super) v: Vec3,
+    pub(super) f0: Vec3,
+    /// The ratio of the indices of refraction across the surface, as the ray crosses it.
+    pub(super) eta: f32,
+    /// Reflected, transmitted and diffuse weights.
+    pub(super) kr: Vec3,
+    pub(super) kt: Vec3,
+    pub(super) kd: Vec3,
+}
+
+/// On through a surface of coverage `alpha`, same direction, same depth.
+pub(super) fn pass_through(
+    s: &Surface,
+    item: &Item,
+    alpha: f32,
+    eps: f32,
+    cone: Cone,
+    out: &mut BlockOut,
+) {
+    let w = item.weight * (1.0 - alpha);
+    if w.max_element() > MIN_WEIGHT || item.coverage > 0.0 {
+        out.next(
+            Ray::new(s.point - s.ng * eps, s.dir),
+            Item {
+                sample: item.sample,
+                weight: w,
+                coverage: item.coverage * (1.0 - alpha),
+                depth: item.depth,
+                passes: item.passes + 1,
+                bounces: item.bounces,
+                diffuse: item.diffuse,
+                seed: item.seed.child(2),
+                cone,
+                path: item.path,
+            },
+        );
+    }
+}
+
+/// The refracted ray (or, on total internal reflection, more weight for the reflected
+/// one) and the reflected ray (mirror, or drawn from the GGX lobe), one level deeper.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn secondary(
+    s: &Surface,
+    lobes: &Lobes,
+    item: &Item,
+    weight: Vec3,
+    eps: f32,
+    origin: Vec3,
+    cone: Cone,
+    out: &mut BlockOut,
+) {
+    let (eta, kt, mut kr) = (lobes.eta, lobes.kt, lobes.kr);
+    let next = |w: Vec3, kind: u64, spread: f32| Item {
+        sample: item.sample,
+        weight: w,
+        coverage: 0.0,
+        depth: item.depth + 1,
+        passes: item.passes,
+        bounces: item.bounces,
+        diffuse: false,
+        seed: item.seed.child(kind),
+        cone: Cone {
+            width: cone.width,
+            spread,
+        },
+        // At the camera ray's hit the event names the pass (kind 1: refraction).
+        path: item.path.or(Some(if kind == 1 {
+            LightPath::Transmission
+        } else {
+            LightPath::Specular
+        })),
+    };
+    // Refraction (or total internal reflection, which adds to the reflected ray).
+    let kt_w = weight * kt;
+    if kt_w.max_element() > MIN_WEIGHT {
+        match refract(s.dir, s.ns, eta).or_else(|| refract(s.dir, s.ng, eta)) {
+            Some(t) if t.dot(s.ng) < 0.0 => {
+                out.next(
+                    Ray::new(s.point - s.ng * eps, t),
+                    next(kt_w, 1, cone.spread),
+                );
+            }
+            _ => kr += kt,
+        }
+    }
+    let kr_w = weight * kr;
+    if kr_w.max_element() <= MIN_WEIGHT {
+        return;
+    }
+    match lobes.glossy_alpha {
+        None => {
+            let mut r = reflect(s.dir, s.ns);
+            if r.dot(s.ng) <= 0.0 {
+                r = reflect(s.dir, s.ng);
+            }
+            out.next(Ray::new(origin, r), next(kr_w, 0, cone.spread));
+        }
+        Some(alpha) => {
+            // One direction from the visible normals: the estimator's weight is
+            // F · G2/G1(v), with Smith's separable G2 that is F · G1(l).
+            let m = sample_ggx_vndf(lobes.v, s.ns, alpha, item.seed.get(Purpose::Glossy, 0));
+            let r = reflect(s.dir, m);
+            let cos_l = r.dot(s.ns);
+            if cos_l <= 0.0 || r.dot(s.ng) <= 0.0 {
+                return; // into the surface: this sample reflects nothing
+            }
+            let w = kr_w * smith_g1(cos_l, alpha);
+            if w.max_element() > MIN_WEIGHT {
+                // The lobe's width widens the cone (for the texture level of detail).
+                out.next(Ray::new(origin, r), next(w, 0, cone.spread + alpha));
+            }
+        }
+    }
+}
+
+/// One cosine-weighted diffuse bounce (`--diffuse-bounces`): with the Lambertian BRDF
+/// `kd / π` and the density `cos / π` the estimator's weight is `kd` itself. The ray
+/// carries on to its hit's shadow rays (next-event estimation), so it adds no emission of
+/// its own (`Item::diffuse`); where it leaves the scene it sees the background or the
+/// environment, which is how they light the scene.
+pub(super) fn diffuse_bounce(
+    s: &Surface,
+    lobes: &Lobes,
+    item: &Item,
+    weight: Vec3,
+    origin: Vec3,
+    cone: Cone,
+    out: &mut BlockOut,
+) {
+    let w = weight * lobes.kd;
+    if w.max_element() <= MIN_WEIGHT {
+        return;
+    }
+    let dir = sample_cosine(s.ns, item.seed.get(Purpose::Diffuse, 0));
+    if dir.dot(s.ng) <= 0.0 {
+        return; // below the geometric surface (a bent shading normal): no light there
+    }
+    out.next(
+        Ray::new(origin, dir),
+        Item {
+            sample: item.sample,
+            weight: w,
+            coverage: 0.0,
+            depth: item.depth + 1,
+            passes: item.passes,
+            bounces: item.bounces + 1,
+            diffuse: true,
+            seed: item.seed.child(3),
+            // A diffuse lobe spreads over the hemisphere: the coarsest texture level.
+            cone: Cone {
+                width: cone.width,
+                spread: 1.0,
+            },
+            path: item.path.or(Some(LightPath::Diffuse)),
+        },
+    );
+}
+
+pub(super) fn reflect(d: Vec3, n: Vec3) -> Vec3 {
+    d - 2.0 * d.dot(n) * n
+}
+
+/// Refraction of unit `d` through unit `n` (facing against `d`), `eta = n1 / n2`;
+/// `None` on total internal reflection.
+pub(super) fn refract(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
+    let cos_i = -d.dot(n);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    if k < 0.0 {
+        return None;
+    }
+    Some((eta * d + (eta * cos_i - k.sqrt()) * n).normalize_or_zero())
+}
+
+/// Unpolarised Fresnel reflectance of a dielectric; `eta = n1 / n2`; 1 on total
+/// internal reflection.
+pub(super) fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
+    let sin_t2 = eta * eta * (1.0 - cos_i * cos_i);
+    if sin_t2 >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin_t2).sqrt();
+    let rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    (0.5 * (rs * rs + rp * rp)).clamp(0.0, 1.0)
+}
+
+impl ShadeContext<'_> {
+    /// The material's lobes at `s`: metallic and roughness (textured), Fresnel, and the
+    /// reflected, transmitted and diffuse weights.
+    pub(super) fn lobes(&self, m: &Material, s: &Surface, albedo: Vec3) -> Lobes {
+        let (mut metallic, mut roughness) = (m.metallic, m.roughness);
+        if let Some(t) = self.texture(m.metallic_roughness_texture, s.uv, s.lod, false) {
+            metallic *= t.z;
+            roughness *= t.y;
+        }
+        let metallic = metallic.clamp(0.0, 1.0);
+        let roughness = roughness.clamp(0.0, 1.0);
+        let transmission = (m.transmission.clamp(0.0, 1.0)) * (1.0 - metallic);
+        let gloss = (1.0 - roughness) * (1.0 - roughness);
+        let v = -s.dir;
+        let cos_o = s.ns.dot(v).clamp(0.0, 1.0);
+        let f0 = Vec3::splat(0.04).lerp(albedo, metallic);
+        let ior = if m.ior.is_finite() && m.ior >= 1.0 {
+            m.ior
+        } else {
+            1.5
+        };
+        let eta = if s.entering { 1.0 / ior } else { ior };
+        // Fresnel: exact dielectric for transmissive surfaces, Schlick otherwise.
+        let fresnel = if transmission > 0.0 {
+            Vec3::splat(fresnel_dielectric(cos_o, eta))
+        } else {
+            f0 + (Vec3::ONE - f0) * (1.0 - cos_o).powi(5)
+        };
+        let reflects = roughness < GLOSSY_LIMIT;
+        let alpha = roughness * roughness;
+        let kt = (Vec3::ONE - fresnel) * transmission * albedo;
+        let (kr, kd) = if reflects {
+            (
+                fresnel,
+                albedo * ((1.0 - metallic) * (1.0 - transmission) * (1.0 - fresnel.max_element())),
+            )
+        } else {
+            (
+                Vec3::ZERO,
+                albedo
+                    * ((1.0 - metallic)
+                        * (1.0 - transmission)
+                        * (1.0 - fresnel.max_element() * gloss)
+                        + metallic * (1.0 - gloss)),
+            )
+        };
+        Lobes {
+            roughness,
+            gloss,
+            glossy_alpha: (reflects && alpha >= MIRROR_ALPHA).then_some(alpha),
+            reflects,
+            v,
+            f0,
+            eta,
+            kr,
+            kt,
+            kd,
+        }
+    }
+
+    /// The Blinn–Phong exponent of the highlight for lights (0: none).
+    pub(super) fn shininess(roughness: f32) -> f32 {
+        if roughness < 0.9 {
+            // Capped: a point light is a delta, and the glint of one on a polished
+            // surface would otherwise be a tiny spot of enormous radiance (one that
+            // mirrors then multiply around the scene).
+            (2.0 / roughness.powi(4).max(1e-4) - 2.0).min(MAX_SHININESS)
+        } else {
+            0.0
+        }
+    }
+
+    /// Diffuse plus (when `highlight`) the capped Blinn–Phong glint, for light arriving
+    /// from `to_light`.
+    #[inline]
+    pub(super) fn brdf(lobes: &Lobes, s: &Surface, to_light: Vec3, highlight: bool) -> Vec3 {
+        let mut brdf = lobes.kd * std::f32::consts::FRAC_1_PI;
+        if highlight {
+            if let Some(g) = Self::glint(lobes, s, to_light) {
+                brdf += g;
+            }
+        }
+        brdf
+    }
+
+    /// The capped Blinn–Phong glint for light arriving from `to_light`; `None` for a
+    /// surface too rough to have one.
+    #[inline]
+    pub(super) fn glint(lobes: &Lobes, s: &Surface, to_light: Vec3) -> Option<Vec3> {
+        let shininess = Self::shininess(lobes.roughness);
+        if shininess <= 0.0 {
+            return None;
+        }
+        let h = (to_light + lobes.v).normalize_or_zero();
+        let nh = s.ns.dot(h).max(0.0);
+        let norm = (shininess + 8.0) / (8.0 * std::f32::consts::PI);
+        // A whole exponent (a polished surface's is the cap, 256) by repeated squaring,
+        // inlined: libm's `powf` was a tenth of the shading, half of that its slow path
+        // for results that underflow, and `f32::powi` a call (benches/PERF.md, issue 38).
+        let lobe = if shininess.fract() == 0.0 {
+            powi(nh, shininess as u32)
+        } else {
+            nh.powf(shininess)
+        };
+        Some(lobes.f0 * (1.0 - lobes.gloss * 0.5) * (norm * lobe).min(1e3))
+    }
+
+    /// What light arriving from `to_light` adds, split over the passes (`e`: the
+    /// path's weight × the light's irradiance and geometry factors): at a camera ray's
+    /// hit (`path` `None`) the diffuse lobe's part is diffuse and the glint's specular;
+    /// deeper, both go to the path's pass.
+    pub(super) fn split_light(
+        lobes: &Lobes,
+        s: &Surface,
+        to_light: Vec3,
+        highlight: bool,
+        e: Vec3,
+        path: Option<LightPath>,
+    ) -> Split {
+        let d = e * (lobes.kd * std::f32::consts::FRAC_1_PI);
+        let g = match highlight.then(|| Self::glint(lobes, s, to_light)).flatten() {
+            Some(g) => e * g,
+            None => Vec3::ZERO,
+        };
+        match path {
+            Some(p) => split_one(p, d + g),
+            None => [d, g, Vec3::ZERO, Vec3::ZERO],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn powi_is_the_library_power_to_the_bit() {
+        for n in [0u32, 1, 2, 5, 7, 64, 255, 256] {
+            for x in [0.0f32, 0.3, 0.9, 0.999_9, 1.0, 1.5] {
+                let n_ = std::hint::black_box(n as i32);
+                assert_eq!(powi(x, n).to_bits(), x.powi(n_).to_bits(), "{x}^{n}");
+            }
+        }
+    }
+
+    #[test]
+    fn refraction_and_fresnel() {
+        let n = Vec3::Y;
+        let d = Vec3::new(1.0, -1.0, 0.0).normalize();
+        // Into glass: bends towards the normal (Snell).
+        let t = refract(d, n, 1.0 / 1.5).unwrap();
+        let sin_t = t.x;
+        assert!((sin_t - d.x / 1.5).abs() < 1e-6);
+        // Out of glass at 45°: total internal reflection (critical angle 41.8°).
+        assert!(refract(d, n, 1.5).is_none());
+        assert_eq!(fresnel_dielectric(d.dot(-n).abs(), 1.5), 1.0);
+        // Normal incidence: ((n1-n2)/(n1+n2))^2 = 0.04.
+        assert!((fresnel_dielectric(1.0, 1.0 / 1.5) - 0.04).abs() < 1e-6);
+        assert!(reflect(d, n).abs_diff_eq(Vec3::new(d.x, -d.y, 0.0), 1e-6));
+    }
+}

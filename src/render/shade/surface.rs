@@ -1,0 +1,220 @@
+//! The surface a ray meets: the hit's point, normals (normal maps), uvs, texture level of
+//! detail, and the textured factors of its material read there.
+
+use glam::{Vec2, Vec3, Vec4};
+
+use super::ShadeContext;
+use crate::geometry::{Hit, Ray};
+use crate::psf::Prim;
+use crate::scene::{AlphaMode, Material, TextureRef};
+
+/// A hit made into a surface: where, which way it faces, and what its material reads.
+pub(super) struct Surface {
+    pub(super) point: Vec3,
+    /// Geometric normal, facing the incoming ray.
+    pub(super) ng: Vec3,
+    /// Shading normal, on the side of `ng`.
+    pub(super) ns: Vec3,
+    /// Unit ray direction.
+    pub(super) dir: Vec3,
+    pub(super) entering: bool,
+    pub(super) uv: Vec2,
+    /// Texture level of detail for a unit texture: a `w × h` texture adds
+    /// `log2(√(w·h))`; `-∞` for the finest level.
+    pub(super) lod: f32,
+    pub(super) material: u32,
+    /// Hit number of the triangle.
+    pub(super) tri: u32,
+}
+
+/// The material's coverage at a point of base colour `base`.
+pub(super) fn alpha_of(m: &Material, base: Vec4) -> f32 {
+    match m.alpha_mode {
+        AlphaMode::Opaque => 1.0,
+        AlphaMode::Mask { cutoff } => {
+            if base.w >= cutoff {
+                1.0
+            } else {
+                0.0
+            }
+        }
+        AlphaMode::Blend => base.w.clamp(0.0, 1.0),
+    }
+}
+
+impl ShadeContext<'_> {
+    /// Samples a texture (RGBA, linearised RGB when `srgb`) at `uv` (through the slot's
+    /// `KHR_texture_transform`, if any), filtered for a footprint of level
+    /// `lod + log2(√(width·height))` (see [`Surface::lod`]), or `None` without one.
+    #[inline]
+    pub(super) fn texture(
+        &self,
+        slot: Option<TextureRef>,
+        uv: Vec2,
+        lod: f32,
+        srgb: bool,
+    ) -> Option<Vec4> {
+        let slot = slot?;
+        let t = slot.texture as usize;
+        let tex = self.scene.textures.get(t)?;
+        let img = self.scene.images.get(tex.image as usize)?;
+        let (w, h) = (img.width, img.height);
+        if w == 0 || h == 0 || img.rgba8.len() as u64 != u64::from(w) * u64::from(h) * 4 {
+            return None;
+        }
+        let uv = slot.transform.map_or(uv, |t| t.apply(uv));
+        let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
+        let lod = lod + 0.5 * ((w as f32) * (h as f32)).log2();
+        Some(self.mips.lookup(t, tex, &img.rgba8, w, h, uv, lod, srgb))
+    }
+
+    /// Geometry at a hit, `None` for a triangle index out of range. `width`: the ray
+    /// cone's width at the hit (0: the finest texture level).
+    #[inline(always)]
+    pub(super) fn surface(&self, ray: &Ray, hit: &Hit, width: f32) -> Option<Surface> {
+        let (soup, i) = match Prim::from_index(hit.tri, self.static_soup.len()) {
+            Prim::Static(i) => (self.static_soup, i as usize),
+            Prim::Moving(i) => (self.dynamic_soup, i as usize),
+        };
+        let p = soup.positions.get(i)?;
+        let nrm = soup.normals.get(i);
+        let uvs = soup.uvs.get(i);
+        let material = soup.material.get(i).copied().unwrap_or(u32::MAX);
+        let (u, v) = (hit.u, hit.v);
+        let w = 1.0 - u - v;
+        let point = p[0] * w + p[1] * u + p[2] * v;
+        let cross = (p[1] - p[0]).cross(p[2] - p[0]);
+        let mut ng = cross.normalize_or_zero();
+        let dir = ray.dir.normalize_or_zero();
+        if ng == Vec3::ZERO {
+            ng = -dir;
+        }
+        let front = ng;
+        // `entering`: the ray meets the side the winding makes the front.
+        let entering = ng.dot(dir) < 0.0;
+        if !entering {
+            ng = -ng;
+        }
+        let mut ns = nrm
+            .map(|n| (n[0] * w + n[1] * u + n[2] * v).normalize_or_zero())
+            .unwrap_or(Vec3::ZERO);
+        if ns == Vec3::ZERO || !ns.is_finite() {
+            ns = front;
+        }
+        let uv = uvs.map_or(Vec2::ZERO, |t| t[0] * w + t[1] * u + t[2] * v);
+        // Level of detail without the texture's size: log2 of the footprint's width in
+        // uv units (Akenine-Möller et al. 2021, eq. 34, for a unit texture).
+        // Only a textured material reads it (two logarithms a hit saved elsewhere).
+        let textured = self.material(material).is_some_and(|m| {
+            m.base_color_texture.is_some()
+                || m.metallic_roughness_texture.is_some()
+                || m.emissive_texture.is_some()
+                || m.normal_texture.is_some()
+        });
+        let lod = match uvs {
+            Some(t) if textured && width > 0.0 => {
+                let uv_area = (t[1] - t[0]).perp_dot(t[2] - t[0]).abs();
+                let world_area = cross.length();
+                let cos = ng.dot(dir).abs().max(1e-4);
+                if uv_area > 0.0 && world_area > 0.0 {
+                    (width / cos).log2() + 0.5 * (uv_area / world_area).log2()
+                } else {
+                    f32::NEG_INFINITY
+                }
+            }
+            _ => f32::NEG_INFINITY,
+        };
+        if let (Some(m), Some(t)) = (self.material(material), uvs) {
+            if m.normal_texture.is_some() {
+                ns = self.normal_mapped(m, ns, p, t, uv, lod).unwrap_or(ns);
+            }
+        }
+        if ns.dot(ng) < 0.0 {
+            ns = -ns;
+        }
+        Some(Surface {
+            point,
+            ng,
+            ns,
+            dir,
+            entering,
+            uv,
+            lod,
+            material,
+            tri: hit.tri,
+        })
+    }
+
+    /// The front-side normal `n` bent by the material's normal map at `uv`. Tangent
+    /// `T = ∂p/∂u` of the triangle (per triangle, from its uvs: the file's `TANGENT`
+    /// attribute is not read), made orthogonal to `n`; bitangent `B = ±n × T`, the sign
+    /// making it point along `−∂p/∂v` (glTF's normal maps have +Y towards decreasing `v`,
+    /// and mirrored uvs flip it). `None` where the uvs are degenerate.
+    pub(super) fn normal_mapped(
+        &self,
+        m: &Material,
+        n: Vec3,
+        p: &[Vec3; 3],
+        t: &[Vec2; 3],
+        uv: Vec2,
+        lod: f32,
+    ) -> Option<Vec3> {
+        let c = self.texture(m.normal_texture, uv, lod, false)?;
+        let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+        let (d1, d2) = (t[1] - t[0], t[2] - t[0]);
+        let det = d1.perp_dot(d2);
+        if det.abs() < 1e-12 {
+            return None;
+        }
+        let dpdu = (e1 * d2.y - e2 * d1.y) / det;
+        let dpdv = (e2 * d1.x - e1 * d2.x) / det;
+        let tangent = (dpdu - n * n.dot(dpdu)).try_normalize()?;
+        let mut bitangent = n.cross(tangent);
+        if bitangent.dot(dpdv) > 0.0 {
+            bitangent = -bitangent;
+        }
+        let s = if m.normal_scale.is_finite() {
+            m.normal_scale
+        } else {
+            1.0
+        };
+        let local = Vec3::new(
+            (2.0 * c.x - 1.0) * s,
+            (2.0 * c.y - 1.0) * s,
+            2.0 * c.z - 1.0,
+        );
+        let bent = (tangent * local.x + bitangent * local.y + n * local.z).try_normalize()?;
+        // A map cannot turn the normal to the far side of the surface.
+        (bent.dot(n) > 0.0).then_some(bent)
+    }
+
+    /// Base colour (factor × texture) at a surface.
+    pub(super) fn base_color(&self, m: &Material, uv: Vec2, lod: f32) -> Vec4 {
+        match self.texture(m.base_color_texture, uv, lod, true) {
+            Some(t) => m.base_color * t,
+            None => m.base_color,
+        }
+    }
+
+    /// Emitted radiance of `m` at `uv`.
+    pub(super) fn emission(&self, m: &Material, uv: Vec2, lod: f32) -> Vec3 {
+        let mut e = m.emissive * m.emissive_strength;
+        if e != Vec3::ZERO {
+            if let Some(t) = self.texture(m.emissive_texture, uv, lod, true) {
+                e *= t.truncate();
+            }
+        }
+        e
+    }
+
+    /// Texture coordinates at barycentrics `b` of hit number `tri`.
+    pub(super) fn uv_at(&self, tri: u32, b: Vec2) -> Vec2 {
+        let uvs = match Prim::from_index(tri, self.static_soup.len()) {
+            Prim::Static(i) => self.static_soup.uvs.get(i as usize),
+            Prim::Moving(i) => self.dynamic_soup.uvs.get(i as usize),
+        };
+        uvs.map_or(Vec2::ZERO, |t| {
+            t[0] * (1.0 - b.x - b.y) + t[1] * b.x + t[2] * b.y
+        })
+    }
+}
