@@ -383,30 +383,27 @@ impl StaticMemo {
             kept.clear();
             kept.resize(pixels, EMPTY);
         }
-        // Each ray's kept static answer, and the rays that have none.
+        // Each ray's kept static answer, and the rays that have none, in one pass over
+        // the kept slots.
+        self.fresh_flags.clear();
+        self.fresh_flags.resize(rays.len(), false);
         {
             let kept = &*kept;
-            let slot = |s: u32| &kept[base + s as usize];
             blocked
                 .par_iter_mut()
+                .zip(self.fresh_flags.par_iter_mut())
                 .zip(rays.par_iter().zip(pixel.par_iter()))
                 .with_min_len(1024)
-                .for_each(|(b, (r, &(s, _)))| {
-                    let (k, answer) = slot(s);
-                    // Not blocked and not kept read the same here; `need` tells them
+                .for_each(|((b, new), (r, &(s, _)))| {
+                    let (k, answer) = &kept[base + s as usize];
+                    // Not blocked and not kept read the same here; `new` tells them
                     // apart.
-                    *b = same(k, r) && *answer;
+                    let same = same(k, r);
+                    *b = same && *answer;
+                    *new = !same;
                 });
-            self.need.clear();
-            self.need.par_extend(
-                rays.par_iter()
-                    .zip(pixel.par_iter())
-                    .enumerate()
-                    .with_min_len(1024)
-                    .filter(|(_, (r, &(s, _)))| !same(&slot(s).0, r))
-                    .map(|(i, _)| i as u32),
-            );
         }
+        select(&mut self.need, &self.fresh_flags, |&f| f);
         if 2 * self.need.len() > rays.len() {
             whole(rays, blocked);
             // The new rays' static answers: false where nothing blocks them, else
