@@ -25,8 +25,13 @@ use crate::geometry::{closest_of, Hit, Layers, Ray};
 /// frame's punctual lights, fewer where [`SHADOW_BYTES`] would not hold them.
 const MAX_LIGHTS: usize = 8;
 
-/// The memory the kept shadow answers may take (36 bytes a pixel and light): eight
-/// lights at 640x480, three at 1920x1080, none at 4096x2160.
+/// The memory the kept shadow answers may take, every level's together (36 bytes a
+/// pixel, light and level): with the camera rays' and two levels below them, eight
+/// lights at 640x480, one at 1920x1080, none at 4096x2160 (where no level below the
+/// camera rays is kept and the camera rays' shadows would need 319 MB a light).
+///
+/// What the memo holds at most, so: 512 + 256 + 256 MB; at 640x480 with one light,
+/// 6 MB of camera-ray hits, 32 MB of the two levels' hits and 33 MB of shadow answers.
 const SHADOW_BYTES: usize = 256 << 20;
 
 /// The memory the kept camera-ray hits may take (20 bytes a pixel): beyond it (some 26
@@ -47,9 +52,11 @@ pub(super) fn levels_kept(pixels: usize) -> usize {
     (SECONDARY_BYTES / (std::mem::size_of::<(Ray, Option<Hit>)>() * pixels.max(1))).min(LEVELS_KEPT)
 }
 
-/// How many punctual lights' shadow answers a frame of `pixels` keeps.
+/// How many punctual lights' shadow answers a frame of `pixels` keeps at each level it
+/// keeps (the camera rays' and [`levels_kept`] below them).
 pub(super) fn lights_kept(pixels: usize) -> usize {
-    (SHADOW_BYTES / (std::mem::size_of::<(Ray, bool)>() * pixels.max(1))).min(MAX_LIGHTS)
+    let levels = 1 + levels_kept(pixels);
+    (SHADOW_BYTES / (std::mem::size_of::<(Ray, bool)>() * pixels.max(1) * levels)).min(MAX_LIGHTS)
 }
 
 /// A batch's closest hits through the whole structure.
@@ -451,5 +458,21 @@ impl StaticMemo {
         for (&i, &a) in self.need.iter().zip(&self.answers) {
             blocked[i as usize] = a;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The budgets the constants' docs state.
+    #[test]
+    fn what_is_kept_at_each_size_is_as_documented() {
+        assert_eq!(std::mem::size_of::<(Ray, bool)>(), 36);
+        assert_eq!(std::mem::size_of::<(Ray, Option<Hit>)>(), 52);
+        let at = |w: usize, h: usize| (levels_kept(w * h), lights_kept(w * h));
+        assert_eq!(at(640, 480), (2, 8));
+        assert_eq!(at(1920, 1080), (2, 1));
+        assert_eq!(at(4096, 2160), (0, 0));
     }
 }
