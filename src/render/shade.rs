@@ -221,15 +221,15 @@ pub struct FrameWork {
 
 /// A light ready for shading.
 #[derive(Clone, Copy, Debug)]
-struct PreLight {
-    kind: LightKind,
+pub(super) struct PreLight {
+    pub(super) kind: LightKind,
     /// Colour × intensity.
-    power: Vec3,
-    position: Vec3,
+    pub(super) power: Vec3,
+    pub(super) position: Vec3,
     /// Unit direction the light shines along.
-    direction: Vec3,
-    range: Option<f32>,
-    falloff: Falloff,
+    pub(super) direction: Vec3,
+    pub(super) range: Option<f32>,
+    pub(super) falloff: Falloff,
 }
 
 /// Everything shading reads during one frame.
@@ -240,8 +240,8 @@ pub struct ShadeContext<'a> {
     pub options: ShadingOptions,
     /// Size of the scene (bounding box diagonal), for ray offsets.
     pub extent: f32,
-    lights: Vec<PreLight>,
-    area: AreaLights,
+    pub(super) lights: Vec<PreLight>,
+    pub(super) area: AreaLights,
     mips: &'a TextureMips,
     /// glTF's default material, for triangles without one (made once, not a hit).
     default_material: Material,
@@ -250,7 +250,7 @@ pub struct ShadeContext<'a> {
 /// Passes through alpha-cut surfaces a ray may make.
 const MAX_PASSES: u16 = 16;
 /// Contributions below this (max component of the weight) are dropped.
-const MIN_WEIGHT: f32 = 1e-4;
+pub(super) const MIN_WEIGHT: f32 = 1e-4;
 /// Largest Blinn–Phong exponent (roughness below about 0.3 gets this).
 const MAX_SHININESS: f32 = 256.0;
 /// From this roughness on, a surface traces no reflection ray. Chosen against Cycles on
@@ -259,7 +259,7 @@ const MAX_SHININESS: f32 = 256.0;
 /// fireflies, there being no multiple importance sampling.
 pub const GLOSSY_LIMIT: f32 = 0.4;
 /// GGX widths below this reflect as a perfect mirror.
-const MIRROR_ALPHA: f32 = 1e-3;
+pub(super) const MIRROR_ALPHA: f32 = 1e-3;
 /// Area-light samples a pixel gets at its camera rays' hits, over all its samples
 /// (`ceil(LIGHT_SAMPLES / spp)` a hit; one at deeper hits).
 const LIGHT_SAMPLES: u32 = 8;
@@ -686,7 +686,7 @@ impl<'a> ShadeContext<'a> {
     }
 
     /// The Blinn–Phong exponent of the highlight for lights (0: none).
-    fn shininess(roughness: f32) -> f32 {
+    pub(super) fn shininess(roughness: f32) -> f32 {
         if roughness < 0.9 {
             // Capped: a point light is a delta, and the glint of one on a polished
             // surface would otherwise be a tiny spot of enormous radiance (one that

@@ -1,0 +1,525 @@
+//! The GPU frame path: a chunk of a frame's samples traced and shaded on the GPU from
+//! its camera rays to its pixels, the wavefront staying on the GPU between depth
+//! levels (shade.wgsl): per level the closest hits (trace.wgsl, through
+//! [`GpuTracer::encode`]), the shading (emission, ambient, a shadow ray a punctual
+//! light, the refracted and mirror rays), the shadow rays and the next level's rays
+//! compacted by prefix sums (scan.wgsl) in the CPU's order, the any hits of the shadow
+//! rays, and each sample's sum. The host reads back two counts a level (to size the
+//! next level's buffers), the finished pixels and, when asked, the camera rays' hits
+//! (for the AOVs and Cryptomatte, which the CPU makes from them).
+//!
+//! What is shaded here is what `render::gpu_frame` admits; the tables it hands over
+//! ([`ShadeMaterial`], [`ShadeLight`]) hold what depends on the material or the light
+//! alone, computed by the CPU's own code.
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::moving::entry;
+use super::trace::pack_ray;
+use super::{GpuDevice, GpuError, GpuMoving, GpuStatic, GpuTracer};
+use crate::geometry::{Hit, Ray};
+
+/// A triangle as shading reads it: three positions (the first's `w`: the material's
+/// index in the table, the second's: 1 when it has vertex normals), then three
+/// normals. 96 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct SurfaceTriangle {
+    v: [[f32; 4]; 6],
+}
+
+impl SurfaceTriangle {
+    /// Positions `p`, vertex normals `n` if any, material `material` (an index into
+    /// the material table).
+    pub fn new(p: &[Vec3; 3], n: Option<&[Vec3; 3]>, material: u32) -> SurfaceTriangle {
+        let mut v = [[0.0f32; 4]; 6];
+        for k in 0..3 {
+            v[k] = [p[k].x, p[k].y, p[k].z, 0.0];
+            if let Some(n) = n {
+                v[3 + k] = [n[k].x, n[k].y, n[k].z, 0.0];
+            }
+        }
+        v[0][3] = f32::from_bits(material);
+        v[1][3] = f32::from_bits(u32::from(n.is_some()));
+        SurfaceTriangle { v }
+    }
+}
+
+/// A constant material, as shade.wgsl's `lobes` and `brdf` read it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct ShadeMaterial {
+    /// Base colour (RGB).
+    pub albedo: [f32; 3],
+    /// Clamped to [0, 1].
+    pub metallic: f32,
+    /// `mix(0.04, albedo, metallic)`.
+    pub f0: [f32; 3],
+    /// Clamped to [0, 1].
+    pub roughness: f32,
+    /// Emissive × strength.
+    pub emission: [f32; 3],
+    /// Clamped, × (1 − metallic).
+    pub transmission: f32,
+    /// `(1 − roughness)²`.
+    pub gloss: f32,
+    /// The Blinn–Phong exponent (0: no glint).
+    pub shininess: f32,
+    /// `1 / ior` and `ior`.
+    pub eta_entering: f32,
+    pub eta_leaving: f32,
+    /// 1 for double-sided.
+    pub double_sided: u32,
+    /// 1 when a (mirror) reflection ray is traced.
+    pub reflects: u32,
+    /// `(shininess + 8) / 8π`.
+    pub glint_norm: f32,
+    /// `1 − gloss / 2`.
+    pub glint_scale: f32,
+}
+
+/// A punctual light, as shade.wgsl reads it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct ShadeLight {
+    pub position: [f32; 3],
+    /// 0 directional, 1 point, 2 spot.
+    pub kind: u32,
+    /// Unit direction the light shines along.
+    pub direction: [f32; 3],
+    pub range: f32,
+    /// Colour × intensity.
+    pub power: [f32; 3],
+    /// 1 for `Falloff::None`.
+    pub no_falloff: u32,
+    /// The spot's `cos(outer)` and `1 / max(cos(inner) − cos(outer), 1e-3)`.
+    pub cos_outer: f32,
+    pub cone_scale: f32,
+    /// 1 when `range` applies.
+    pub has_range: u32,
+    pub pad: u32,
+}
+
+/// A frame's shading constants.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadeParams {
+    pub ambient: [f32; 3],
+    pub background: [f32; 3],
+    /// The scene's size (ray offsets).
+    pub extent: f32,
+    pub max_depth: u32,
+    /// Contributions at or below this are dropped (`shade::MIN_WEIGHT`).
+    pub min_weight: f32,
+}
+
+/// `FP` in shade.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct Params {
+    a: [u32; 4],
+    b: [u32; 4],
+    c: [f32; 4],
+    d: [f32; 4],
+    e: [f32; 4],
+    g: [u32; 4],
+}
+
+/// The surfaces of a frame's moving triangles, uploaded ([`GpuShading::moving`]).
+pub struct GpuSurfaces {
+    buf: wgpu::Buffer,
+    count: u32,
+}
+
+/// What a chunk's samples gave.
+#[derive(Clone, Debug, Default)]
+pub struct ChunkOut {
+    /// Each pixel's RGB (averaged over its samples) and coverage.
+    pub rgba: Vec<[f32; 4]>,
+    /// The camera rays' closest hits, when asked for.
+    pub camera_hits: Option<Vec<Option<Hit>>>,
+    pub shadow_rays: u64,
+    pub secondary_rays: u64,
+}
+
+/// Bindings of shade.wgsl beyond the uniform.
+const BINDINGS: u32 = 22;
+
+/// The frame path's kernels and the static triangles' surfaces (uploaded once).
+pub struct GpuShading {
+    layout: wgpu::BindGroupLayout,
+    shade_pipe: wgpu::ComputePipeline,
+    compact_pipe: wgpu::ComputePipeline,
+    accum_pipe: wgpu::ComputePipeline,
+    pixels_pipe: wgpu::ComputePipeline,
+    shear_pipe: wgpu::ComputePipeline,
+    static_surf: wgpu::Buffer,
+    static_count: u32,
+    /// A small buffer for each binding a kernel does not read.
+    dummies: Vec<wgpu::Buffer>,
+}
+
+impl std::fmt::Debug for GpuShading {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "GpuShading({} static triangles)", self.static_count)
+    }
+}
+
+const USAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
+    .union(wgpu::BufferUsages::COPY_SRC)
+    .union(wgpu::BufferUsages::COPY_DST);
+
+impl GpuShading {
+    /// Compiles the kernels and uploads the static triangles' surfaces (numbered as
+    /// the tracer numbers them).
+    pub fn new(dev: &GpuDevice, static_surf: &[SurfaceTriangle]) -> Result<GpuShading, GpuError> {
+        let device = &dev.device;
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("shade.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("shade.wgsl").into()),
+        });
+        let mut entries = vec![wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        }];
+        entries.extend((1..=BINDINGS).map(|binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: false },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        }));
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("frame"),
+            entries: &entries,
+        });
+        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("frame"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipe = |name: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(name),
+                layout: Some(&pl),
+                module: &module,
+                entry_point: Some(name),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let (shade_pipe, compact_pipe, accum_pipe, pixels_pipe, shear_pipe) = (
+            pipe("shade"),
+            pipe("compact"),
+            pipe("accum"),
+            pipe("pixels"),
+            pipe("shear_test"),
+        );
+        let dummies = (0..BINDINGS)
+            .map(|_| dev.buffer("an unused binding", 256, USAGE))
+            .collect::<Result<Vec<_>, _>>()?;
+        let static_count = u32::try_from(static_surf.len())
+            .map_err(|_| dev.too_large("the static surfaces", static_surf.len() as u64 * 96))?;
+        let static_surf =
+            dev.storage_with("the static surfaces", bytemuck::cast_slice(static_surf))?;
+        dev.wait()?;
+        Ok(GpuShading {
+            layout,
+            shade_pipe,
+            compact_pipe,
+            accum_pipe,
+            pixels_pipe,
+            shear_pipe,
+            static_surf,
+            static_count,
+            dummies,
+        })
+    }
+
+    /// A frame's moving triangles' surfaces, uploaded (numbered after the static ones).
+    pub fn moving(
+        &self,
+        dev: &GpuDevice,
+        surf: &[SurfaceTriangle],
+    ) -> Result<GpuSurfaces, GpuError> {
+        let count = u32::try_from(surf.len())
+            .map_err(|_| dev.too_large("the moving surfaces", surf.len() as u64 * 96))?;
+        Ok(GpuSurfaces {
+            buf: dev.storage_with("the moving surfaces", bytemuck::cast_slice(surf))?,
+            count,
+        })
+    }
+
+    fn group(&self, dev: &GpuDevice, bufs: &[Option<&wgpu::Buffer>]) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = bufs
+            .iter()
+            .enumerate()
+            .map(|(k, b)| entry(k as u32, b.unwrap_or(&self.dummies[k.saturating_sub(1)])))
+            .collect();
+        dev.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame"),
+            layout: &self.layout,
+            entries: &entries,
+        })
+    }
+
+    fn dispatch(
+        enc: &mut wgpu::CommandEncoder,
+        pipe: &wgpu::ComputePipeline,
+        group: &wgpu::BindGroup,
+        n: u64,
+    ) {
+        if n == 0 {
+            return;
+        }
+        let (gx, gy, _) = GpuDevice::grid_of(n, 64);
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(pipe);
+        pass.set_bind_group(0, group, &[]);
+        pass.dispatch_workgroups(gx, gy, 1);
+    }
+
+    /// For the tests: the rays as the GPU frame path makes them (`trace::pack_ray`'s 48
+    /// bytes: origin and `t_min`, direction and `t_max`, the shear and its axis bits),
+    /// each word's bits; [`packed_on_cpu`] gives the CPU's.
+    pub fn rays_made_on_gpu(
+        &self,
+        dev: &GpuDevice,
+        rays: &[Ray],
+    ) -> Result<Vec<[u32; 12]>, GpuError> {
+        let n = rays.len() as u64;
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        // Sent with no shear: the kernel makes it.
+        let plain: Vec<[f32; 12]> = rays
+            .iter()
+            .map(|r| {
+                let (o, d) = (r.origin, r.dir);
+                [
+                    o.x, o.y, o.z, r.t_min, d.x, d.y, d.z, r.t_max, 0.0, 0.0, 0.0, 0.0,
+                ]
+            })
+            .collect();
+        let buf = dev.buffer("the rays", n * 48, USAGE)?;
+        dev.write(&buf, 0, bytemuck::cast_slice(&plain));
+        let (_, _, stride) = GpuDevice::grid_of(n, 64);
+        let params = params(n, 0, true, 0, 0, stride, 0, 1, None);
+        let uni = dev.uniform(bytemuck::bytes_of(&params));
+        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; BINDINGS as usize + 1];
+        bufs[0] = Some(&uni);
+        bufs[1] = Some(&buf);
+        let group = self.group(dev, &bufs);
+        let mut enc = dev.device.create_command_encoder(&Default::default());
+        Self::dispatch(&mut enc, &self.shear_pipe, &group, n);
+        let bytes = dev.read_back(enc, &buf, n * 48)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes[..rays.len() * 48]))
+    }
+
+    /// Traces and shades `camera_rays` (`spp` consecutive rays a pixel, in the CPU's
+    /// sample order) over the static part and the frame's moving part (`moving`,
+    /// `surfaces`), with `materials` (indexed by the surfaces' material numbers) and
+    /// `lights`: each pixel's averaged RGB and coverage, and the camera rays' hits when
+    /// `want_hits`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_chunk(
+        &self,
+        dev: &GpuDevice,
+        stat: &GpuStatic,
+        moving: &GpuMoving,
+        surfaces: &GpuSurfaces,
+        materials: &[ShadeMaterial],
+        lights: &[ShadeLight],
+        shading: &ShadeParams,
+        camera_rays: &[Ray],
+        spp: u32,
+        want_hits: bool,
+    ) -> Result<ChunkOut, GpuError> {
+        let spp = spp.max(1);
+        let nsamples = camera_rays.len() as u64;
+        let npix = nsamples / u64::from(spp);
+        if nsamples == 0 {
+            return Ok(ChunkOut::default());
+        }
+        let nl = lights.len() as u64;
+        let nl32 = u32::try_from(nl).map_err(|_| dev.too_large("the lights", nl * 48))?;
+        let tracer = GpuTracer::new(dev, stat, moving);
+        let mats = dev.storage_with("the materials", bytemuck::cast_slice(materials))?;
+        let lts = dev.storage_with("the lights", bytemuck::cast_slice(lights))?;
+        let packed: Vec<_> = camera_rays
+            .par_iter()
+            .with_min_len(4096)
+            .map(pack_ray)
+            .collect();
+        let mut rays = dev.storage_with("the camera rays", bytemuck::cast_slice(&packed))?;
+        let mut items: Option<wgpu::Buffer> = None;
+        let radiance = dev.buffer("the samples' radiance", nsamples * 16, USAGE)?;
+        let mut n = nsamples;
+        let mut first = true;
+        let mut camera_hits = None;
+        let mut out = ChunkOut::default();
+        let mut enc = dev.device.create_command_encoder(&Default::default());
+        let total_tris = self.static_count.saturating_add(surfaces.count);
+        while n > 0 {
+            let hits = dev.buffer("the hits", n * 16, USAGE)?;
+            tracer.encode(&mut enc, &rays, &hits, n, false)?;
+            let local = dev.buffer("the items' light", n * 16, USAGE)?;
+            let sh_cand = dev.buffer("the shadow ray candidates", n * nl * 64, USAGE)?;
+            let nx_cand_r = dev.buffer("the next rays' candidates", n * 2 * 48, USAGE)?;
+            let nx_cand_i = dev.buffer("the next items' candidates", n * 2 * 32, USAGE)?;
+            let sh_count = dev.buffer("the shadow ray counts", (n + 1) * 4, USAGE)?;
+            let nx_count = dev.buffer("the next ray counts", (n + 1) * 4, USAGE)?;
+            let sh_start = dev.buffer("the shadow ray starts", (n + 1) * 4, USAGE)?;
+            let nx_start = dev.buffer("the next ray starts", (n + 1) * 4, USAGE)?;
+            let (_, _, stride) = GpuDevice::grid_of(n, 64);
+            let p = params(
+                n,
+                nl32,
+                first,
+                shading.max_depth,
+                self.static_count,
+                stride,
+                npix,
+                spp,
+                Some((shading, total_tris)),
+            );
+            let uni = dev.uniform(bytemuck::bytes_of(&p));
+            let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![
+                Some(&uni),
+                Some(&rays),
+                items.as_ref(),
+                Some(&hits),
+                Some(&self.static_surf),
+                Some(&surfaces.buf),
+                Some(&mats),
+                Some(&lts),
+                Some(&local),
+                Some(&sh_cand),
+                Some(&nx_cand_r),
+                Some(&nx_cand_i),
+                Some(&sh_count),
+                Some(&nx_count),
+                Some(&sh_start),
+                Some(&nx_start),
+                None,
+                None,
+                None,
+                None,
+                None,
+                Some(&radiance),
+                None,
+            ];
+            let group = self.group(dev, &bufs);
+            Self::dispatch(&mut enc, &self.shade_pipe, &group, n);
+            super::scan::exclusive_scan(dev, &mut enc, &sh_count, &sh_start, n + 1)?;
+            super::scan::exclusive_scan(dev, &mut enc, &nx_count, &nx_start, n + 1)?;
+            let totals = dev.buffer("the level's totals", 8, USAGE)?;
+            enc.copy_buffer_to_buffer(&sh_start, n * 4, &totals, 0, 4);
+            enc.copy_buffer_to_buffer(&nx_start, n * 4, &totals, 4, 4);
+            if first && want_hits {
+                let b = dev.read_back(enc, &hits, n * 16)?;
+                let raw: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(&b[..n as usize * 16]);
+                camera_hits = Some(
+                    raw.par_iter()
+                        .with_min_len(4096)
+                        .map(|h| {
+                            (h[1] != u32::MAX).then(|| Hit {
+                                t: f32::from_bits(h[0]),
+                                tri: h[1],
+                                u: f32::from_bits(h[2]),
+                                v: f32::from_bits(h[3]),
+                            })
+                        })
+                        .collect(),
+                );
+                enc = dev.device.create_command_encoder(&Default::default());
+            }
+            let t = dev.read_back(enc, &totals, 8)?;
+            let t: Vec<u32> = bytemuck::pod_collect_to_vec(&t[..8]);
+            let (ns, nn) = (u64::from(t[0]), u64::from(t[1]));
+            if ns > n * nl || nn > n * 2 {
+                return Err(GpuError::Lost(format!(
+                    "the frame path's counts are out of range ({ns} shadow rays, {nn} next rays for {n} items)"
+                )));
+            }
+            out.shadow_rays += ns;
+            out.secondary_rays += nn;
+            enc = dev.device.create_command_encoder(&Default::default());
+            let sh_rays = dev.buffer("the shadow rays", ns * 48, USAGE)?;
+            let sh_add = dev.buffer("the shadow rays' light", ns * 16, USAGE)?;
+            let sh_hits = dev.buffer("the shadow rays' hits", ns * 16, USAGE)?;
+            let nx_rays = dev.buffer("the next rays", nn * 48, USAGE)?;
+            let nx_items = dev.buffer("the next items", nn * 32, USAGE)?;
+            bufs[16] = Some(&sh_rays);
+            bufs[17] = Some(&sh_add);
+            bufs[18] = Some(&nx_rays);
+            bufs[19] = Some(&nx_items);
+            bufs[20] = Some(&sh_hits);
+            let group = self.group(dev, &bufs);
+            Self::dispatch(&mut enc, &self.compact_pipe, &group, n);
+            tracer.encode(&mut enc, &sh_rays, &sh_hits, ns, true)?;
+            Self::dispatch(&mut enc, &self.accum_pipe, &group, n);
+            rays = nx_rays;
+            items = Some(nx_items);
+            n = nn;
+            first = false;
+        }
+        let rgba = dev.buffer("the pixels", npix * 16, USAGE)?;
+        let (_, _, stride) = GpuDevice::grid_of(npix, 64);
+        let p = params(0, 0, false, 0, 0, stride, npix, spp, None);
+        let uni = dev.uniform(bytemuck::bytes_of(&p));
+        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; BINDINGS as usize + 1];
+        bufs[0] = Some(&uni);
+        bufs[21] = Some(&radiance);
+        bufs[22] = Some(&rgba);
+        let group = self.group(dev, &bufs);
+        Self::dispatch(&mut enc, &self.pixels_pipe, &group, npix);
+        let b = dev.read_back(enc, &rgba, npix * 16)?;
+        out.rgba = bytemuck::pod_collect_to_vec(&b[..npix as usize * 16]);
+        out.camera_hits = camera_hits;
+        Ok(out)
+    }
+}
+
+/// The uniform of shade.wgsl.
+#[allow(clippy::too_many_arguments)]
+fn params(
+    n: u64,
+    lights: u32,
+    first: bool,
+    max_depth: u32,
+    static_tris: u32,
+    stride: u32,
+    npix: u64,
+    spp: u32,
+    shading: Option<(&ShadeParams, u32)>,
+) -> Params {
+    let (amb, bg, extent, min_w, total) = match shading {
+        Some((s, total)) => (s.ambient, s.background, s.extent, s.min_weight, total),
+        None => ([0.0; 3], [0.0; 3], 1.0, 0.0, 0),
+    };
+    Params {
+        a: [n as u32, lights, u32::from(first), max_depth],
+        b: [static_tris, stride, npix as u32, spp],
+        c: [amb[0], amb[1], amb[2], extent],
+        d: [bg[0], bg[1], bg[2], 1.0 / spp.max(1) as f32],
+        e: [min_w, 0.0, 0.0, 0.0],
+        g: [total, 0, 0, 0],
+    }
+}
+
+/// For the tests: a ray as the CPU packs it for the trace kernel (`trace::pack_ray`),
+/// each word's bits.
+pub fn packed_on_cpu(r: &Ray) -> [u32; 12] {
+    bytemuck::cast(pack_ray(r))
+}

@@ -1,0 +1,322 @@
+//! The GPU frame path's render side (`--device gpu`, issue 37 part 2, first step): which
+//! scenes it takes ([`outside_subset`]), the tables the kernels read (materials,
+//! lights, surfaces) made from the CPU's own shading values, and a frame traced as
+//! [`wavefront::render_frame_with`](super::wavefront) traces it, but with each chunk's
+//! whole wavefront on the GPU (`gpu::GpuShading`, shade.wgsl): camera rays made here,
+//! pixels and (for the AOVs and Cryptomatte) the camera rays' hits read back.
+//!
+//! The subset is what `ShadeContext::shade` does without random numbers and without
+//! textures: constant, opaque materials (base colour, metallic, roughness, emission,
+//! transmission, IOR, double-sided); the mirror reflection (GGX width under
+//! `MIRROR_ALPHA`) or no reflection ray (roughness from `GLOSSY_LIMIT` on); refraction
+//! with exact dielectric Fresnel; punctual lights (the default light too); the options'
+//! or the scene's ambient light; a constant background. Anything else keeps shading on
+//! the CPU, traced on the GPU as before, and the log says which feature did.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::lights::emits;
+use super::options::RenderOptions;
+use super::shade::{FrameBuffers, FrameWork, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT, MIRROR_ALPHA};
+use super::wavefront::{sample_offset, write_aovs, write_crypto, CentreInputs, FrameArgs};
+use crate::geometry::Ray;
+use crate::gpu::{
+    GpuDevice, GpuError, GpuMoving, GpuShading, GpuStatic, GpuTracer, ShadeLight, ShadeMaterial,
+    ShadeParams, SurfaceTriangle,
+};
+use crate::scene::{AlphaMode, Falloff, LightKind, Material, Scene, TriangleSoup};
+
+/// Samples a chunk traces at most (bounds the GPU's buffers: a level's rays at most
+/// double, and its shadow rays are at most one a light an item).
+const CHUNK_SAMPLES: usize = 1 << 16;
+
+/// Why `scene` rendered with `opts` cannot take the GPU frame path (the first feature
+/// outside the subset, in words), or `None` when it can. `max_binding`: the adapter's
+/// largest storage binding (the surfaces of either part must fit one).
+pub(super) fn outside_subset(
+    scene: &Scene,
+    opts: &RenderOptions,
+    static_triangles: usize,
+    moving_triangles: usize,
+    max_binding: u64,
+) -> Option<String> {
+    if opts.blur().is_some() {
+        return Some("motion blur (--motion-blur)".into());
+    }
+    if opts.aovs.any_light_path() {
+        return Some("the light-path AOVs (--aov diffuse,specular,transmission,emission)".into());
+    }
+    if opts.shading.environment.is_some() {
+        return Some("an environment map (--environment)".into());
+    }
+    if opts.shading.diffuse_bounces > 0 {
+        return Some("diffuse bounces (--diffuse-bounces)".into());
+    }
+    for (i, m) in scene.materials.iter().enumerate() {
+        let name = match &m.name {
+            Some(n) => format!("material '{n}'"),
+            None => format!("material {i}"),
+        };
+        if let Some(why) = material_outside(m) {
+            return Some(format!("{name}: {why}"));
+        }
+    }
+    for (what, n) in [("static", static_triangles), ("moving", moving_triangles)] {
+        let bytes = n as u64 * std::mem::size_of::<SurfaceTriangle>() as u64;
+        if bytes > max_binding {
+            return Some(format!(
+                "the {what} triangles' surfaces ({bytes} bytes) exceed one GPU storage binding ({max_binding} bytes)"
+            ));
+        }
+    }
+    None
+}
+
+/// Why material `m` is outside the subset, if it is.
+fn material_outside(m: &Material) -> Option<&'static str> {
+    if m.base_color_texture.is_some()
+        || m.metallic_roughness_texture.is_some()
+        || m.emissive_texture.is_some()
+        || m.normal_texture.is_some()
+    {
+        return Some("a texture");
+    }
+    if m.ambient.is_some() {
+        return Some("its own ambient colour (AFF)");
+    }
+    let opaque = match m.alpha_mode {
+        AlphaMode::Opaque => true,
+        AlphaMode::Mask { cutoff } => m.base_color.w >= cutoff,
+        AlphaMode::Blend => m.base_color.w.clamp(0.0, 1.0) >= 1.0,
+    };
+    if !opaque {
+        return Some("alpha below 1 (pass-through)");
+    }
+    if emits(m) {
+        return Some("emission, which makes its triangles area lights");
+    }
+    let roughness = m.roughness.clamp(0.0, 1.0);
+    if roughness < GLOSSY_LIMIT && roughness * roughness >= MIRROR_ALPHA {
+        return Some("glossy reflection (GGX sampling)");
+    }
+    None
+}
+
+/// The material table: the scene's materials, then glTF's default material (for
+/// triangles without one), each as `ShadeContext::lobes` and `glint` compute it.
+fn materials(scene: &Scene) -> Vec<ShadeMaterial> {
+    let default = Material::default();
+    scene
+        .materials
+        .iter()
+        .chain(std::iter::once(&default))
+        .map(|m| {
+            let albedo = m.base_color.truncate();
+            let metallic = m.metallic.clamp(0.0, 1.0);
+            let roughness = m.roughness.clamp(0.0, 1.0);
+            let transmission = (m.transmission.clamp(0.0, 1.0)) * (1.0 - metallic);
+            let gloss = (1.0 - roughness) * (1.0 - roughness);
+            let f0 = Vec3::splat(0.04).lerp(albedo, metallic);
+            let ior = if m.ior.is_finite() && m.ior >= 1.0 {
+                m.ior
+            } else {
+                1.5
+            };
+            let shininess = ShadeContext::shininess(roughness);
+            ShadeMaterial {
+                albedo: albedo.to_array(),
+                metallic,
+                f0: f0.to_array(),
+                roughness,
+                emission: (m.emissive * m.emissive_strength).to_array(),
+                transmission,
+                gloss,
+                shininess,
+                eta_entering: 1.0 / ior,
+                eta_leaving: ior,
+                double_sided: u32::from(m.double_sided),
+                reflects: u32::from(roughness < GLOSSY_LIMIT),
+                glint_norm: (shininess + 8.0) / (8.0 * std::f32::consts::PI),
+                glint_scale: 1.0 - gloss * 0.5,
+            }
+        })
+        .collect()
+}
+
+/// The punctual lights of `ctx` (posed for the frame; the default light included).
+fn lights(ctx: &ShadeContext<'_>) -> Vec<ShadeLight> {
+    ctx.lights
+        .iter()
+        .map(|l| {
+            let (kind, cos_outer, cone_scale) = match l.kind {
+                LightKind::Directional => (0, 0.0, 0.0),
+                LightKind::Point => (1, 0.0, 0.0),
+                LightKind::Spot {
+                    inner_cone_angle,
+                    outer_cone_angle,
+                } => {
+                    let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
+                    (2, co, 1.0 / (ci - co).max(1e-3))
+                }
+            };
+            ShadeLight {
+                position: l.position.to_array(),
+                kind,
+                direction: l.direction.to_array(),
+                range: l.range.unwrap_or(0.0),
+                power: l.power.to_array(),
+                no_falloff: u32::from(l.falloff == Falloff::None),
+                cos_outer,
+                cone_scale,
+                has_range: u32::from(l.range.is_some()),
+                pad: 0,
+            }
+        })
+        .collect()
+}
+
+/// The surfaces of `soup`'s triangles; a material number outside the table's
+/// `materials` scene materials takes the default material after them.
+pub(super) fn surfaces(soup: &TriangleSoup, materials: usize) -> Vec<SurfaceTriangle> {
+    soup.positions
+        .par_iter()
+        .enumerate()
+        .with_min_len(4096)
+        .map(|(i, p)| {
+            let m = soup
+                .material
+                .get(i)
+                .copied()
+                .filter(|&m| (m as usize) < materials)
+                .unwrap_or(materials as u32);
+            SurfaceTriangle::new(p, soup.normals.get(i), m)
+        })
+        .collect()
+}
+
+/// What the frame path needs of the GPU.
+pub(super) struct GpuParts<'a> {
+    pub dev: &'a GpuDevice,
+    pub stat: &'a GpuStatic,
+    pub moving: &'a GpuMoving,
+    pub shading: &'a GpuShading,
+}
+
+/// One frame (no motion blur) traced and shaded on the GPU into `fb` (from
+/// `wavefront::new_frame`): the same pixels `render_frame_with` makes on the CPU, to
+/// the rounding of the GPU's shading arithmetic (docs/GPU.md), and the same AOVs.
+pub(super) fn render_frame_gpu(
+    gpu: &GpuParts<'_>,
+    ctx: &ShadeContext<'_>,
+    args: &FrameArgs<'_>,
+    fb: &mut FrameBuffers,
+    work: &mut FrameWork,
+) -> Result<(), GpuError> {
+    let FrameArgs {
+        camera,
+        frame,
+        spp,
+        max_depth,
+        inputs,
+    } = *args;
+    let aovs = inputs.aovs;
+    let o = inputs.overscan as usize;
+    let (w, h) = (
+        camera.width as usize + 2 * o,
+        camera.height as usize + 2 * o,
+    );
+    let spp = spp.max(1) as usize;
+    let clock = Instant::now();
+    let mats = materials(ctx.scene);
+    let lts = lights(ctx);
+    let params = ShadeParams {
+        ambient: ctx.options.ambient.to_array(),
+        background: ctx.options.background.to_array(),
+        extent: ctx.extent,
+        max_depth,
+        min_weight: MIN_WEIGHT,
+    };
+    let moving_surf = surfaces(ctx.dynamic_soup, ctx.scene.materials.len());
+    work.shade += clock.elapsed();
+    let clock = Instant::now();
+    let surf = gpu.shading.moving(gpu.dev, &moving_surf)?;
+    work.trace += clock.elapsed();
+    let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
+    let any_aov = aovs.any_centre();
+    let centre_batch = spp > 1;
+    let want_hits = (any_aov && !centre_batch) || (crypto.is_some() && fb.crypto.is_some());
+    let centre_inputs = CentreInputs {
+        camera,
+        next: inputs.next.filter(|_| aovs.motion),
+    };
+    let pixel = |i: u32| i.wrapping_sub(o as u32);
+    let rows_per_chunk = (CHUNK_SAMPLES / (w * spp)).max(1);
+    let mut y0 = 0;
+    while y0 < h {
+        let y1 = (y0 + rows_per_chunk).min(h);
+        let px0 = y0 * w;
+        let npix = (y1 - y0) * w;
+        let clock = Instant::now();
+        // The camera rays, as `trace_pass` makes them: the samples of a pixel, the
+        // pixels of a row, the rows.
+        let rays: Vec<Ray> = (0..npix * spp)
+            .into_par_iter()
+            .with_min_len(1024)
+            .map(|s| {
+                let p = px0 + s / spp;
+                let k = (s % spp) as u32;
+                let (x, y) = (pixel((p % w) as u32), pixel((p / w) as u32));
+                let (ox, oy) = sample_offset(frame, x, y, k, spp as u32);
+                camera.ray(x as i32 as f32 + ox, y as i32 as f32 + oy)
+            })
+            .collect();
+        work.rays.primary += rays.len() as u64;
+        work.shade += clock.elapsed();
+        let clock = Instant::now();
+        let out = gpu.shading.render_chunk(
+            gpu.dev, gpu.stat, gpu.moving, &surf, &mats, &lts, &params, &rays, spp as u32,
+            want_hits,
+        )?;
+        work.trace += clock.elapsed();
+        work.rays.shadow += out.shadow_rays;
+        work.rays.secondary += out.secondary_rays;
+        let clock = Instant::now();
+        fb.rgba[px0..px0 + npix].copy_from_slice(&out.rgba);
+        if let Some(hits) = &out.camera_hits {
+            if any_aov && !centre_batch {
+                write_aovs(ctx, &centre_inputs, fb, px0, &rays, hits);
+            }
+            if let (Some(names), Some(buf)) = (crypto, fb.crypto.as_mut()) {
+                write_crypto(ctx, names, buf, px0, spp, hits);
+            }
+        }
+        work.shade += clock.elapsed();
+        if any_aov && centre_batch {
+            let clock = Instant::now();
+            let centre: Vec<Ray> = (0..npix)
+                .into_par_iter()
+                .with_min_len(1024)
+                .map(|i| {
+                    let p = px0 + i;
+                    let (x, y) = (pixel((p % w) as u32), pixel((p / w) as u32));
+                    camera.ray(x as i32 as f32 + 0.5, y as i32 as f32 + 0.5)
+                })
+                .collect();
+            work.rays.primary += npix as u64;
+            work.shade += clock.elapsed();
+            let clock = Instant::now();
+            let mut chits = vec![None; npix];
+            GpuTracer::new(gpu.dev, gpu.stat, gpu.moving)
+                .try_intersect_batch(&centre, &mut chits)?;
+            work.trace += clock.elapsed();
+            let clock = Instant::now();
+            write_aovs(ctx, &centre_inputs, fb, px0, &centre, &chits);
+            work.shade += clock.elapsed();
+        }
+        y0 = y1;
+    }
+    Ok(())
+}
