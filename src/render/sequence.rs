@@ -97,7 +97,7 @@ pub fn render_sequence(
         device,
         &psf,
         plan.split.dynamic_triangles,
-        frame_path.then(|| (&static_soup, scene.materials.len())),
+        frame_path.then_some((&static_soup, scene.materials.len())),
     )?;
     let mips = TextureMips::build(scene);
     let frames = Frames {

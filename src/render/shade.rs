@@ -241,7 +241,7 @@ pub struct ShadeContext<'a> {
     /// Size of the scene (bounding box diagonal), for ray offsets.
     pub extent: f32,
     pub(super) lights: Vec<PreLight>,
-    pub(super) area: AreaLights,
+    area: AreaLights,
     mips: &'a TextureMips,
     /// glTF's default material, for triangles without one (made once, not a hit).
     default_material: Material,
