@@ -96,7 +96,7 @@ fn material_outside(m: &Material) -> Option<&'static str> {
         return Some("alpha below 1 (pass-through)");
     }
     if emits(m) {
-        return Some("emission, which makes its triangles area lights");
+        return Some("emission (its triangles are area lights)");
     }
     let roughness = m.roughness.clamp(0.0, 1.0);
     if roughness < GLOSSY_LIMIT && roughness * roughness >= MIRROR_ALPHA {
@@ -253,7 +253,11 @@ pub(super) fn render_frame_gpu(
         next: inputs.next.filter(|_| aovs.motion),
     };
     let pixel = |i: u32| i.wrapping_sub(o as u32);
-    let rows_per_chunk = (CHUNK_SAMPLES / (w * spp)).max(1);
+    // Each light's shadow ray candidates take 64 bytes an item: fewer samples a chunk
+    // with many lights. A chunk whose levels still outgrow a binding is traced again in
+    // halves (a sample's light does not depend on the chunk it is traced in).
+    let per_chunk = CHUNK_SAMPLES * 4 / lts.len().clamp(4, 64);
+    let mut rows_per_chunk = (per_chunk / (w * spp)).max(1);
     let mut y0 = 0;
     while y0 < h {
         let y1 = (y0 + rows_per_chunk).min(h);
@@ -273,14 +277,21 @@ pub(super) fn render_frame_gpu(
                 camera.ray(x as i32 as f32 + ox, y as i32 as f32 + oy)
             })
             .collect();
-        work.rays.primary += rays.len() as u64;
         work.shade += clock.elapsed();
         let clock = Instant::now();
         let out = gpu.shading.render_chunk(
             gpu.dev, gpu.stat, gpu.moving, &surf, &mats, &lts, &params, &rays, spp as u32,
             want_hits,
-        )?;
+        );
         work.trace += clock.elapsed();
+        let out = match out {
+            Err(GpuError::TooLarge { .. }) if y1 - y0 > 1 => {
+                rows_per_chunk = (y1 - y0) / 2;
+                continue;
+            }
+            r => r?,
+        };
+        work.rays.primary += rays.len() as u64;
         work.rays.shadow += out.shadow_rays;
         work.rays.secondary += out.secondary_rays;
         let clock = Instant::now();
@@ -319,4 +330,120 @@ pub(super) fn render_frame_gpu(
         y0 = y1;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::options::MotionBlur;
+    use crate::scene::TextureRef;
+
+    fn scene_with(m: Material) -> Scene {
+        Scene {
+            materials: vec![m],
+            ..Scene::default()
+        }
+    }
+
+    fn why(scene: &Scene, opts: &RenderOptions) -> Option<String> {
+        outside_subset(scene, opts, 10, 10, 1 << 20)
+    }
+
+    /// Every feature the frame path does not shade sends the scene to the CPU's
+    /// shading, with its name; the subset's own materials do not.
+    #[test]
+    fn the_subset_and_what_falls_back() {
+        let opts = RenderOptions::default();
+        let inside = [
+            Material::default(),
+            Material {
+                roughness: 0.0,
+                metallic: 1.0,
+                ..Material::default()
+            },
+            Material {
+                roughness: 0.03,
+                transmission: 1.0,
+                double_sided: true,
+                ..Material::default()
+            },
+            Material {
+                roughness: 0.4,
+                alpha_mode: AlphaMode::Mask { cutoff: 0.5 },
+                ..Material::default()
+            },
+        ];
+        for m in inside {
+            assert_eq!(why(&scene_with(m.clone()), &opts), None, "{m:?}");
+        }
+        let tex = Some(TextureRef {
+            texture: 0,
+            tex_coord: 0,
+            transform: None,
+        });
+        let outside = [
+            (
+                Material {
+                    base_color_texture: tex,
+                    ..Material::default()
+                },
+                "a texture",
+            ),
+            (
+                Material {
+                    normal_texture: tex,
+                    ..Material::default()
+                },
+                "a texture",
+            ),
+            (
+                Material {
+                    ambient: Some(Vec3::ONE),
+                    ..Material::default()
+                },
+                "ambient colour",
+            ),
+            (
+                Material {
+                    alpha_mode: AlphaMode::Blend,
+                    base_color: glam::Vec4::new(1.0, 1.0, 1.0, 0.5),
+                    ..Material::default()
+                },
+                "pass-through",
+            ),
+            (
+                Material {
+                    emissive: Vec3::new(0.0, 0.0, 1.0),
+                    ..Material::default()
+                },
+                "area lights",
+            ),
+            (
+                Material {
+                    roughness: 0.2,
+                    ..Material::default()
+                },
+                "GGX",
+            ),
+        ];
+        for (m, said) in outside {
+            let w = why(&scene_with(m.clone()), &opts).unwrap_or_default();
+            assert!(w.contains(said) && w.contains("material 0"), "{m:?}: {w}");
+        }
+        let plain = scene_with(Material::default());
+        let mut o = RenderOptions::default();
+        o.motion_blur = Some(MotionBlur {
+            shutter: 0.5,
+            steps: 3,
+        });
+        assert!(why(&plain, &o).unwrap().contains("motion blur"));
+        let mut o = RenderOptions::default();
+        o.aovs.specular = true;
+        assert!(why(&plain, &o).unwrap().contains("light-path"));
+        let mut o = RenderOptions::default();
+        o.shading.diffuse_bounces = 1;
+        assert!(why(&plain, &o).unwrap().contains("diffuse bounces"));
+        let big = outside_subset(&plain, &RenderOptions::default(), 1 << 20, 0, 1 << 20);
+        assert!(big.unwrap().contains("static triangles' surfaces"));
+    }
 }

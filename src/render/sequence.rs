@@ -71,8 +71,8 @@ pub fn render_sequence(
             None => true,
             Some(why) => {
                 on_event(RenderEvent::Note(&format!(
-                    "shading on the CPU, tracing on the GPU: {why} is outside what the GPU \
-                     frame path shades (docs/GPU.md)"
+                    "shading on the CPU, tracing on the GPU: the GPU frame path does not \
+                     take {why} (docs/GPU.md)"
                 )));
                 false
             }
