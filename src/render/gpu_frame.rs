@@ -431,18 +431,20 @@ mod tests {
             assert!(w.contains(said) && w.contains("material 0"), "{m:?}: {w}");
         }
         let plain = scene_with(Material::default());
-        let mut o = RenderOptions::default();
-        o.motion_blur = Some(MotionBlur {
-            shutter: 0.5,
-            steps: 3,
-        });
-        assert!(why(&plain, &o).unwrap().contains("motion blur"));
-        let mut o = RenderOptions::default();
-        o.aovs.specular = true;
-        assert!(why(&plain, &o).unwrap().contains("light-path"));
-        let mut o = RenderOptions::default();
-        o.shading.diffuse_bounces = 1;
-        assert!(why(&plain, &o).unwrap().contains("diffuse bounces"));
+        let blur = RenderOptions {
+            motion_blur: Some(MotionBlur {
+                shutter: 0.5,
+                steps: 3,
+            }),
+            ..RenderOptions::default()
+        };
+        assert!(why(&plain, &blur).unwrap().contains("motion blur"));
+        let mut paths = RenderOptions::default();
+        paths.aovs.specular = true;
+        assert!(why(&plain, &paths).unwrap().contains("light-path"));
+        let mut bounces = RenderOptions::default();
+        bounces.shading.diffuse_bounces = 1;
+        assert!(why(&plain, &bounces).unwrap().contains("diffuse bounces"));
         let big = outside_subset(&plain, &RenderOptions::default(), 1 << 20, 0, 1 << 20);
         assert!(big.unwrap().contains("static triangles' surfaces"));
     }
