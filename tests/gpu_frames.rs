@@ -199,7 +199,7 @@ fn render(scene: &Path, dir: &Path, device: &str, folder: &str, extra: &[&str]) 
         "--size",
         "64x48",
         "--aov",
-        "depth,normal,albedo,position,motion",
+        "depth,normal,albedo,position,motion,cryptomatte",
         "--float",
         "--device",
         device,
@@ -230,6 +230,7 @@ fn compare(a: &Path, b: &Path) -> Diff {
     assert_eq!((w, h), (wb, hb));
     // Coverage and the AOVs come from the camera rays' (or the centre rays') hits, which
     // are the CPU's: equal to the bit.
+    assert!(ca.iter().any(|(n, _)| n.starts_with("CryptoObject")));
     for ((na, va), (nb, vb)) in ca.iter().zip(&cb) {
         assert_eq!(na, nb);
         if !["R", "G", "B"].contains(&na.as_str()) {
