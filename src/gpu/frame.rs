@@ -1,6 +1,6 @@
 //! The GPU frame path: a chunk of a frame's samples traced and shaded on the GPU from
-//! its camera rays to its pixels, the wavefront staying on the GPU between depth
-//! levels (shade.wgsl): per level the closest hits (trace.wgsl, through
+//! its camera rays (made there, the CPU's to the bit) to its pixels, the wavefront
+//! staying on the GPU between depth levels (shade.wgsl): per level the closest hits (trace.wgsl, through
 //! [`GpuTracer::encode`]), the shading (emission, ambient, a shadow ray a punctual
 //! light, the refracted and mirror rays), the shadow rays and the next level's rays
 //! compacted by prefix sums (scan.wgsl) in the CPU's order, the any hits of the shadow
@@ -102,6 +102,42 @@ pub struct ShadeLight {
     pub pad: u32,
 }
 
+/// The camera as shade.wgsl's `camera` kernel makes the rays (`Cam`): the fields of
+/// `render::CameraModel` and of the frame, so that the rays are `CameraModel::ray`'s
+/// at `wavefront::sample_offset`'s points, to the bit.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct CameraRays {
+    pub origin: [f32; 3],
+    pub tan_half: f32,
+    /// The rotation's columns.
+    pub x_axis: [f32; 3],
+    pub aspect: f32,
+    pub y_axis: [f32; 3],
+    /// Orthographic half width and height (with `ortho` 1).
+    pub xmag: f32,
+    pub z_axis: [f32; 3],
+    pub ymag: f32,
+    /// The image's size (not the data window's).
+    pub width: u32,
+    pub height: u32,
+    pub frame: u32,
+    pub spp: u32,
+    /// The jitter grid: `ceil(√spp)` columns, `ceil(spp / columns)` rows.
+    pub grid_x: u32,
+    pub grid_y: u32,
+    pub overscan: u32,
+    /// The data window's width (image and border).
+    pub data_width: u32,
+    /// The first pixel (row-major in the data window) of the rays made.
+    pub first_pixel: u32,
+    /// 1 for an orthographic camera.
+    pub ortho: u32,
+    /// 0: the zero that keeps products from being fused (`nc`).
+    pub zero: u32,
+    pub pad: u32,
+}
+
 /// A frame's shading constants.
 #[derive(Clone, Copy, Debug)]
 pub struct ShadeParams {
@@ -143,8 +179,10 @@ pub struct ChunkOut {
     pub secondary_rays: u64,
 }
 
-/// Bindings of shade.wgsl beyond the uniform.
+/// Storage bindings of shade.wgsl (1..=22); 0 and 23 are uniforms.
 const BINDINGS: u32 = 22;
+/// The camera's uniform.
+const CAMERA: u32 = 23;
 
 /// The frame path's kernels and the static triangles' surfaces (uploaded once).
 pub struct GpuShading {
@@ -154,10 +192,12 @@ pub struct GpuShading {
     accum_pipe: wgpu::ComputePipeline,
     pixels_pipe: wgpu::ComputePipeline,
     shear_pipe: wgpu::ComputePipeline,
+    camera_pipe: wgpu::ComputePipeline,
     static_surf: wgpu::Buffer,
     static_count: u32,
-    /// A small buffer for each binding a kernel does not read.
+    /// A small buffer for each storage binding a kernel does not read, and a camera.
     dummies: Vec<wgpu::Buffer>,
+    dummy_camera: wgpu::Buffer,
 }
 
 impl std::fmt::Debug for GpuShading {
@@ -199,6 +239,16 @@ impl GpuShading {
             },
             count: None,
         }));
+        entries.push(wgpu::BindGroupLayoutEntry {
+            binding: CAMERA,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        });
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frame"),
             entries: &entries,
@@ -218,13 +268,15 @@ impl GpuShading {
                 cache: None,
             })
         };
-        let (shade_pipe, compact_pipe, accum_pipe, pixels_pipe, shear_pipe) = (
+        let (shade_pipe, compact_pipe, accum_pipe, pixels_pipe, shear_pipe, camera_pipe) = (
             pipe("shade"),
             pipe("compact"),
             pipe("accum"),
             pipe("pixels"),
             pipe("shear_test"),
+            pipe("camera"),
         );
+        let dummy_camera = dev.uniform(bytemuck::bytes_of(&CameraRays::default()));
         let dummies = (0..BINDINGS)
             .map(|_| dev.buffer("an unused binding", 256, USAGE))
             .collect::<Result<Vec<_>, _>>()?;
@@ -240,9 +292,11 @@ impl GpuShading {
             accum_pipe,
             pixels_pipe,
             shear_pipe,
+            camera_pipe,
             static_surf,
             static_count,
             dummies,
+            dummy_camera,
         })
     }
 
@@ -264,7 +318,13 @@ impl GpuShading {
         let entries: Vec<wgpu::BindGroupEntry<'_>> = bufs
             .iter()
             .enumerate()
-            .map(|(k, b)| entry(k as u32, b.unwrap_or(&self.dummies[k.saturating_sub(1)])))
+            .map(|(k, b)| {
+                let dummy = match k as u32 {
+                    CAMERA => &self.dummy_camera,
+                    _ => &self.dummies[k.saturating_sub(1)],
+                };
+                entry(k as u32, b.unwrap_or(dummy))
+            })
             .collect();
         dev.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("frame"),
@@ -287,6 +347,34 @@ impl GpuShading {
         pass.set_pipeline(pipe);
         pass.set_bind_group(0, group, &[]);
         pass.dispatch_workgroups(gx, gy, 1);
+    }
+
+    /// For the tests: the camera rays of `npix` pixels from `camera.first_pixel` on, as
+    /// the frame path makes them (each word's bits, as [`packed_on_cpu`] gives them).
+    pub fn camera_rays_made_on_gpu(
+        &self,
+        dev: &GpuDevice,
+        camera: &CameraRays,
+        npix: u64,
+    ) -> Result<Vec<[u32; 12]>, GpuError> {
+        let n = npix * u64::from(camera.spp.max(1));
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        let buf = dev.buffer("the camera rays", n * 48, USAGE)?;
+        let (_, _, stride) = GpuDevice::grid_of(n, 64);
+        let params = params(n, 0, true, 0, 0, stride, 0, 1, None);
+        let uni = dev.uniform(bytemuck::bytes_of(&params));
+        let cam = dev.uniform(bytemuck::bytes_of(camera));
+        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; CAMERA as usize + 1];
+        bufs[0] = Some(&uni);
+        bufs[1] = Some(&buf);
+        bufs[CAMERA as usize] = Some(&cam);
+        let group = self.group(dev, &bufs);
+        let mut enc = dev.device.create_command_encoder(&Default::default());
+        Self::dispatch(&mut enc, &self.camera_pipe, &group, n);
+        let bytes = dev.read_back(enc, &buf, n * 48)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes[..n as usize * 48]))
     }
 
     /// For the tests: the rays as the GPU frame path makes them (`trace::pack_ray`'s 48
@@ -316,7 +404,7 @@ impl GpuShading {
         let (_, _, stride) = GpuDevice::grid_of(n, 64);
         let params = params(n, 0, true, 0, 0, stride, 0, 1, None);
         let uni = dev.uniform(bytemuck::bytes_of(&params));
-        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; BINDINGS as usize + 1];
+        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; CAMERA as usize + 1];
         bufs[0] = Some(&uni);
         bufs[1] = Some(&buf);
         let group = self.group(dev, &bufs);
@@ -326,11 +414,11 @@ impl GpuShading {
         Ok(bytemuck::pod_collect_to_vec(&bytes[..rays.len() * 48]))
     }
 
-    /// Traces and shades `camera_rays` (`spp` consecutive rays a pixel, in the CPU's
-    /// sample order) over the static part and the frame's moving part (`moving`,
-    /// `surfaces`), with `materials` (indexed by the surfaces' material numbers) and
-    /// `lights`: each pixel's averaged RGB and coverage, and the camera rays' hits when
-    /// `want_hits`.
+    /// Traces and shades the camera rays of `npix` pixels from `camera.first_pixel` on
+    /// (made here, `camera.spp` a pixel, in the CPU's sample order) over the static
+    /// part and the frame's moving part (`moving`, `surfaces`), with `materials`
+    /// (indexed by the surfaces' material numbers) and `lights`: each pixel's averaged
+    /// RGB and coverage, and the camera rays' hits when `want_hits`.
     #[allow(clippy::too_many_arguments)]
     pub fn render_chunk(
         &self,
@@ -341,13 +429,12 @@ impl GpuShading {
         materials: &[ShadeMaterial],
         lights: &[ShadeLight],
         shading: &ShadeParams,
-        camera_rays: &[Ray],
-        spp: u32,
+        camera: &CameraRays,
+        npix: u64,
         want_hits: bool,
     ) -> Result<ChunkOut, GpuError> {
-        let spp = spp.max(1);
-        let nsamples = camera_rays.len() as u64;
-        let npix = nsamples / u64::from(spp);
+        let spp = camera.spp.max(1);
+        let nsamples = npix * u64::from(spp);
         if nsamples == 0 {
             return Ok(ChunkOut::default());
         }
@@ -356,12 +443,8 @@ impl GpuShading {
         let tracer = GpuTracer::new(dev, stat, moving);
         let mats = dev.storage_with("the materials", bytemuck::cast_slice(materials))?;
         let lts = dev.storage_with("the lights", bytemuck::cast_slice(lights))?;
-        let packed: Vec<_> = camera_rays
-            .par_iter()
-            .with_min_len(4096)
-            .map(pack_ray)
-            .collect();
-        let mut rays = dev.storage_with("the camera rays", bytemuck::cast_slice(&packed))?;
+        let cam = dev.uniform(bytemuck::bytes_of(camera));
+        let mut rays = dev.buffer("the camera rays", nsamples * 48, USAGE)?;
         let mut items: Option<wgpu::Buffer> = None;
         let radiance = dev.buffer("the samples' radiance", nsamples * 16, USAGE)?;
         let mut n = nsamples;
@@ -372,7 +455,6 @@ impl GpuShading {
         let total_tris = self.static_count.saturating_add(surfaces.count);
         while n > 0 {
             let hits = dev.buffer("the hits", n * 16, USAGE)?;
-            tracer.encode(&mut enc, &rays, &hits, n, false)?;
             let local = dev.buffer("the items' light", n * 16, USAGE)?;
             let sh_cand = dev.buffer("the shadow ray candidates", n * nl * 64, USAGE)?;
             let nx_cand_r = dev.buffer("the next rays' candidates", n * 2 * 48, USAGE)?;
@@ -418,8 +500,13 @@ impl GpuShading {
                 None,
                 Some(&radiance),
                 None,
+                Some(&cam),
             ];
             let group = self.group(dev, &bufs);
+            if first {
+                Self::dispatch(&mut enc, &self.camera_pipe, &group, n);
+            }
+            tracer.encode(&mut enc, &rays, &hits, n, false)?;
             Self::dispatch(&mut enc, &self.shade_pipe, &group, n);
             super::scan::exclusive_scan(dev, &mut enc, &sh_count, &sh_start, n + 1)?;
             super::scan::exclusive_scan(dev, &mut enc, &nx_count, &nx_start, n + 1)?;
@@ -478,7 +565,7 @@ impl GpuShading {
         let (_, _, stride) = GpuDevice::grid_of(npix, 64);
         let p = params(0, 0, false, 0, 0, stride, npix, spp, None);
         let uni = dev.uniform(bytemuck::bytes_of(&p));
-        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; BINDINGS as usize + 1];
+        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; CAMERA as usize + 1];
         bufs[0] = Some(&uni);
         bufs[21] = Some(&radiance);
         bufs[22] = Some(&rgba);

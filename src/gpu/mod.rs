@@ -22,8 +22,8 @@ mod trace;
 
 pub use device::{AdapterPolicy, GpuDevice};
 pub use frame::{
-    packed_on_cpu, ChunkOut, GpuShading, GpuSurfaces, ShadeLight, ShadeMaterial, ShadeParams,
-    SurfaceTriangle,
+    packed_on_cpu, CameraRays, ChunkOut, GpuShading, GpuSurfaces, ShadeLight, ShadeMaterial,
+    ShadeParams, SurfaceTriangle,
 };
 pub use moving::GpuMoving;
 pub use static_part::GpuStatic;

@@ -114,6 +114,24 @@ struct Light {
 @group(0) @binding(21) var<storage, read_write> radiance: array<vec4<f32>>;
 @group(0) @binding(22) var<storage, read_write> rgba: array<vec4<f32>>;
 
+// The camera (frame.rs `CameraRays`), for the camera rays' level.
+struct Cam {
+    // origin, tan(yfov / 2)
+    o: vec4<f32>,
+    // the rotation's columns; w: aspect, xmag, ymag
+    rx: vec4<f32>,
+    ry: vec4<f32>,
+    rz: vec4<f32>,
+    // image width, height, frame, samples a pixel
+    a: vec4<u32>,
+    // the jitter grid's columns and rows, overscan, the data window's width
+    b: vec4<u32>,
+    // the chunk's first pixel, 1 for orthographic, the zero of `nc`
+    c: vec4<u32>,
+}
+
+@group(0) @binding(23) var<uniform> C: Cam;
+
 const NONE: u32 = 0xffffffffu;
 const FRAC_1_PI: f32 = 0.31830988618379067;
 
@@ -192,6 +210,104 @@ fn make_ray(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> Ray {
         r.s = s;
     }
     return r;
+}
+
+// The camera rays, as `wavefront::sample_offset` and `CameraModel::ray` make them, to
+// the bit: Vulkan rounds f32 + - * correctly; a product that feeds an add goes through
+// `nc` (an xor with a zero from the uniform, as in trace.wgsl) so that nothing is fused;
+// the divisions are made in f64 and rounded once (correctly rounded, see `shear`); the
+// hash's 64-bit arithmetic is done on pairs of u32.
+fn nc(x: f32) -> f32 {
+    return bitcast<f32>(bitcast<u32>(x) ^ C.c.z);
+}
+
+fn nc3(v: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(nc(v.x), nc(v.y), nc(v.z));
+}
+
+fn div_rn(a: f32, b: f32) -> f32 {
+    return f32(f64(a) / f64(b));
+}
+
+// u64 as (low, high) words.
+fn add64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
+    let lo = a.x + b.x;
+    return vec2<u32>(lo, a.y + b.y + select(0u, 1u, lo < a.x));
+}
+
+// a >> s for 0 < s < 32.
+fn shr64(a: vec2<u32>, s: u32) -> vec2<u32> {
+    return vec2<u32>((a.x >> s) | (a.y << (32u - s)), a.y >> s);
+}
+
+// The full 64-bit product of two u32.
+fn mul32(a: u32, b: u32) -> vec2<u32> {
+    let a0 = a & 0xffffu;
+    let a1 = a >> 16u;
+    let b0 = b & 0xffffu;
+    let b1 = b >> 16u;
+    let p00 = a0 * b0;
+    let p01 = a0 * b1;
+    let p10 = a1 * b0;
+    let p11 = a1 * b1;
+    let mid = (p00 >> 16u) + (p01 & 0xffffu) + (p10 & 0xffffu);
+    return vec2<u32>((p00 & 0xffffu) | (mid << 16u), p11 + (p01 >> 16u) + (p10 >> 16u) + (mid >> 16u));
+}
+
+// a * b mod 2^64.
+fn mul64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
+    let p = mul32(a.x, b.x);
+    return vec2<u32>(p.x, p.y + a.x * b.y + a.y * b.x);
+}
+
+// `wavefront::hash`.
+fn hash4(v: vec4<u32>) -> vec2<u32> {
+    let g = vec2<u32>(0x7F4A7C15u, 0x9E3779B9u);
+    var h = g;
+    for (var i = 0u; i < 4u; i = i + 1u) {
+        h.x = h.x ^ v[i];
+        h = add64(h, g);
+        h = mul64(h ^ shr64(h, 30u), vec2<u32>(0x1CE4E5B9u, 0xBF58476Du));
+        h = mul64(h ^ shr64(h, 27u), vec2<u32>(0x133111EBu, 0x94D049BBu));
+        h = h ^ shr64(h, 31u);
+    }
+    return h;
+}
+
+// `wavefront::sample_offset(frame, x, y, k, spp)`.
+fn sample_offset(x: u32, y: u32, k: u32) -> vec2<f32> {
+    if C.a.w <= 1u {
+        return vec2<f32>(0.5);
+    }
+    let sx = C.b.x;
+    let sy = C.b.y;
+    let h = hash4(vec4<u32>(C.a.z, x, y, k));
+    // Integers under 2^24 times 2^-24: exact.
+    let rx = f32(h.y >> 8u) * (1.0 / 16777216.0);
+    let ry = f32(((h.y << 16u) | (h.x >> 16u)) & 0xffffffu) * (1.0 / 16777216.0);
+    // 0.999_999_9 as f32.
+    let top = bitcast<f32>(0x3f7ffffeu);
+    return vec2<f32>(
+        min(div_rn(f32(k % sx) + rx, f32(sx)), top),
+        min(div_rn(f32(k / sx) + ry, f32(sy)), top),
+    );
+}
+
+// The rotation times v: (X·vx + Y·vy) + Z·vz, as glam's Mat3 * Vec3.
+fn rotate(v: vec3<f32>) -> vec3<f32> {
+    return (nc3(C.rx.xyz * v.x) + nc3(C.ry.xyz * v.y)) + nc3(C.rz.xyz * v.z);
+}
+
+// `CameraModel::ray(px, py)`.
+fn camera_ray(px: f32, py: f32) -> Ray {
+    let sx = div_rn(2.0 * px, f32(C.a.x)) - 1.0;
+    let sy = 1.0 - div_rn(2.0 * py, f32(C.a.y));
+    if C.c.y == 0u {
+        let d = vec3<f32>(sx * C.rx.w * C.o.w, sy * C.o.w, -1.0);
+        return make_ray(C.o.xyz, rotate(d), 0.0, inf());
+    }
+    let o = rotate(vec3<f32>(sx * C.ry.w, sy * C.rz.w, 0.0));
+    return make_ray(C.o.xyz + o, rotate(vec3<f32>(0.0, 0.0, -1.0)), 0.0, inf());
 }
 
 fn grid_index(gid: vec3<u32>) -> u32 {
@@ -560,6 +676,25 @@ fn pixels(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let inv = F.d.w;
     rgba[p] = vec4<f32>(c * inv, min(a * inv, 1.0));
+}
+
+// The chunk's camera rays: sample s is sample s % spp of the chunk's pixel s / spp (the
+// samples of a pixel, the pixels of a row, the rows), as `trace_pass` makes them.
+@compute @workgroup_size(64)
+fn camera(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let s = grid_index(gid);
+    if s >= F.a.x {
+        return;
+    }
+    let spp = max(C.a.w, 1u);
+    let p = C.c.x + s / spp;
+    let k = s % spp;
+    let w = C.b.w;
+    // The camera's pixel, wrapping in the overscan border as the seeds take it.
+    let x = (p % w) - C.b.z;
+    let y = (p / w) - C.b.z;
+    let off = sample_offset(x, y, k);
+    rays[s] = camera_ray(f32(bitcast<i32>(x)) + off.x, f32(bitcast<i32>(y)) + off.y);
 }
 
 // For the tests: each ray's origin, direction and span remade here, with its shear.

@@ -18,14 +18,15 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::camera::CameraModel;
 use super::lights::emits;
 use super::options::RenderOptions;
 use super::shade::{FrameBuffers, FrameWork, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT, MIRROR_ALPHA};
 use super::wavefront::{sample_offset, write_aovs, write_crypto, CentreInputs, FrameArgs};
 use crate::geometry::Ray;
 use crate::gpu::{
-    GpuDevice, GpuError, GpuMoving, GpuShading, GpuStatic, GpuTracer, ShadeLight, ShadeMaterial,
-    ShadeParams, SurfaceTriangle,
+    CameraRays, GpuDevice, GpuError, GpuMoving, GpuShading, GpuStatic, GpuTracer, ShadeLight,
+    ShadeMaterial, ShadeParams, SurfaceTriangle,
 };
 use crate::scene::{AlphaMode, Falloff, LightKind, Material, Scene, TriangleSoup};
 
@@ -197,6 +198,38 @@ pub(super) fn surfaces(soup: &TriangleSoup, materials: usize) -> Vec<SurfaceTria
         .collect()
 }
 
+/// `camera` and the frame as the GPU makes their rays (`CameraModel::ray` at
+/// `sample_offset`'s points), from the data window's first pixel on.
+pub(super) fn camera_rays(camera: &CameraModel, frame: u32, spp: u32, overscan: u32) -> CameraRays {
+    let spp = spp.max(1);
+    // `sample_offset`'s grid.
+    let gx = (spp as f64).sqrt().ceil() as u32;
+    let (xmag, ymag) = camera.ortho.unwrap_or((0.0, 0.0));
+    let r = &camera.rotation;
+    CameraRays {
+        origin: camera.origin.to_array(),
+        tan_half: camera.tan_half,
+        x_axis: r.x_axis.to_array(),
+        aspect: camera.aspect,
+        y_axis: r.y_axis.to_array(),
+        xmag,
+        z_axis: r.z_axis.to_array(),
+        ymag,
+        width: camera.width,
+        height: camera.height,
+        frame,
+        spp,
+        grid_x: gx.max(1),
+        grid_y: spp.div_ceil(gx.max(1)),
+        overscan,
+        data_width: camera.width + 2 * overscan,
+        first_pixel: 0,
+        ortho: u32::from(camera.ortho.is_some()),
+        zero: 0,
+        pad: 0,
+    }
+}
+
 /// What the frame path needs of the GPU.
 pub(super) struct GpuParts<'a> {
     pub dev: &'a GpuDevice,
@@ -253,6 +286,7 @@ pub(super) fn render_frame_gpu(
         next: inputs.next.filter(|_| aovs.motion),
     };
     let pixel = |i: u32| i.wrapping_sub(o as u32);
+    let cam = camera_rays(camera, frame, spp as u32, inputs.overscan);
     // Each light's shadow ray candidates take 64 bytes an item: fewer samples a chunk
     // with many lights. A chunk whose levels still outgrow a binding is traced again in
     // halves (a sample's light does not depend on the chunk it is traced in).
@@ -264,23 +298,25 @@ pub(super) fn render_frame_gpu(
         let px0 = y0 * w;
         let npix = (y1 - y0) * w;
         let clock = Instant::now();
-        // The camera rays, as `trace_pass` makes them: the samples of a pixel, the
-        // pixels of a row, the rows.
-        let rays: Vec<Ray> = (0..npix * spp)
-            .into_par_iter()
-            .with_min_len(1024)
-            .map(|s| {
-                let p = px0 + s / spp;
-                let k = (s % spp) as u32;
-                let (x, y) = (pixel((p % w) as u32), pixel((p / w) as u32));
-                let (ox, oy) = sample_offset(frame, x, y, k, spp as u32);
-                camera.ray(x as i32 as f32 + ox, y as i32 as f32 + oy)
-            })
-            .collect();
-        work.shade += clock.elapsed();
-        let clock = Instant::now();
+        let chunk_camera = CameraRays {
+            first_pixel: u32::try_from(px0).map_err(|_| GpuError::TooLarge {
+                what: "an image (pixels numbered in 32 bits)",
+                needed: px0 as u64,
+                available: u64::from(u32::MAX),
+                adapter: gpu.dev.describe(),
+            })?,
+            ..cam
+        };
         let out = gpu.shading.render_chunk(
-            gpu.dev, gpu.stat, gpu.moving, &surf, &mats, &lts, &params, &rays, spp as u32,
+            gpu.dev,
+            gpu.stat,
+            gpu.moving,
+            &surf,
+            &mats,
+            &lts,
+            &params,
+            &chunk_camera,
+            npix as u64,
             want_hits,
         );
         work.trace += clock.elapsed();
@@ -291,13 +327,25 @@ pub(super) fn render_frame_gpu(
             }
             r => r?,
         };
-        work.rays.primary += rays.len() as u64;
+        work.rays.primary += (npix * spp) as u64;
         work.rays.shadow += out.shadow_rays;
         work.rays.secondary += out.secondary_rays;
         let clock = Instant::now();
         fb.rgba[px0..px0 + npix].copy_from_slice(&out.rgba);
         if let Some(hits) = &out.camera_hits {
             if any_aov && !centre_batch {
+                // One sample a pixel: the camera rays are the centre rays, made again
+                // here (the same bits: `camera_rays_are_the_cpus`).
+                let rays: Vec<Ray> = (0..npix)
+                    .into_par_iter()
+                    .with_min_len(1024)
+                    .map(|i| {
+                        let p = px0 + i;
+                        let (x, y) = (pixel((p % w) as u32), pixel((p / w) as u32));
+                        let (ox, oy) = sample_offset(frame, x, y, 0, 1);
+                        camera.ray(x as i32 as f32 + ox, y as i32 as f32 + oy)
+                    })
+                    .collect();
                 write_aovs(ctx, &centre_inputs, fb, px0, &rays, hits);
             }
             if let (Some(names), Some(buf)) = (crypto, fb.crypto.as_mut()) {
@@ -337,6 +385,66 @@ mod tests {
     use super::*;
     use crate::render::options::MotionBlur;
     use crate::scene::TextureRef;
+
+    /// The camera rays the GPU makes (`sample_offset`'s jitter, `CameraModel::ray`, the
+    /// shear) are the CPU's to the bit: perspective and orthographic cameras turned
+    /// every way, one to sixteen samples, with and without an overscan border.
+    #[test]
+    fn camera_rays_are_the_cpus() {
+        let dev = match GpuDevice::open(crate::gpu::AdapterPolicy::Any) {
+            Ok(Some(d)) => d,
+            other => {
+                let why = format!("{:?}", other.err());
+                assert!(
+                    std::env::var_os("CI").is_none(),
+                    "no GPU adapter under CI: {why}"
+                );
+                use std::io::Write;
+                let _ = writeln!(std::io::stderr(), "SKIPPED: no GPU adapter: {why}");
+                return;
+            }
+        };
+        let shading = GpuShading::new(&dev, &[]).unwrap();
+        let rotation = glam::Mat3::from_quat(
+            glam::Quat::from_rotation_y(0.7)
+                * glam::Quat::from_rotation_x(-0.3)
+                * glam::Quat::from_rotation_z(0.1),
+        );
+        for ortho in [None, Some((2.0, 1.3))] {
+            let camera = CameraModel {
+                origin: Vec3::new(1.25, -3.5, 7.1),
+                rotation,
+                tan_half: 0.41,
+                aspect: 37.0 / 23.0,
+                ortho,
+                width: 37,
+                height: 23,
+            };
+            for (spp, overscan) in [(1, 0), (1, 3), (3, 0), (4, 2), (16, 0)] {
+                let cam = camera_rays(&camera, 7, spp, overscan);
+                let (w, h) = (37 + 2 * overscan, 23 + 2 * overscan);
+                let gpu = shading
+                    .camera_rays_made_on_gpu(&dev, &cam, u64::from(w * h))
+                    .unwrap();
+                assert_eq!(gpu.len() as u32, w * h * spp);
+                for (s, g) in gpu.iter().enumerate() {
+                    let s = s as u32;
+                    let (p, k) = (s / spp, s % spp);
+                    let (x, y) = (
+                        (p % w).wrapping_sub(overscan),
+                        (p / w).wrapping_sub(overscan),
+                    );
+                    let (ox, oy) = sample_offset(7, x, y, k, spp);
+                    let r = camera.ray(x as i32 as f32 + ox, y as i32 as f32 + oy);
+                    assert_eq!(
+                        *g,
+                        crate::gpu::packed_on_cpu(&r),
+                        "ortho {ortho:?}, spp {spp}, overscan {overscan}: sample {k} of ({x}, {y})"
+                    );
+                }
+            }
+        }
+    }
 
     fn scene_with(m: Material) -> Scene {
         Scene {
