@@ -349,8 +349,38 @@ fn gpu_frames_agree_with_the_cpu() {
     let dir = temp_dir("gpu-frames");
     let scene = write(&dir, &subset_scene());
     let a = ["--frames", "3..6", "--spp", "1", "--max-depth", "3"];
-    render(&scene, &dir, "cpu", "cpu1", &a);
-    let log = render(&scene, &dir, "gpu", "gpu1", &a);
+    let stats = |name: &str| {
+        let p = dir.join(name);
+        (p.clone(), p.to_str().unwrap().to_string())
+    };
+    let (cpu_stats, cs) = stats("cpu1.csv");
+    let (gpu_stats, gs) = stats("gpu1.csv");
+    render(
+        &scene,
+        &dir,
+        "cpu",
+        "cpu1",
+        &[&a[..], &["--stats", &cs]].concat(),
+    );
+    let log = render(
+        &scene,
+        &dir,
+        "gpu",
+        "gpu1",
+        &[&a[..], &["--stats", &gs]].concat(),
+    );
+    // The same rays: camera, shadow and secondary counts (columns 6-8) frame by frame,
+    // so the GPU's shading made the CPU's decisions (which lights, which rays).
+    let counts = |p: &Path| -> Vec<Vec<String>> {
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').skip(6).take(3).map(String::from).collect())
+            .collect()
+    };
+    assert_eq!(counts(&cpu_stats), counts(&gpu_stats));
+    assert_eq!(counts(&cpu_stats).len(), 3);
     assert!(
         !log.contains("shading on the CPU"),
         "the subset scene fell back: {log}"
