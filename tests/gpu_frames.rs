@@ -338,7 +338,8 @@ fn write(dir: &Path, scene: &Scene) -> PathBuf {
 }
 
 /// Three frames of the moving cube, one sample a pixel, depth 3 (mirror in glass in
-/// mirror); then two samples at depth 1 with an overscan border and an exposure; each
+/// mirror); then two samples at depth 1 with an overscan border, an exposure and a
+/// background that the mirrors and the glass show; each
 /// against the CPU (RGB within the bound, alpha and the AOVs to the bit). The first
 /// again, whole and in two shards: the same bytes.
 #[test]
@@ -398,6 +399,8 @@ fn gpu_frames_agree_with_the_cpu() {
         "2",
         "--exposure",
         "0.5",
+        "--background",
+        "0.2,0.3,0.4",
     ];
     render(&scene, &dir, "cpu", "cpu2", &b);
     render(&scene, &dir, "gpu", "gpu2", &b);
