@@ -183,6 +183,8 @@ pub struct ChunkOut {
 const BINDINGS: u32 = 22;
 /// The camera's uniform.
 const CAMERA: u32 = 23;
+/// The last binding: 24..=26 are the next level's templates, uniforms and totals.
+const LAST: u32 = 26;
 
 /// The frame path's kernels and the static triangles' surfaces (uploaded once).
 pub struct GpuShading {
@@ -193,6 +195,7 @@ pub struct GpuShading {
     pixels_pipe: wgpu::ComputePipeline,
     shear_pipe: wgpu::ComputePipeline,
     camera_pipe: wgpu::ComputePipeline,
+    next_pipe: wgpu::ComputePipeline,
     static_surf: wgpu::Buffer,
     static_count: u32,
     /// A small buffer for each storage binding a kernel does not read, and a camera.
@@ -239,6 +242,18 @@ impl GpuShading {
             },
             count: None,
         }));
+        entries.extend(
+            (CAMERA + 1..=LAST).map(|binding| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: false },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            }),
+        );
         entries.push(wgpu::BindGroupLayoutEntry {
             binding: CAMERA,
             visibility: wgpu::ShaderStages::COMPUTE,
@@ -276,9 +291,10 @@ impl GpuShading {
             pipe("shear_test"),
             pipe("camera"),
         );
+        let next_pipe = pipe("next_level");
         let dummy_camera = dev.uniform(bytemuck::bytes_of(&CameraRays::default()));
-        let dummies = (0..BINDINGS)
-            .map(|_| dev.buffer("an unused binding", 256, USAGE))
+        let dummies = (0..=LAST)
+            .map(|_| dev.buffer("an unused binding", 512, USAGE))
             .collect::<Result<Vec<_>, _>>()?;
         let static_count = u32::try_from(static_surf.len())
             .map_err(|_| dev.too_large("the static surfaces", static_surf.len() as u64 * 96))?;
@@ -293,6 +309,7 @@ impl GpuShading {
             pixels_pipe,
             shear_pipe,
             camera_pipe,
+            next_pipe,
             static_surf,
             static_count,
             dummies,
@@ -321,7 +338,7 @@ impl GpuShading {
             .map(|(k, b)| {
                 let dummy = match k as u32 {
                     CAMERA => &self.dummy_camera,
-                    _ => &self.dummies[k.saturating_sub(1)],
+                    _ => &self.dummies[k],
                 };
                 entry(k as u32, b.unwrap_or(dummy))
             })
@@ -366,7 +383,7 @@ impl GpuShading {
         let params = params(n, 0, true, 0, 0, stride, 0, 1, None);
         let uni = dev.uniform(bytemuck::bytes_of(&params));
         let cam = dev.uniform(bytemuck::bytes_of(camera));
-        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; CAMERA as usize + 1];
+        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; LAST as usize + 1];
         bufs[0] = Some(&uni);
         bufs[1] = Some(&buf);
         bufs[CAMERA as usize] = Some(&cam);
@@ -404,7 +421,7 @@ impl GpuShading {
         let (_, _, stride) = GpuDevice::grid_of(n, 64);
         let params = params(n, 0, true, 0, 0, stride, 0, 1, None);
         let uni = dev.uniform(bytemuck::bytes_of(&params));
-        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; CAMERA as usize + 1];
+        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; LAST as usize + 1];
         bufs[0] = Some(&uni);
         bufs[1] = Some(&buf);
         let group = self.group(dev, &bufs);
@@ -414,11 +431,26 @@ impl GpuShading {
         Ok(bytemuck::pod_collect_to_vec(&bytes[..rays.len() * 48]))
     }
 
+    /// The most items a level can hold with `lights` lights: what one binding and a
+    /// budget of 256 MiB for a chunk's buffers allow (the frame path's buffers take
+    /// some 368 + 144 · lights bytes an item).
+    pub fn max_capacity(dev: &GpuDevice, lights: usize) -> u64 {
+        let l = lights as u64;
+        let per_binding = dev.max_binding() / (64 * l).max(96);
+        let budget = (256u64 << 20) / (368 + 144 * l);
+        per_binding.min(budget).clamp(1024, 1 << 22)
+    }
+
     /// Traces and shades the camera rays of `npix` pixels from `camera.first_pixel` on
     /// (made here, `camera.spp` a pixel, in the CPU's sample order) over the static
     /// part and the frame's moving part (`moving`, `surfaces`), with `materials`
     /// (indexed by the surfaces' material numbers) and `lights`: each pixel's averaged
     /// RGB and coverage, and the camera rays' hits when `want_hits`.
+    ///
+    /// The levels run without the host: each level's buffers hold `capacity` items (at
+    /// least the chunk's samples) and `capacity` × lights shadow rays, and the next
+    /// level's counts go into its uniforms on the GPU. `Ok(None)`: a level outgrew them
+    /// (nothing of the chunk is kept; trace it again with more room or fewer pixels).
     #[allow(clippy::too_many_arguments)]
     pub fn render_chunk(
         &self,
@@ -431,55 +463,87 @@ impl GpuShading {
         shading: &ShadeParams,
         camera: &CameraRays,
         npix: u64,
+        capacity: u64,
         want_hits: bool,
-    ) -> Result<ChunkOut, GpuError> {
+    ) -> Result<Option<ChunkOut>, GpuError> {
         let spp = camera.spp.max(1);
         let nsamples = npix * u64::from(spp);
         if nsamples == 0 {
-            return Ok(ChunkOut::default());
+            return Ok(Some(ChunkOut::default()));
         }
+        let cap = capacity.max(nsamples);
         let nl = lights.len() as u64;
-        let nl32 = u32::try_from(nl).map_err(|_| dev.too_large("the lights", nl * 48))?;
+        let caps = (cap * nl).max(1);
+        let (cap32, caps32, nl32) =
+            match (u32::try_from(cap), u32::try_from(caps), u32::try_from(nl)) {
+                (Ok(a), Ok(b), Ok(c)) => (a, b, c),
+                _ => return Err(dev.too_large("a level of the frame path", caps * 48)),
+            };
         let tracer = GpuTracer::new(dev, stat, moving);
         let mats = dev.storage_with("the materials", bytemuck::cast_slice(materials))?;
         let lts = dev.storage_with("the lights", bytemuck::cast_slice(lights))?;
         let cam = dev.uniform(bytemuck::bytes_of(camera));
-        let mut rays = dev.buffer("the camera rays", nsamples * 48, USAGE)?;
-        let mut items: Option<wgpu::Buffer> = None;
+        // The items of a level and of the next, in turn.
+        let rays = [
+            dev.buffer("the rays", cap * 48, USAGE)?,
+            dev.buffer("the next rays", cap * 48, USAGE)?,
+        ];
+        let items = [
+            dev.buffer("the items", cap * 32, USAGE)?,
+            dev.buffer("the next items", cap * 32, USAGE)?,
+        ];
         let radiance = dev.buffer("the samples' radiance", nsamples * 16, USAGE)?;
-        let mut n = nsamples;
-        let mut first = true;
-        let mut camera_hits = None;
-        let mut out = ChunkOut::default();
-        let mut enc = dev.device.create_command_encoder(&Default::default());
+        let hits = dev.buffer("the hits", cap * 16, USAGE)?;
+        let local = dev.buffer("the items' light", cap * 16, USAGE)?;
+        let sh_cand = dev.buffer("the shadow ray candidates", cap * nl * 64, USAGE)?;
+        let nx_cand_r = dev.buffer("the next rays' candidates", cap * 2 * 48, USAGE)?;
+        let nx_cand_i = dev.buffer("the next items' candidates", cap * 2 * 32, USAGE)?;
+        let sh_count = dev.buffer("the shadow ray counts", (cap + 1) * 4, USAGE)?;
+        let nx_count = dev.buffer("the next ray counts", (cap + 1) * 4, USAGE)?;
+        let sh_start = dev.buffer("the shadow ray starts", (cap + 1) * 4, USAGE)?;
+        let nx_start = dev.buffer("the next ray starts", (cap + 1) * 4, USAGE)?;
+        let sh_rays = dev.buffer("the shadow rays", caps * 48, USAGE)?;
+        let sh_add = dev.buffer("the shadow rays' light", caps * 16, USAGE)?;
+        let sh_hits = dev.buffer("the shadow rays' hits", caps * 16, USAGE)?;
+        // The uniforms: this file's for the items (a grid over the capacity and one
+        // more), the trace kernel's for the closest hits (a grid over the capacity) and
+        // for the any hits; the level's counts are written into them on the GPU.
+        let (_, _, stride) = GpuDevice::grid_of(cap + 1, 64);
         let total_tris = self.static_count.saturating_add(surfaces.count);
-        while n > 0 {
-            let hits = dev.buffer("the hits", n * 16, USAGE)?;
-            let local = dev.buffer("the items' light", n * 16, USAGE)?;
-            let sh_cand = dev.buffer("the shadow ray candidates", n * nl * 64, USAGE)?;
-            let nx_cand_r = dev.buffer("the next rays' candidates", n * 2 * 48, USAGE)?;
-            let nx_cand_i = dev.buffer("the next items' candidates", n * 2 * 32, USAGE)?;
-            let sh_count = dev.buffer("the shadow ray counts", (n + 1) * 4, USAGE)?;
-            let nx_count = dev.buffer("the next ray counts", (n + 1) * 4, USAGE)?;
-            let sh_start = dev.buffer("the shadow ray starts", (n + 1) * 4, USAGE)?;
-            let nx_start = dev.buffer("the next ray starts", (n + 1) * 4, USAGE)?;
-            let (_, _, stride) = GpuDevice::grid_of(n, 64);
-            let p = params(
-                n,
-                nl32,
-                first,
-                shading.max_depth,
-                self.static_count,
-                stride,
-                npix,
-                spp,
-                Some((shading, total_tris)),
-            );
-            let uni = dev.uniform(bytemuck::bytes_of(&p));
-            let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![
-                Some(&uni),
-                Some(&rays),
-                items.as_ref(),
+        let mut p = params(
+            nsamples,
+            nl32,
+            true,
+            shading.max_depth,
+            self.static_count,
+            stride,
+            npix,
+            spp,
+            Some((shading, total_tris)),
+        );
+        p.g[1] = cap32;
+        p.g[2] = caps32;
+        let mut closest = tracer.params_words(cap, false)?;
+        let any = tracer.params_words(caps, true)?;
+        let f_uni = dev.uniform(bytemuck::bytes_of(&p));
+        closest[0] = nsamples as u32;
+        let tc_uni = dev.uniform(bytemuck::bytes_of(&closest));
+        let ta_uni = dev.uniform(bytemuck::bytes_of(&any));
+        let mut words: Vec<u32> = bytemuck::cast_slice(bytemuck::bytes_of(&p)).to_vec();
+        words.extend_from_slice(&closest);
+        words.extend_from_slice(&any);
+        let templates = dev.buffer("the uniforms' templates", 104 * 4, USAGE)?;
+        dev.write(&templates, 0, bytemuck::cast_slice(&words));
+        let made = dev.buffer("the next level's uniforms", 104 * 4, USAGE)?;
+        let totals = dev.buffer("the frame path's totals", 16, USAGE)?;
+        dev.write(&totals, 0, &[0u8; 16]);
+        let cam_hits = dev.buffer("the camera rays' hits", nsamples * 16, USAGE)?;
+        // A bind group a parity: level k reads set k % 2 and writes the other.
+        let group = |k: usize| {
+            let bufs: Vec<Option<&wgpu::Buffer>> = vec![
+                Some(&f_uni),
+                Some(&rays[k]),
+                Some(&items[k]),
                 Some(&hits),
                 Some(&self.static_surf),
                 Some(&surfaces.buf),
@@ -493,88 +557,94 @@ impl GpuShading {
                 Some(&nx_count),
                 Some(&sh_start),
                 Some(&nx_start),
-                None,
-                None,
-                None,
-                None,
-                None,
+                Some(&sh_rays),
+                Some(&sh_add),
+                Some(&rays[1 - k]),
+                Some(&items[1 - k]),
+                Some(&sh_hits),
                 Some(&radiance),
                 None,
                 Some(&cam),
+                Some(&templates),
+                Some(&made),
+                Some(&totals),
             ];
-            let group = self.group(dev, &bufs);
-            if first {
-                Self::dispatch(&mut enc, &self.camera_pipe, &group, n);
+            self.group(dev, &bufs)
+        };
+        let groups = [group(0), group(1)];
+        let trace_closest = [
+            tracer.bind_uniform(&tc_uni, &rays[0], &hits),
+            tracer.bind_uniform(&tc_uni, &rays[1], &hits),
+        ];
+        let trace_any = tracer.bind_uniform(&ta_uni, &sh_rays, &sh_hits);
+        let mut enc = dev.device.create_command_encoder(&Default::default());
+        // Every level up to the deepest the items can reach (an empty level costs
+        // grids whose invocations stop at once).
+        for level in 0..=shading.max_depth as usize {
+            let (g, k) = (&groups[level % 2], level % 2);
+            if level == 0 {
+                Self::dispatch(&mut enc, &self.camera_pipe, g, cap + 1);
             }
-            tracer.encode(&mut enc, &rays, &hits, n, false)?;
-            Self::dispatch(&mut enc, &self.shade_pipe, &group, n);
-            super::scan::exclusive_scan(dev, &mut enc, &sh_count, &sh_start, n + 1)?;
-            super::scan::exclusive_scan(dev, &mut enc, &nx_count, &nx_start, n + 1)?;
-            let totals = dev.buffer("the level's totals", 8, USAGE)?;
-            enc.copy_buffer_to_buffer(&sh_start, n * 4, &totals, 0, 4);
-            enc.copy_buffer_to_buffer(&nx_start, n * 4, &totals, 4, 4);
-            if first && want_hits {
-                let b = dev.read_back(enc, &hits, n * 16)?;
-                let raw: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(&b[..n as usize * 16]);
-                camera_hits = Some(
-                    raw.par_iter()
-                        .with_min_len(4096)
-                        .map(|h| {
-                            (h[1] != u32::MAX).then(|| Hit {
-                                t: f32::from_bits(h[0]),
-                                tri: h[1],
-                                u: f32::from_bits(h[2]),
-                                v: f32::from_bits(h[3]),
-                            })
-                        })
-                        .collect(),
-                );
-                enc = dev.device.create_command_encoder(&Default::default());
+            tracer.encode_group(&mut enc, &trace_closest[k], cap);
+            if level == 0 && want_hits {
+                enc.copy_buffer_to_buffer(&hits, 0, &cam_hits, 0, nsamples * 16);
             }
-            let t = dev.read_back(enc, &totals, 8)?;
-            let t: Vec<u32> = bytemuck::pod_collect_to_vec(&t[..8]);
-            let (ns, nn) = (u64::from(t[0]), u64::from(t[1]));
-            if ns > n * nl || nn > n * 2 {
-                return Err(GpuError::Lost(format!(
-                    "the frame path's counts are out of range ({ns} shadow rays, {nn} next rays for {n} items)"
-                )));
-            }
-            out.shadow_rays += ns;
-            out.secondary_rays += nn;
-            enc = dev.device.create_command_encoder(&Default::default());
-            let sh_rays = dev.buffer("the shadow rays", ns * 48, USAGE)?;
-            let sh_add = dev.buffer("the shadow rays' light", ns * 16, USAGE)?;
-            let sh_hits = dev.buffer("the shadow rays' hits", ns * 16, USAGE)?;
-            let nx_rays = dev.buffer("the next rays", nn * 48, USAGE)?;
-            let nx_items = dev.buffer("the next items", nn * 32, USAGE)?;
-            bufs[16] = Some(&sh_rays);
-            bufs[17] = Some(&sh_add);
-            bufs[18] = Some(&nx_rays);
-            bufs[19] = Some(&nx_items);
-            bufs[20] = Some(&sh_hits);
-            let group = self.group(dev, &bufs);
-            Self::dispatch(&mut enc, &self.compact_pipe, &group, n);
-            tracer.encode(&mut enc, &sh_rays, &sh_hits, ns, true)?;
-            Self::dispatch(&mut enc, &self.accum_pipe, &group, n);
-            rays = nx_rays;
-            items = Some(nx_items);
-            n = nn;
-            first = false;
+            Self::dispatch(&mut enc, &self.shade_pipe, g, cap + 1);
+            super::scan::exclusive_scan(dev, &mut enc, &sh_count, &sh_start, cap + 1)?;
+            super::scan::exclusive_scan(dev, &mut enc, &nx_count, &nx_start, cap + 1)?;
+            Self::dispatch(&mut enc, &self.next_pipe, g, 1);
+            enc.copy_buffer_to_buffer(&made, 64 * 4, &ta_uni, 0, 40 * 4);
+            Self::dispatch(&mut enc, &self.compact_pipe, g, cap + 1);
+            tracer.encode_group(&mut enc, &trace_any, caps);
+            Self::dispatch(&mut enc, &self.accum_pipe, g, cap + 1);
+            enc.copy_buffer_to_buffer(&made, 0, &f_uni, 0, 24 * 4);
+            enc.copy_buffer_to_buffer(&made, 24 * 4, &tc_uni, 0, 40 * 4);
         }
         let rgba = dev.buffer("the pixels", npix * 16, USAGE)?;
         let (_, _, stride) = GpuDevice::grid_of(npix, 64);
         let p = params(0, 0, false, 0, 0, stride, npix, spp, None);
         let uni = dev.uniform(bytemuck::bytes_of(&p));
-        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; CAMERA as usize + 1];
+        let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; LAST as usize + 1];
         bufs[0] = Some(&uni);
         bufs[21] = Some(&radiance);
         bufs[22] = Some(&rgba);
         let group = self.group(dev, &bufs);
         Self::dispatch(&mut enc, &self.pixels_pipe, &group, npix);
         let b = dev.read_back(enc, &rgba, npix * 16)?;
-        out.rgba = bytemuck::pod_collect_to_vec(&b[..npix as usize * 16]);
-        out.camera_hits = camera_hits;
-        Ok(out)
+        let t = dev.read_back(
+            dev.device.create_command_encoder(&Default::default()),
+            &totals,
+            16,
+        )?;
+        let t: Vec<u32> = bytemuck::pod_collect_to_vec(&t[..16]);
+        if t[0] != 0 {
+            return Ok(None);
+        }
+        let mut out = ChunkOut {
+            rgba: bytemuck::pod_collect_to_vec(&b[..npix as usize * 16]),
+            camera_hits: None,
+            shadow_rays: u64::from(t[1]),
+            secondary_rays: u64::from(t[2]),
+        };
+        if want_hits {
+            let enc = dev.device.create_command_encoder(&Default::default());
+            let b = dev.read_back(enc, &cam_hits, nsamples * 16)?;
+            let raw: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(&b[..nsamples as usize * 16]);
+            out.camera_hits = Some(
+                raw.par_iter()
+                    .with_min_len(4096)
+                    .map(|h| {
+                        (h[1] != u32::MAX).then(|| Hit {
+                            t: f32::from_bits(h[0]),
+                            tri: h[1],
+                            u: f32::from_bits(h[2]),
+                            v: f32::from_bits(h[3]),
+                        })
+                    })
+                    .collect(),
+            );
+        }
+        Ok(Some(out))
     }
 }
 

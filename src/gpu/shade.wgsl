@@ -33,7 +33,7 @@ struct FP {
     d: vec4<f32>,
     // MIN_WEIGHT
     e: vec4<f32>,
-    // triangles in all
+    // triangles in all, the items a level holds at most, the shadow rays likewise
     g: vec4<u32>,
 }
 
@@ -131,6 +131,13 @@ struct Cam {
 }
 
 @group(0) @binding(23) var<uniform> C: Cam;
+
+// The next level's uniforms, made on the GPU (`next_level`): templates in, uniforms
+// out (this file's FP, then trace.wgsl's Params for the closest hits and for the any
+// hits), and the frame's running totals (overflow, shadow rays, next-level rays).
+@group(0) @binding(24) var<storage, read_write> templates: array<u32>;
+@group(0) @binding(25) var<storage, read_write> made: array<u32>;
+@group(0) @binding(26) var<storage, read_write> totals: array<u32>;
 
 const NONE: u32 = 0xffffffffu;
 const FRAC_1_PI: f32 = 0.31830988618379067;
@@ -464,12 +471,12 @@ fn brdf(m: Mat, l: Lobes, s: Surf, to: vec3<f32>) -> vec3<f32> {
 fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = grid_index(gid);
     let n = F.a.x;
-    if i == 0u {
-        // The scans read one more count: the totals land at [n].
-        sh_count[n] = 0u;
-        nx_count[n] = 0u;
-    }
     if i >= n {
+        // The scans run over the level's capacity and one more: the totals land there.
+        if i <= F.g.y {
+            sh_count[i] = 0u;
+            nx_count[i] = 0u;
+        }
         return;
     }
     let nl = F.a.y;
@@ -611,17 +618,56 @@ fn compact(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let nl = F.a.y;
+    // Past the capacities nothing is written: `next_level` flags the overflow and the
+    // host traces the chunk again with more room.
     let a = sh_start[i];
     for (var k = 0u; k < sh_count[i]; k = k + 1u) {
-        let c = sh_cand[i * nl + k];
-        sh_rays[a + k] = c.r;
-        sh_add[a + k] = c.c;
+        if a + k < F.g.z {
+            let c = sh_cand[i * nl + k];
+            sh_rays[a + k] = c.r;
+            sh_add[a + k] = c.c;
+        }
     }
     let b = nx_start[i];
     for (var k = 0u; k < nx_count[i]; k = k + 1u) {
-        nx_rays[b + k] = nx_cand_r[i * 2u + k];
-        nx_items[b + k] = nx_cand_i[i * 2u + k];
+        if b + k < F.g.y {
+            nx_rays[b + k] = nx_cand_r[i * 2u + k];
+            nx_items[b + k] = nx_cand_i[i * 2u + k];
+        }
     }
+}
+
+// One invocation: the level's totals (the scans' last sums), the uniforms of the
+// shadow rays' any hits and of the next level (its items and their closest hits), made
+// from the templates with the counts, clamped to the capacities (an overflow is
+// flagged), and the frame's totals.
+@compute @workgroup_size(1)
+fn next_level() {
+    let cap = F.g.y;
+    let ns = sh_start[cap];
+    let nn = nx_start[cap];
+    var over = 0u;
+    var ns2 = ns;
+    if ns > F.g.z {
+        ns2 = F.g.z;
+        over = 1u;
+    }
+    var nn2 = nn;
+    if nn > cap {
+        nn2 = cap;
+        over = 1u;
+    }
+    totals[0] = totals[0] | over;
+    totals[1] = totals[1] + ns2;
+    totals[2] = totals[2] + nn2;
+    for (var w = 0u; w < 104u; w = w + 1u) {
+        made[w] = templates[w];
+    }
+    made[0] = nn2;
+    // Not the camera rays' level.
+    made[2] = 0u;
+    made[24] = nn2;
+    made[64] = ns2;
 }
 
 // A run of items of one sample, added to it in the CPU's order: the items' own terms,

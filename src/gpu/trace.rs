@@ -195,17 +195,10 @@ impl<'a> GpuTracer<'a> {
         Ok(bytemuck::pod_collect_to_vec(&bytes[..rays.len() * 16]))
     }
 
-    /// The trace kernel's bind group for `n` rays in `rays` (`GpuRay`s, 48 bytes each)
-    /// whose hits go to `hits` (`[t, tri, u, v]` bits, 16 bytes each): closest hits, or
-    /// any hits when `any`. The rays and hits may be made and read by other kernels
-    /// (the GPU frame path, `frame.rs`): nothing here reads them on the host.
-    pub(super) fn bind(
-        &self,
-        rays: &wgpu::Buffer,
-        hits: &wgpu::Buffer,
-        n: u64,
-        any: bool,
-    ) -> Result<wgpu::BindGroup, GpuError> {
+    /// The trace kernel's uniform for `n` rays (closest hits, or any hits when `any`),
+    /// as 40 words; the first is `n`, which the GPU frame path (`frame.rs`) rewrites on
+    /// the GPU for each level (the rest, the row stride included, stay).
+    pub(super) fn params_words(&self, n: u64, any: bool) -> Result<[u32; 40], GpuError> {
         let dev = self.dev;
         let n32 = u32::try_from(n).map_err(|_| dev.too_large("a ray batch", n * 48))?;
         let (_, _, stride) = GpuDevice::grid_of(n, 64);
@@ -224,10 +217,37 @@ impl<'a> GpuTracer<'a> {
             k: [s.tris.shift, s.tiles.shift, s.starts.shift, s.entries.shift],
             k2: [s.blocks.shift, 0, 0, 0],
         };
-        let uniform = dev.uniform(bytemuck::bytes_of(&params));
+        Ok(bytemuck::cast(params))
+    }
+
+    /// The trace kernel's bind group for `n` rays in `rays` (`GpuRay`s, 48 bytes each)
+    /// whose hits go to `hits` (`[t, tri, u, v]` bits, 16 bytes each): closest hits, or
+    /// any hits when `any`. The rays and hits may be made and read by other kernels
+    /// (the GPU frame path, `frame.rs`): nothing here reads them on the host.
+    pub(super) fn bind(
+        &self,
+        rays: &wgpu::Buffer,
+        hits: &wgpu::Buffer,
+        n: u64,
+        any: bool,
+    ) -> Result<wgpu::BindGroup, GpuError> {
+        let words = self.params_words(n, any)?;
+        let uniform = self.dev.uniform(bytemuck::bytes_of(&words));
+        Ok(self.bind_uniform(&uniform, rays, hits))
+    }
+
+    /// The trace kernel's bind group with its uniform in `uniform` (see
+    /// [`params_words`](Self::params_words)).
+    pub(super) fn bind_uniform(
+        &self,
+        uniform: &wgpu::Buffer,
+        rays: &wgpu::Buffer,
+        hits: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        let (dev, s, m) = (self.dev, self.stat, self.moving);
         let d = &s.dummy;
         let mut entries = vec![
-            entry(0, &uniform),
+            entry(0, uniform),
             entry(1, rays),
             entry(2, hits),
             entry(3, s.tris.binding(0, d)),
@@ -249,36 +269,32 @@ impl<'a> GpuTracer<'a> {
                 b += 1;
             }
         }
-        Ok(dev.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        dev.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("trace"),
             layout: &dev.trace_layout,
             entries: &entries,
-        }))
+        })
     }
 
-    /// Appends to `enc` the trace pass over `n` rays in the GPU buffer `rays`, writing
-    /// `hits` (see [`bind`](Self::bind)); nothing for `n == 0`.
-    pub(super) fn encode(
+    /// Appends to `enc` the trace pass of `group` over a grid for `n` rays (the kernel
+    /// stops at its uniform's count).
+    pub(super) fn encode_group(
         &self,
         enc: &mut wgpu::CommandEncoder,
-        rays: &wgpu::Buffer,
-        hits: &wgpu::Buffer,
+        group: &wgpu::BindGroup,
         n: u64,
-        any: bool,
-    ) -> Result<(), GpuError> {
+    ) {
         if n == 0 {
-            return Ok(());
+            return;
         }
-        let group = self.bind(rays, hits, n, any)?;
         let (gx, gy, _) = GpuDevice::grid_of(n, 64);
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("trace"),
             timestamp_writes: None,
         });
         pass.set_pipeline(&self.dev.trace_pipe);
-        pass.set_bind_group(0, &group, &[]);
+        pass.set_bind_group(0, group, &[]);
         pass.dispatch_workgroups(gx, gy, 1);
-        Ok(())
     }
 }
 

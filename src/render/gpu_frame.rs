@@ -287,11 +287,14 @@ pub(super) fn render_frame_gpu(
     };
     let pixel = |i: u32| i.wrapping_sub(o as u32);
     let cam = camera_rays(camera, frame, spp as u32, inputs.overscan);
-    // Each light's shadow ray candidates take 64 bytes an item: fewer samples a chunk
-    // with many lights. A chunk whose levels still outgrow a binding is traced again in
-    // halves (a sample's light does not depend on the chunk it is traced in).
-    let per_chunk = CHUNK_SAMPLES * 4 / lts.len().clamp(4, 64);
-    let mut rows_per_chunk = (per_chunk / (w * spp)).max(1);
+    // A chunk's levels hold `capacity` items each (the buffers are sized before the
+    // GPU knows how many rays a level makes): twice the chunk's samples to begin with,
+    // doubled while a level outgrows it, up to what the adapter allows; past that the
+    // chunk is traced again in halves. A sample's light does not depend on the chunk or
+    // the room it is traced in, so neither changes a byte.
+    let max_capacity = GpuShading::max_capacity(gpu.dev, lts.len()) as usize;
+    let mut rows_per_chunk = ((CHUNK_SAMPLES.min(max_capacity / 4)) / (w * spp)).max(1);
+    let mut capacity = 0;
     let mut y0 = 0;
     while y0 < h {
         let y1 = (y0 + rows_per_chunk).min(h);
@@ -317,16 +320,32 @@ pub(super) fn render_frame_gpu(
             &params,
             &chunk_camera,
             npix as u64,
+            capacity.max(2 * npix * spp).min(max_capacity) as u64,
             want_hits,
         );
         work.trace += clock.elapsed();
         let out = match out {
-            Err(GpuError::TooLarge { .. }) if y1 - y0 > 1 => {
-                rows_per_chunk = (y1 - y0) / 2;
+            Ok(Some(out)) => out,
+            Ok(None) if capacity < max_capacity => {
+                capacity = capacity.max(2 * npix * spp).saturating_mul(2);
                 continue;
             }
-            r => r?,
+            Ok(None) | Err(GpuError::TooLarge { .. }) if y1 - y0 > 1 => {
+                rows_per_chunk = (y1 - y0) / 2;
+                capacity = 0;
+                continue;
+            }
+            Ok(None) => {
+                return Err(GpuError::TooLarge {
+                    what: "the rays of one row of pixels (the frame path's levels)",
+                    needed: (max_capacity * 48) as u64,
+                    available: gpu.dev.max_binding(),
+                    adapter: gpu.dev.describe(),
+                })
+            }
+            Err(e) => return Err(e),
         };
+        capacity = 0;
         work.rays.primary += (npix * spp) as u64;
         work.rays.shadow += out.shadow_rays;
         work.rays.secondary += out.secondary_rays;
@@ -386,13 +405,10 @@ mod tests {
     use crate::render::options::MotionBlur;
     use crate::scene::TextureRef;
 
-    /// The camera rays the GPU makes (`sample_offset`'s jitter, `CameraModel::ray`, the
-    /// shear) are the CPU's to the bit: perspective and orthographic cameras turned
-    /// every way, one to sixteen samples, with and without an overscan border.
-    #[test]
-    fn camera_rays_are_the_cpus() {
-        let dev = match GpuDevice::open(crate::gpu::AdapterPolicy::Any) {
-            Ok(Some(d)) => d,
+    /// The adapter, or `None` after saying why the test skips (a failure under CI).
+    fn test_device() -> Option<GpuDevice> {
+        match GpuDevice::open(crate::gpu::AdapterPolicy::Any) {
+            Ok(Some(d)) => Some(d),
             other => {
                 let why = format!("{:?}", other.err());
                 assert!(
@@ -401,8 +417,124 @@ mod tests {
                 );
                 use std::io::Write;
                 let _ = writeln!(std::io::stderr(), "SKIPPED: no GPU adapter: {why}");
-                return;
+                None
             }
+        }
+    }
+
+    /// A level that outgrows its room is refused (`None`), and the chunk traced with
+    /// more room gives the same bytes whatever the room: 256 pixels of glass over a
+    /// floor make 512 rays at the second level.
+    #[test]
+    fn a_level_that_outgrows_its_room_is_refused_and_room_changes_nothing() {
+        use crate::gpu::{GpuMoving, GpuStatic};
+        use crate::psf::{Psf, PsfParams};
+        let Some(dev) = test_device() else {
+            return;
+        };
+        let mut tris: Vec<[Vec3; 3]> = Vec::new();
+        let mut mat = Vec::new();
+        // A cube of glass (material 0) around the origin, half size 0.5.
+        for axis in 0..3 {
+            for sign in [-1.0f32, 1.0] {
+                let mut n = Vec3::ZERO;
+                n[axis] = sign;
+                let a = n.any_orthonormal_vector();
+                let b = n.cross(a);
+                let c = |s: f32, t: f32| (n + a * s + b * t) * 0.5;
+                tris.push([c(-1.0, -1.0), c(1.0, -1.0), c(1.0, 1.0)]);
+                tris.push([c(-1.0, -1.0), c(1.0, 1.0), c(-1.0, 1.0)]);
+                mat.extend([0, 0]);
+            }
+        }
+        // A floor (material 1).
+        let f = |x: f32, z: f32| Vec3::new(x, -1.0, z);
+        tris.push([f(-5.0, -5.0), f(-5.0, 5.0), f(5.0, 5.0)]);
+        tris.push([f(-5.0, -5.0), f(5.0, 5.0), f(5.0, -5.0)]);
+        mat.extend([1, 1]);
+        let psf = Psf::build(&tris, &PsfParams::for_static(tris.len())).unwrap();
+        let stat = GpuStatic::upload(&dev, &psf).unwrap();
+        let mut moving = GpuMoving::new(&dev).unwrap();
+        moving.update(&dev, &[]).unwrap();
+        let surf: Vec<SurfaceTriangle> = tris
+            .iter()
+            .zip(&mat)
+            .map(|(p, &m)| SurfaceTriangle::new(p, None, m))
+            .collect();
+        let shading = GpuShading::new(&dev, &surf).unwrap();
+        let no_moving = shading.moving(&dev, &[]).unwrap();
+        let scene = Scene {
+            materials: vec![
+                Material {
+                    transmission: 1.0,
+                    roughness: 0.0,
+                    metallic: 0.0,
+                    double_sided: true,
+                    ..Material::default()
+                },
+                Material {
+                    metallic: 0.0,
+                    ..Material::default()
+                },
+            ],
+            ..Scene::default()
+        };
+        let mats = materials(&scene);
+        let lts = [ShadeLight {
+            position: [2.0, 4.0, 3.0],
+            kind: 1,
+            power: [40.0; 3],
+            ..ShadeLight::default()
+        }];
+        let params = ShadeParams {
+            ambient: [0.05; 3],
+            background: [0.2, 0.3, 0.4],
+            extent: 10.0,
+            max_depth: 4,
+            min_weight: MIN_WEIGHT,
+        };
+        // Every pixel on the cube's front face.
+        let camera = CameraModel {
+            origin: Vec3::new(0.0, 0.1, 4.0),
+            rotation: glam::Mat3::IDENTITY,
+            tan_half: 0.1,
+            aspect: 1.0,
+            ortho: None,
+            width: 16,
+            height: 16,
+        };
+        let cam = camera_rays(&camera, 0, 1, 0);
+        let run = |capacity: u64| {
+            shading
+                .render_chunk(
+                    &dev, &stat, &moving, &no_moving, &mats, &lts, &params, &cam, 256, capacity,
+                    true,
+                )
+                .unwrap()
+        };
+        assert!(run(256).is_none(), "512 rays in the room of 256");
+        let snug = run(1024).unwrap();
+        let roomy = run(1 << 14).unwrap();
+        let bits = |o: &crate::gpu::ChunkOut| -> Vec<u32> {
+            o.rgba.iter().flatten().map(|x| x.to_bits()).collect()
+        };
+        assert_eq!(bits(&snug), bits(&roomy));
+        assert_eq!(snug.camera_hits, roomy.camera_hits);
+        assert_eq!(
+            (snug.shadow_rays, snug.secondary_rays),
+            (roomy.shadow_rays, roomy.secondary_rays)
+        );
+        assert!(snug.secondary_rays >= 512, "{}", snug.secondary_rays);
+        assert!(snug.rgba.iter().all(|p| p[3] == 1.0 && p[0] > 0.0));
+    }
+
+    /// The camera rays the GPU makes (`sample_offset`'s jitter, `CameraModel::ray`, the
+    /// shear) are the CPU's to the bit: perspective and orthographic cameras turned
+    /// every way, one to sixteen samples, with and without an overscan border.
+    #[test]
+    fn camera_rays_are_the_cpus() {
+        let Some(dev) = test_device() else {
+            return;
         };
         let shading = GpuShading::new(&dev, &[]).unwrap();
         let rotation = glam::Mat3::from_quat(
