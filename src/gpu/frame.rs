@@ -160,6 +160,7 @@ struct Params {
     d: [f32; 4],
     e: [f32; 4],
     g: [u32; 4],
+    h: [u32; 4],
 }
 
 /// The surfaces of a frame's moving triangles, uploaded ([`GpuShading::moving`]).
@@ -350,6 +351,20 @@ impl GpuShading {
         })
     }
 
+    /// A dispatch whose workgroup counts the GPU wrote (`args` at byte `at`).
+    fn dispatch_indirect(
+        enc: &mut wgpu::CommandEncoder,
+        pipe: &wgpu::ComputePipeline,
+        group: &wgpu::BindGroup,
+        args: &wgpu::Buffer,
+        at: u64,
+    ) {
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(pipe);
+        pass.set_bind_group(0, group, &[]);
+        pass.dispatch_workgroups_indirect(args, at);
+    }
+
     fn dispatch(
         enc: &mut wgpu::CommandEncoder,
         pipe: &wgpu::ComputePipeline,
@@ -523,6 +538,9 @@ impl GpuShading {
         );
         p.g[1] = cap32;
         p.g[2] = caps32;
+        let x_of = |n: u64| GpuDevice::grid_of(n, 64).0;
+        let x_caps = [x_of(cap + 1), x_of(cap), x_of(caps)];
+        p.h = [x_caps[0], x_caps[1], x_caps[2], 0];
         let mut closest = tracer.params_words(cap, false)?;
         let any = tracer.params_words(caps, true)?;
         let f_uni = dev.uniform(bytemuck::bytes_of(&p));
@@ -532,9 +550,24 @@ impl GpuShading {
         let mut words: Vec<u32> = bytemuck::cast_slice(bytemuck::bytes_of(&p)).to_vec();
         words.extend_from_slice(&closest);
         words.extend_from_slice(&any);
-        let templates = dev.buffer("the uniforms' templates", 104 * 4, USAGE)?;
+        let templates = dev.buffer("the uniforms' templates", 108 * 4, USAGE)?;
         dev.write(&templates, 0, bytemuck::cast_slice(&words));
-        let made = dev.buffer("the next level's uniforms", 104 * 4, USAGE)?;
+        let indirect = USAGE | wgpu::BufferUsages::INDIRECT;
+        let made = dev.buffer("the next level's uniforms", 117 * 4, indirect)?;
+        // The workgroups of the items' kernels, the closest hits and the any hits (as
+        // `next_level` counts them); the camera rays' level's from here.
+        let groups = |n: u64, x_cap: u32| {
+            let g = n.div_ceil(64) as u32;
+            [g.min(x_cap), g.div_ceil(x_cap), 1]
+        };
+        let args = dev.buffer("the dispatches' workgroups", 9 * 4, indirect)?;
+        let first_args: Vec<u32> = [
+            groups(nsamples, x_caps[0]),
+            groups(nsamples, x_caps[1]),
+            [0, 0, 1],
+        ]
+        .concat();
+        dev.write(&args, 0, bytemuck::cast_slice(&first_args));
         let totals = dev.buffer("the frame path's totals", 16, USAGE)?;
         dev.write(&totals, 0, &[0u8; 16]);
         let cam_hits = dev.buffer("the camera rays' hits", nsamples * 16, USAGE)?;
@@ -571,7 +604,7 @@ impl GpuShading {
             ];
             self.group(dev, &bufs)
         };
-        let groups = [group(0), group(1)];
+        let bind = [group(0), group(1)];
         let trace_closest = [
             tracer.bind_uniform(&tc_uni, &rays[0], &hits),
             tracer.bind_uniform(&tc_uni, &rays[1], &hits),
@@ -580,25 +613,30 @@ impl GpuShading {
         let mut enc = dev.device.create_command_encoder(&Default::default());
         // Every level up to the deepest the items can reach (an empty level costs
         // grids whose invocations stop at once).
+        // Word offsets in `made`: this file's uniform, the closest hits', the any
+        // hits', then the workgroups (items, closest, any).
+        let (w_f, w_tc, w_ta, w_args) = (0u64, 28u64, 68u64, 108u64);
         for level in 0..=shading.max_depth as usize {
-            let (g, k) = (&groups[level % 2], level % 2);
+            let (g, k) = (&bind[level % 2], level % 2);
             if level == 0 {
-                Self::dispatch(&mut enc, &self.camera_pipe, g, cap + 1);
+                Self::dispatch(&mut enc, &self.camera_pipe, g, nsamples);
             }
-            tracer.encode_group(&mut enc, &trace_closest[k], cap);
+            tracer.encode_group_indirect(&mut enc, &trace_closest[k], &args, 12);
             if level == 0 && want_hits {
                 enc.copy_buffer_to_buffer(&hits, 0, &cam_hits, 0, nsamples * 16);
             }
-            Self::dispatch(&mut enc, &self.shade_pipe, g, cap + 1);
+            Self::dispatch_indirect(&mut enc, &self.shade_pipe, g, &args, 0);
             super::scan::exclusive_scan(dev, &mut enc, &sh_count, &sh_start, cap + 1)?;
             super::scan::exclusive_scan(dev, &mut enc, &nx_count, &nx_start, cap + 1)?;
             Self::dispatch(&mut enc, &self.next_pipe, g, 1);
-            enc.copy_buffer_to_buffer(&made, 64 * 4, &ta_uni, 0, 40 * 4);
-            Self::dispatch(&mut enc, &self.compact_pipe, g, cap + 1);
-            tracer.encode_group(&mut enc, &trace_any, caps);
-            Self::dispatch(&mut enc, &self.accum_pipe, g, cap + 1);
-            enc.copy_buffer_to_buffer(&made, 0, &f_uni, 0, 24 * 4);
-            enc.copy_buffer_to_buffer(&made, 24 * 4, &tc_uni, 0, 40 * 4);
+            enc.copy_buffer_to_buffer(&made, w_ta * 4, &ta_uni, 0, 40 * 4);
+            enc.copy_buffer_to_buffer(&made, (w_args + 6) * 4, &args, 24, 12);
+            Self::dispatch_indirect(&mut enc, &self.compact_pipe, g, &args, 0);
+            tracer.encode_group_indirect(&mut enc, &trace_any, &args, 24);
+            Self::dispatch_indirect(&mut enc, &self.accum_pipe, g, &args, 0);
+            enc.copy_buffer_to_buffer(&made, w_f * 4, &f_uni, 0, 28 * 4);
+            enc.copy_buffer_to_buffer(&made, w_tc * 4, &tc_uni, 0, 40 * 4);
+            enc.copy_buffer_to_buffer(&made, w_args * 4, &args, 0, 24);
         }
         let rgba = dev.buffer("the pixels", npix * 16, USAGE)?;
         let (_, _, stride) = GpuDevice::grid_of(npix, 64);
@@ -672,6 +710,7 @@ fn params(
         d: [bg[0], bg[1], bg[2], 1.0 / spp.max(1) as f32],
         e: [min_w, 0.0, 0.0, 0.0],
         g: [total, 0, 0, 0],
+        h: [0; 4],
     }
 }
 

@@ -35,6 +35,9 @@ struct FP {
     e: vec4<f32>,
     // triangles in all, the items a level holds at most, the shadow rays likewise
     g: vec4<u32>,
+    // workgroups along x of the grids over the capacities (the row strides / 64): the
+    // items' kernels, the closest hits, the any hits
+    h: vec4<u32>,
 }
 
 // trace.wgsl's `Ray`, the shear's axis bits as a u32 (the same 48 bytes).
@@ -134,7 +137,9 @@ struct Cam {
 
 // The next level's uniforms, made on the GPU (`next_level`): templates in, uniforms
 // out (this file's FP, then trace.wgsl's Params for the closest hits and for the any
-// hits), and the frame's running totals (overflow, shadow rays, next-level rays).
+// hits) and then the dispatches' workgroup counts (the next level's items, its closest
+// hits, this level's any hits); and the frame's running totals (overflow, shadow rays,
+// next-level rays).
 @group(0) @binding(24) var<storage, read_write> templates: array<u32>;
 @group(0) @binding(25) var<storage, read_write> made: array<u32>;
 @group(0) @binding(26) var<storage, read_write> totals: array<u32>;
@@ -471,12 +476,8 @@ fn brdf(m: Mat, l: Lobes, s: Surf, to: vec3<f32>) -> vec3<f32> {
 fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = grid_index(gid);
     let n = F.a.x;
+    // The scans run over the capacity; the sums up to [n] read only counts written here.
     if i >= n {
-        // The scans run over the level's capacity and one more: the totals land there.
-        if i <= F.g.y {
-            sh_count[i] = 0u;
-            nx_count[i] = 0u;
-        }
         return;
     }
     let nl = F.a.y;
@@ -641,11 +642,20 @@ fn compact(@builtin(global_invocation_id) gid: vec3<u32>) {
 // shadow rays' any hits and of the next level (its items and their closest hits), made
 // from the templates with the counts, clamped to the capacities (an overflow is
 // flagged), and the frame's totals.
+// Workgroups (x, y, 1) of 64 for `n` invocations on a grid `x_cap` wide (the width
+// the row stride in the uniform was made for).
+fn groups(at: u32, n: u32, x_cap: u32) {
+    let g = (n + 63u) / 64u;
+    made[at] = min(g, x_cap);
+    made[at + 1u] = (g + x_cap - 1u) / x_cap;
+    made[at + 2u] = 1u;
+}
+
 @compute @workgroup_size(1)
 fn next_level() {
     let cap = F.g.y;
-    let ns = sh_start[cap];
-    let nn = nx_start[cap];
+    let ns = sh_start[F.a.x];
+    let nn = nx_start[F.a.x];
     var over = 0u;
     var ns2 = ns;
     if ns > F.g.z {
@@ -660,14 +670,17 @@ fn next_level() {
     totals[0] = totals[0] | over;
     totals[1] = totals[1] + ns2;
     totals[2] = totals[2] + nn2;
-    for (var w = 0u; w < 104u; w = w + 1u) {
+    for (var w = 0u; w < 108u; w = w + 1u) {
         made[w] = templates[w];
     }
     made[0] = nn2;
     // Not the camera rays' level.
     made[2] = 0u;
-    made[24] = nn2;
-    made[64] = ns2;
+    made[28] = nn2;
+    made[68] = ns2;
+    groups(108u, nn2, F.h.x);
+    groups(111u, nn2, F.h.y);
+    groups(114u, ns2, F.h.z);
 }
 
 // A run of items of one sample, added to it in the CPU's order: the items' own terms,

@@ -276,25 +276,22 @@ impl<'a> GpuTracer<'a> {
         })
     }
 
-    /// Appends to `enc` the trace pass of `group` over a grid for `n` rays (the kernel
-    /// stops at its uniform's count).
-    pub(super) fn encode_group(
+    /// Appends to `enc` the trace pass of `group` with the workgroup counts the GPU
+    /// wrote into `args` at byte `at` (the grid as wide as the uniform's row stride).
+    pub(super) fn encode_group_indirect(
         &self,
         enc: &mut wgpu::CommandEncoder,
         group: &wgpu::BindGroup,
-        n: u64,
+        args: &wgpu::Buffer,
+        at: u64,
     ) {
-        if n == 0 {
-            return;
-        }
-        let (gx, gy, _) = GpuDevice::grid_of(n, 64);
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("trace"),
             timestamp_writes: None,
         });
         pass.set_pipeline(&self.dev.trace_pipe);
         pass.set_bind_group(0, group, &[]);
-        pass.dispatch_workgroups(gx, gy, 1);
+        pass.dispatch_workgroups_indirect(args, at);
     }
 }
 
