@@ -1,12 +1,14 @@
 //! The GPU frame path: a chunk of a frame's samples traced and shaded on the GPU from
 //! its camera rays (made there, the CPU's to the bit) to its pixels, the wavefront
-//! staying on the GPU between depth levels (shade.wgsl): per level the closest hits (trace.wgsl, through
-//! [`GpuTracer::encode`]), the shading (emission, ambient, a shadow ray a punctual
-//! light, the refracted and mirror rays), the shadow rays and the next level's rays
-//! compacted by prefix sums (scan.wgsl) in the CPU's order, the any hits of the shadow
-//! rays, and each sample's sum. The host reads back two counts a level (to size the
-//! next level's buffers), the finished pixels and, when asked, the camera rays' hits
-//! (for the AOVs and Cryptomatte, which the CPU makes from them).
+//! staying on the GPU between depth levels (shade.wgsl): per level the closest hits
+//! (trace.wgsl, bound by [`GpuTracer::bind_uniform`]), the shading (emission, ambient,
+//! a shadow ray a punctual light, the refracted and mirror rays), the shadow rays and
+//! the next level's rays compacted by prefix sums (scan.wgsl) in the CPU's order, the
+//! next level's uniforms and workgroup counts made on the GPU from the sums, the any
+//! hits of the shadow rays, and each sample's sum. The host encodes every level at once
+//! and reads back only the finished pixels, the chunk's totals (an overflow flag, the
+//! ray counts) and, when asked, the camera rays' hits (for the AOVs and Cryptomatte,
+//! which the CPU makes from them).
 //!
 //! What is shaded here is what `render::gpu_frame` admits; the tables it hands over
 //! ([`ShadeMaterial`], [`ShadeLight`]) hold what depends on the material or the light
