@@ -339,7 +339,7 @@ fn write(dir: &Path, scene: &Scene) -> PathBuf {
 
 /// Three frames of the moving cube, one sample a pixel, depth 3 (mirror in glass in
 /// mirror); then two samples at depth 1 with an overscan border, an exposure and a
-/// background that the mirrors and the glass show; each
+/// background that the mirrors and the glass show; then three samples at depth 0; each
 /// against the CPU (RGB within the bound, alpha and the AOVs to the bit). The first
 /// again, whole and in two shards: the same bytes.
 #[test]
@@ -405,6 +405,12 @@ fn gpu_frames_agree_with_the_cpu() {
     render(&scene, &dir, "cpu", "cpu2", &b);
     render(&scene, &dir, "gpu", "gpu2", &b);
     check_close(&dir, "cpu2", "gpu2");
+
+    // No secondary rays at all, three samples (a 2x2 jitter grid, one cell empty).
+    let c = ["--frames", "20", "--spp", "3", "--max-depth", "0"];
+    render(&scene, &dir, "cpu", "cpu3", &c);
+    render(&scene, &dir, "gpu", "gpu3", &c);
+    check_close(&dir, "cpu3", "gpu3");
 
     // Twice on the GPU, and in two shards: the same bytes.
     render(&scene, &dir, "gpu", "gpu1again", &a);
