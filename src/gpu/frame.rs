@@ -204,6 +204,85 @@ pub struct GpuShading {
     /// A small buffer for each storage binding a kernel does not read, and a camera.
     dummies: Vec<wgpu::Buffer>,
     dummy_camera: wgpu::Buffer,
+    /// The last chunk's buffers, for the next chunk or frame that fits them.
+    room: std::sync::Mutex<Option<Room>>,
+}
+
+/// What a chunk's buffers hold: items a level, shadow rays a level, shadow ray
+/// candidates (items × lights), samples, pixels.
+#[derive(Clone, Copy, Debug)]
+struct RoomSize {
+    cap: u64,
+    caps: u64,
+    cand: u64,
+    nsamples: u64,
+    npix: u64,
+}
+
+impl RoomSize {
+    fn holds(&self, o: &RoomSize) -> bool {
+        self.cap >= o.cap
+            && self.caps >= o.caps
+            && self.cand >= o.cand
+            && self.nsamples >= o.nsamples
+            && self.npix >= o.npix
+    }
+}
+
+/// A chunk's buffers (see `render_chunk`).
+struct Room {
+    size: RoomSize,
+    /// The items of a level and of the next, in turn.
+    rays: [wgpu::Buffer; 2],
+    items: [wgpu::Buffer; 2],
+    radiance: wgpu::Buffer,
+    hits: wgpu::Buffer,
+    local: wgpu::Buffer,
+    sh_cand: wgpu::Buffer,
+    nx_cand_r: wgpu::Buffer,
+    nx_cand_i: wgpu::Buffer,
+    sh_count: wgpu::Buffer,
+    nx_count: wgpu::Buffer,
+    sh_start: wgpu::Buffer,
+    nx_start: wgpu::Buffer,
+    sh_rays: wgpu::Buffer,
+    sh_add: wgpu::Buffer,
+    sh_hits: wgpu::Buffer,
+    cam_hits: wgpu::Buffer,
+    rgba: wgpu::Buffer,
+}
+
+impl Room {
+    fn new(dev: &GpuDevice, size: RoomSize) -> Result<Room, GpuError> {
+        let RoomSize {
+            cap,
+            caps,
+            cand,
+            nsamples,
+            npix,
+        } = size;
+        let b = |what, bytes| dev.buffer(what, bytes, USAGE);
+        Ok(Room {
+            size,
+            rays: [b("the rays", cap * 48)?, b("the next rays", cap * 48)?],
+            items: [b("the items", cap * 32)?, b("the next items", cap * 32)?],
+            radiance: b("the samples' radiance", nsamples * 16)?,
+            hits: b("the hits", cap * 16)?,
+            local: b("the items' light", cap * 16)?,
+            sh_cand: b("the shadow ray candidates", cand * 64)?,
+            nx_cand_r: b("the next rays' candidates", cap * 2 * 48)?,
+            nx_cand_i: b("the next items' candidates", cap * 2 * 32)?,
+            sh_count: b("the shadow ray counts", (cap + 1) * 4)?,
+            nx_count: b("the next ray counts", (cap + 1) * 4)?,
+            sh_start: b("the shadow ray starts", (cap + 1) * 4)?,
+            nx_start: b("the next ray starts", (cap + 1) * 4)?,
+            sh_rays: b("the shadow rays", caps * 48)?,
+            sh_add: b("the shadow rays' light", caps * 16)?,
+            sh_hits: b("the shadow rays' hits", caps * 16)?,
+            cam_hits: b("the camera rays' hits", nsamples * 16)?,
+            rgba: b("the pixels", npix * 16)?,
+        })
+    }
 }
 
 impl std::fmt::Debug for GpuShading {
@@ -317,6 +396,7 @@ impl GpuShading {
             static_count,
             dummies,
             dummy_camera,
+            room: std::sync::Mutex::new(None),
         })
     }
 
@@ -500,28 +580,40 @@ impl GpuShading {
         let mats = dev.storage_with("the materials", bytemuck::cast_slice(materials))?;
         let lts = dev.storage_with("the lights", bytemuck::cast_slice(lights))?;
         let cam = dev.uniform(bytemuck::bytes_of(camera));
-        // The items of a level and of the next, in turn.
-        let rays = [
-            dev.buffer("the rays", cap * 48, USAGE)?,
-            dev.buffer("the next rays", cap * 48, USAGE)?,
-        ];
-        let items = [
-            dev.buffer("the items", cap * 32, USAGE)?,
-            dev.buffer("the next items", cap * 32, USAGE)?,
-        ];
-        let radiance = dev.buffer("the samples' radiance", nsamples * 16, USAGE)?;
-        let hits = dev.buffer("the hits", cap * 16, USAGE)?;
-        let local = dev.buffer("the items' light", cap * 16, USAGE)?;
-        let sh_cand = dev.buffer("the shadow ray candidates", cap * nl * 64, USAGE)?;
-        let nx_cand_r = dev.buffer("the next rays' candidates", cap * 2 * 48, USAGE)?;
-        let nx_cand_i = dev.buffer("the next items' candidates", cap * 2 * 32, USAGE)?;
-        let sh_count = dev.buffer("the shadow ray counts", (cap + 1) * 4, USAGE)?;
-        let nx_count = dev.buffer("the next ray counts", (cap + 1) * 4, USAGE)?;
-        let sh_start = dev.buffer("the shadow ray starts", (cap + 1) * 4, USAGE)?;
-        let nx_start = dev.buffer("the next ray starts", (cap + 1) * 4, USAGE)?;
-        let sh_rays = dev.buffer("the shadow rays", caps * 48, USAGE)?;
-        let sh_add = dev.buffer("the shadow rays' light", caps * 16, USAGE)?;
-        let sh_hits = dev.buffer("the shadow rays' hits", caps * 16, USAGE)?;
+        // The buffers of the last chunk when they are large enough (every one is written
+        // before it is read), else new ones.
+        let size = RoomSize {
+            cap,
+            caps,
+            cand: cap * nl,
+            nsamples,
+            npix,
+        };
+        let kept = self.room.lock().ok().and_then(|mut g| g.take());
+        let room = match kept {
+            Some(r) if r.size.holds(&size) => r,
+            _ => Room::new(dev, size)?,
+        };
+        let Room {
+            rays,
+            items,
+            radiance,
+            hits,
+            local,
+            sh_cand,
+            nx_cand_r,
+            nx_cand_i,
+            sh_count,
+            nx_count,
+            sh_start,
+            nx_start,
+            sh_rays,
+            sh_add,
+            sh_hits,
+            cam_hits,
+            rgba,
+            ..
+        } = &room;
         // The uniforms: this file's for the items (a grid over the capacity and one
         // more), the trace kernel's for the closest hits (a grid over the capacity) and
         // for the any hits; the level's counts are written into them on the GPU.
@@ -572,32 +664,31 @@ impl GpuShading {
         dev.write(&args, 0, bytemuck::cast_slice(&first_args));
         let totals = dev.buffer("the frame path's totals", 16, USAGE)?;
         dev.write(&totals, 0, &[0u8; 16]);
-        let cam_hits = dev.buffer("the camera rays' hits", nsamples * 16, USAGE)?;
         // A bind group a parity: level k reads set k % 2 and writes the other.
         let group = |k: usize| {
             let bufs: Vec<Option<&wgpu::Buffer>> = vec![
                 Some(&f_uni),
                 Some(&rays[k]),
                 Some(&items[k]),
-                Some(&hits),
+                Some(hits),
                 Some(&self.static_surf),
                 Some(&surfaces.buf),
                 Some(&mats),
                 Some(&lts),
-                Some(&local),
-                Some(&sh_cand),
-                Some(&nx_cand_r),
-                Some(&nx_cand_i),
-                Some(&sh_count),
-                Some(&nx_count),
-                Some(&sh_start),
-                Some(&nx_start),
-                Some(&sh_rays),
-                Some(&sh_add),
+                Some(local),
+                Some(sh_cand),
+                Some(nx_cand_r),
+                Some(nx_cand_i),
+                Some(sh_count),
+                Some(nx_count),
+                Some(sh_start),
+                Some(nx_start),
+                Some(sh_rays),
+                Some(sh_add),
                 Some(&rays[1 - k]),
                 Some(&items[1 - k]),
-                Some(&sh_hits),
-                Some(&radiance),
+                Some(sh_hits),
+                Some(radiance),
                 None,
                 Some(&cam),
                 Some(&templates),
@@ -608,10 +699,10 @@ impl GpuShading {
         };
         let bind = [group(0), group(1)];
         let trace_closest = [
-            tracer.bind_uniform(&tc_uni, &rays[0], &hits),
-            tracer.bind_uniform(&tc_uni, &rays[1], &hits),
+            tracer.bind_uniform(&tc_uni, &rays[0], hits),
+            tracer.bind_uniform(&tc_uni, &rays[1], hits),
         ];
-        let trace_any = tracer.bind_uniform(&ta_uni, &sh_rays, &sh_hits);
+        let trace_any = tracer.bind_uniform(&ta_uni, sh_rays, sh_hits);
         let mut enc = dev.device.create_command_encoder(&Default::default());
         // Every level up to the deepest the items can reach (an empty level costs
         // grids whose invocations stop at once).
@@ -625,11 +716,11 @@ impl GpuShading {
             }
             tracer.encode_group_indirect(&mut enc, &trace_closest[k], &args, 12);
             if level == 0 && want_hits {
-                enc.copy_buffer_to_buffer(&hits, 0, &cam_hits, 0, nsamples * 16);
+                enc.copy_buffer_to_buffer(hits, 0, cam_hits, 0, nsamples * 16);
             }
             Self::dispatch_indirect(&mut enc, &self.shade_pipe, g, &args, 0);
-            super::scan::exclusive_scan(dev, &mut enc, &sh_count, &sh_start, cap + 1)?;
-            super::scan::exclusive_scan(dev, &mut enc, &nx_count, &nx_start, cap + 1)?;
+            super::scan::exclusive_scan(dev, &mut enc, sh_count, sh_start, cap + 1)?;
+            super::scan::exclusive_scan(dev, &mut enc, nx_count, nx_start, cap + 1)?;
             Self::dispatch(&mut enc, &self.next_pipe, g, 1);
             enc.copy_buffer_to_buffer(&made, w_ta * 4, &ta_uni, 0, 40 * 4);
             enc.copy_buffer_to_buffer(&made, (w_args + 6) * 4, &args, 24, 12);
@@ -640,23 +731,32 @@ impl GpuShading {
             enc.copy_buffer_to_buffer(&made, w_tc * 4, &tc_uni, 0, 40 * 4);
             enc.copy_buffer_to_buffer(&made, w_args * 4, &args, 0, 24);
         }
-        let rgba = dev.buffer("the pixels", npix * 16, USAGE)?;
         let (_, _, stride) = GpuDevice::grid_of(npix, 64);
         let p = params(0, 0, false, 0, 0, stride, npix, spp, None);
         let uni = dev.uniform(bytemuck::bytes_of(&p));
         let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; LAST as usize + 1];
         bufs[0] = Some(&uni);
-        bufs[21] = Some(&radiance);
-        bufs[22] = Some(&rgba);
+        bufs[21] = Some(radiance);
+        bufs[22] = Some(rgba);
         let group = self.group(dev, &bufs);
         Self::dispatch(&mut enc, &self.pixels_pipe, &group, npix);
-        let b = dev.read_back(enc, &rgba, npix * 16)?;
+        let b = dev.read_back(enc, rgba, npix * 16)?;
         let t = dev.read_back(
             dev.device.create_command_encoder(&Default::default()),
             &totals,
             16,
         )?;
         let t: Vec<u32> = bytemuck::pod_collect_to_vec(&t[..16]);
+        let hits_back = if want_hits && t[0] == 0 {
+            let enc = dev.device.create_command_encoder(&Default::default());
+            Some(dev.read_back(enc, cam_hits, nsamples * 16)?)
+        } else {
+            None
+        };
+        // Kept for the next chunk (only once everything read back is read).
+        if let Ok(mut g) = self.room.lock() {
+            *g = Some(room);
+        }
         if t[0] != 0 {
             return Ok(None);
         }
@@ -666,9 +766,7 @@ impl GpuShading {
             shadow_rays: u64::from(t[1]),
             secondary_rays: u64::from(t[2]),
         };
-        if want_hits {
-            let enc = dev.device.create_command_encoder(&Default::default());
-            let b = dev.read_back(enc, &cam_hits, nsamples * 16)?;
+        if let Some(b) = hits_back {
             let raw: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(&b[..nsamples as usize * 16]);
             out.camera_hits = Some(
                 raw.par_iter()

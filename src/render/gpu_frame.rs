@@ -423,8 +423,9 @@ mod tests {
     }
 
     /// A level that outgrows its room is refused (`None`), and the chunk traced with
-    /// more room gives the same bytes whatever the room: 256 pixels of glass over a
-    /// floor make 512 rays at the second level.
+    /// more room gives the same bytes whatever the room, in fresh buffers or in those a
+    /// larger chunk left: 256 pixels of glass over a floor make 512 rays at the second
+    /// level.
     #[test]
     fn a_level_that_outgrows_its_room_is_refused_and_room_changes_nothing() {
         use crate::gpu::{GpuMoving, GpuStatic};
@@ -518,7 +519,12 @@ mod tests {
         let bits = |o: &crate::gpu::ChunkOut| -> Vec<u32> {
             o.rgba.iter().flatten().map(|x| x.to_bits()).collect()
         };
+        // Again in the room of 1024, in the buffers the last run left (16384 items
+        // large, full of its numbers).
+        let again = run(1024).unwrap();
         assert_eq!(bits(&snug), bits(&roomy));
+        assert_eq!(bits(&snug), bits(&again));
+        assert_eq!(snug.camera_hits, again.camera_hits);
         assert_eq!(snug.camera_hits, roomy.camera_hits);
         assert_eq!(
             (snug.shadow_rays, snug.secondary_rays),
