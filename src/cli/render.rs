@@ -465,6 +465,9 @@ pub fn drive(
                 start["device"] = d.into();
                 pending.push(format!("tracing on: {d}"));
             }
+            RenderEvent::Note(n) => {
+                pending.push(format!("note: {n}"));
+            }
             RenderEvent::StaticReady {
                 triangles,
                 baked_file,

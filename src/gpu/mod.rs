@@ -5,20 +5,27 @@
 //! * `static_part`: a [`Psf`](crate::psf::Psf) uploaded once as storage buffers.
 //! * `moving`: the moving triangles of a frame, gridded on the GPU (count, scan, scatter).
 //! * `trace`: [`GpuTracer`], closest hit and any hit of ray batches over both.
-//! * `scan`: the prefix sum the grid build uses.
+//! * `scan`: the prefix sum the grid build and the frame path use.
+//! * `frame`: [`GpuShading`], the GPU frame path: a wavefront traced and shaded on the
+//!   GPU from camera rays to pixels (shade.wgsl), for the scenes `render` admits;
+//!   `shade_tables`: the materials, lights, camera and surfaces its kernels read.
 //!
 //! The kernels (`*.wgsl` beside the files) answer exactly what the CPU tracer answers:
 //! the same triangle, `t`, `u` and `v` to the bit (docs/GPU.md says why each number is
 //! exact, and what the walk may do differently without changing a hit).
 
 mod device;
+mod frame;
 mod moving;
 mod scan;
+mod shade_tables;
 mod static_part;
 mod trace;
 
 pub use device::{AdapterPolicy, GpuDevice};
+pub use frame::{packed_on_cpu, ChunkOut, GpuShading, GpuSurfaces};
 pub use moving::GpuMoving;
+pub use shade_tables::{CameraRays, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle};
 pub use static_part::GpuStatic;
 pub use trace::GpuTracer;
 

@@ -41,7 +41,7 @@ struct Params {
 /// computed (`kx | ky << 2 | kz << 4`, bit 8 for a valid ray).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct GpuRay {
+pub(super) struct GpuRay {
     o: [f32; 4],
     d: [f32; 4],
     s: [f32; 4],
@@ -49,7 +49,7 @@ struct GpuRay {
 
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 48);
 
-fn pack_ray(r: &Ray) -> GpuRay {
+pub(super) fn pack_ray(r: &Ray) -> GpuRay {
     let (o, d) = (r.origin, r.dir);
     let (s, bits) = if r.is_valid() {
         let s = Shear::new(d);
@@ -162,58 +162,14 @@ impl<'a> GpuTracer<'a> {
         let dev = self.dev;
         let packed: Vec<GpuRay> = rays.par_iter().with_min_len(4096).map(pack_ray).collect();
         let n = rays.len() as u64;
-        let (gx, gy, stride) = GpuDevice::grid_of(n, 64);
-        let (s, m) = (self.stat, self.moving);
-        let (c, sh) = (&s.clip, &m.shape);
-        let params = Params {
-            // The zero that keeps products from being fused (trace.wgsl, `nc`).
-            a: [n as u32, s.subfields, s.table_res, 0],
-            b: [u32::from(any), m.count, s.triangles, stride],
-            clip_lo: [c.min.x, c.min.y, c.min.z, s.margin],
-            clip_hi: [c.max.x, c.max.y, c.max.z, 0.0],
-            g_lo: [sh.lo.x, sh.lo.y, sh.lo.z, sh.cell],
-            g_dims: [sh.dims[0], sh.dims[1], sh.dims[2], 0],
-            m_lo: [sh.clip.min.x, sh.clip.min.y, sh.clip.min.z, sh.margin],
-            m_hi: [sh.clip.max.x, sh.clip.max.y, sh.clip.max.z, 0.0],
-            k: [s.tris.shift, s.tiles.shift, s.starts.shift, s.entries.shift],
-            k2: [s.blocks.shift, 0, 0, 0],
-        };
-        let uniform = dev.uniform(bytemuck::bytes_of(&params));
         let ray_buf = dev.storage_with("the rays", bytemuck::cast_slice(&packed))?;
         let hits = dev.buffer(
             "the hits",
             n * 16,
             wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         )?;
-        let d = &s.dummy;
-        let mut entries = vec![
-            entry(0, &uniform),
-            entry(1, &ray_buf),
-            entry(2, &hits),
-            entry(3, s.tris.binding(0, d)),
-            entry(4, &s.subs),
-            entry(5, s.tiles.binding(0, d)),
-            entry(6, s.starts.binding(0, d)),
-            entry(7, s.entries.binding(0, d)),
-            entry(8, s.blocks.binding(0, d)),
-            entry(9, &s.table),
-            entry(10, &m.tris),
-            entry(11, &m.cell_start),
-            entry(12, &m.cell_tris),
-        ];
-        // Bindings 13.. : chunks 1..CHUNKS of each split array (trace.wgsl).
-        let mut b = 13;
-        for arr in [&s.tris, &s.tiles, &s.starts, &s.entries, &s.blocks] {
-            for k in 1..super::static_part::CHUNKS {
-                entries.push(entry(b, arr.binding(k, d)));
-                b += 1;
-            }
-        }
-        let group = dev.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("trace"),
-            layout: &dev.trace_layout,
-            entries: &entries,
-        });
+        let group = self.bind(&ray_buf, &hits, n, any)?;
+        let (gx, gy, _) = GpuDevice::grid_of(n, 64);
         let mut enc = dev.device.create_command_encoder(&Default::default());
         let stamps = self.gpu_seconds.as_ref().and_then(|_| dev.stamps(1));
         {
@@ -237,6 +193,105 @@ impl<'a> GpuTracer<'a> {
             }
         }
         Ok(bytemuck::pod_collect_to_vec(&bytes[..rays.len() * 16]))
+    }
+
+    /// The trace kernel's uniform for `n` rays (closest hits, or any hits when `any`),
+    /// as 40 words; the first is `n`, which the GPU frame path (`frame.rs`) rewrites on
+    /// the GPU for each level (the rest, the row stride included, stay).
+    pub(super) fn params_words(&self, n: u64, any: bool) -> Result<[u32; 40], GpuError> {
+        let dev = self.dev;
+        let n32 = u32::try_from(n).map_err(|_| dev.too_large("a ray batch", n * 48))?;
+        let (_, _, stride) = GpuDevice::grid_of(n, 64);
+        let (s, m) = (self.stat, self.moving);
+        let (c, sh) = (&s.clip, &m.shape);
+        let params = Params {
+            // The zero that keeps products from being fused (trace.wgsl, `nc`).
+            a: [n32, s.subfields, s.table_res, 0],
+            b: [u32::from(any), m.count, s.triangles, stride],
+            clip_lo: [c.min.x, c.min.y, c.min.z, s.margin],
+            clip_hi: [c.max.x, c.max.y, c.max.z, 0.0],
+            g_lo: [sh.lo.x, sh.lo.y, sh.lo.z, sh.cell],
+            g_dims: [sh.dims[0], sh.dims[1], sh.dims[2], 0],
+            m_lo: [sh.clip.min.x, sh.clip.min.y, sh.clip.min.z, sh.margin],
+            m_hi: [sh.clip.max.x, sh.clip.max.y, sh.clip.max.z, 0.0],
+            k: [s.tris.shift, s.tiles.shift, s.starts.shift, s.entries.shift],
+            k2: [s.blocks.shift, 0, 0, 0],
+        };
+        Ok(bytemuck::cast(params))
+    }
+
+    /// The trace kernel's bind group for `n` rays in `rays` (`GpuRay`s, 48 bytes each)
+    /// whose hits go to `hits` (`[t, tri, u, v]` bits, 16 bytes each): closest hits, or
+    /// any hits when `any`. The rays and hits may be made and read by other kernels
+    /// (the GPU frame path, `frame.rs`): nothing here reads them on the host.
+    pub(super) fn bind(
+        &self,
+        rays: &wgpu::Buffer,
+        hits: &wgpu::Buffer,
+        n: u64,
+        any: bool,
+    ) -> Result<wgpu::BindGroup, GpuError> {
+        let words = self.params_words(n, any)?;
+        let uniform = self.dev.uniform(bytemuck::bytes_of(&words));
+        Ok(self.bind_uniform(&uniform, rays, hits))
+    }
+
+    /// The trace kernel's bind group with its uniform in `uniform` (see
+    /// [`params_words`](Self::params_words)).
+    pub(super) fn bind_uniform(
+        &self,
+        uniform: &wgpu::Buffer,
+        rays: &wgpu::Buffer,
+        hits: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        let (dev, s, m) = (self.dev, self.stat, self.moving);
+        let d = &s.dummy;
+        let mut entries = vec![
+            entry(0, uniform),
+            entry(1, rays),
+            entry(2, hits),
+            entry(3, s.tris.binding(0, d)),
+            entry(4, &s.subs),
+            entry(5, s.tiles.binding(0, d)),
+            entry(6, s.starts.binding(0, d)),
+            entry(7, s.entries.binding(0, d)),
+            entry(8, s.blocks.binding(0, d)),
+            entry(9, &s.table),
+            entry(10, &m.tris),
+            entry(11, &m.cell_start),
+            entry(12, &m.cell_tris),
+        ];
+        // Bindings 13.. : chunks 1..CHUNKS of each split array (trace.wgsl).
+        let mut b = 13;
+        for arr in [&s.tris, &s.tiles, &s.starts, &s.entries, &s.blocks] {
+            for k in 1..super::static_part::CHUNKS {
+                entries.push(entry(b, arr.binding(k, d)));
+                b += 1;
+            }
+        }
+        dev.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("trace"),
+            layout: &dev.trace_layout,
+            entries: &entries,
+        })
+    }
+
+    /// Appends to `enc` the trace pass of `group` with the workgroup counts the GPU
+    /// wrote into `args` at byte `at` (the grid as wide as the uniform's row stride).
+    pub(super) fn encode_group_indirect(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        group: &wgpu::BindGroup,
+        args: &wgpu::Buffer,
+        at: u64,
+    ) {
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("trace"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.dev.trace_pipe);
+        pass.set_bind_group(0, group, &[]);
+        pass.dispatch_workgroups_indirect(args, at);
     }
 }
 

@@ -35,6 +35,8 @@ mod cpu_clock;
 mod environment;
 mod errors;
 mod exr_zip;
+#[cfg(feature = "gpu")]
+mod gpu_frame;
 mod lights;
 mod memo;
 mod mips;
@@ -226,6 +228,9 @@ pub enum RenderEvent<'a> {
         seconds: f64,
     },
     Frame(&'a FrameReport),
+    /// A note for the log, said once: e.g. which feature of the scene or the options
+    /// keeps `--device gpu`'s shading on the CPU (`note: ` goes before it).
+    Note(&'a str),
 }
 
 /// The outcome of a whole run.

@@ -57,6 +57,30 @@ pub fn render_sequence(
     let split_all = scene.split(ClipSelection::All);
     let split = static_dynamic_split(scene, plan.selection);
     let static_soup = scene.static_triangles(&split_all);
+    // `--device gpu`: whole frames on the GPU where the scene is inside the frame path's
+    // subset, else shading on the CPU, said once.
+    #[cfg(feature = "gpu")]
+    let frame_path = match &device {
+        Some(d) => match super::gpu_frame::outside_subset(
+            scene,
+            opts,
+            static_soup.len(),
+            plan.split.dynamic_triangles,
+            d.max_binding(),
+        ) {
+            None => true,
+            Some(why) => {
+                on_event(RenderEvent::Note(&format!(
+                    "shading on the CPU, tracing on the GPU: the GPU frame path does not \
+                     take {why} (docs/GPU.md)"
+                )));
+                false
+            }
+        },
+        None => false,
+    };
+    #[cfg(not(feature = "gpu"))]
+    let frame_path = false;
     let clock = Instant::now();
     let psf = static_part(&static_soup, opts)?;
     let static_seconds = clock.elapsed().as_secs_f64();
@@ -69,7 +93,12 @@ pub fn render_sequence(
         seconds: static_seconds,
     });
 
-    let tracing = tracing(device, &psf, plan.split.dynamic_triangles)?;
+    let tracing = tracing(
+        device,
+        &psf,
+        plan.split.dynamic_triangles,
+        frame_path.then_some((&static_soup, scene.materials.len())),
+    )?;
     let mips = TextureMips::build(scene);
     let frames = Frames {
         scene,
@@ -161,6 +190,9 @@ struct GpuParts {
     dev: crate::gpu::GpuDevice,
     stat: crate::gpu::GpuStatic,
     moving: crate::gpu::GpuMoving,
+    /// The GPU frame path's kernels and static surfaces, when the scene is inside its
+    /// subset (`gpu_frame`).
+    shading: Option<crate::gpu::GpuShading>,
 }
 
 #[cfg(feature = "gpu")]
@@ -211,8 +243,15 @@ fn device_words(device: &Option<Device>) -> String {
     }
 }
 
-/// The frame loop's tracer: on the GPU, the static part uploaded once.
-fn tracing(device: Option<Device>, psf: &Psf, moving: usize) -> Result<Tracing, RenderError> {
+/// The frame loop's tracer: on the GPU, the static part uploaded once, and with
+/// `frame_path` (the static triangles and the scene's material count) their surfaces
+/// for the GPU frame path.
+fn tracing(
+    device: Option<Device>,
+    psf: &Psf,
+    moving: usize,
+    frame_path: Option<(&TriangleSoup, usize)>,
+) -> Result<Tracing, RenderError> {
     match device {
         None => Ok(Tracing::Cpu(Box::new(DynamicLayer::for_triangles(moving)))),
         #[cfg(feature = "gpu")]
@@ -223,11 +262,23 @@ fn tracing(device: Option<Device>, psf: &Psf, moving: usize) -> Result<Tracing, 
             };
             let stat = crate::gpu::GpuStatic::upload(&dev, psf).map_err(gpu)?;
             let moving = crate::gpu::GpuMoving::new(&dev).map_err(gpu)?;
-            Ok(Tracing::Gpu(Box::new(GpuParts { dev, stat, moving })))
+            let shading = match frame_path {
+                Some((soup, materials)) => Some(
+                    crate::gpu::GpuShading::new(&dev, &super::gpu_frame::surfaces(soup, materials))
+                        .map_err(gpu)?,
+                ),
+                None => None,
+            };
+            Ok(Tracing::Gpu(Box::new(GpuParts {
+                dev,
+                stat,
+                moving,
+                shading,
+            })))
         }
         #[cfg(not(feature = "gpu"))]
         Some(d) => {
-            let _ = psf;
+            let _ = (psf, frame_path);
             match d {}
         }
     }
@@ -590,6 +641,20 @@ impl Frames<'_> {
             }
             #[cfg(feature = "gpu")]
             Tracing::Gpu(g) => {
+                if let (Some(shading), None) = (&g.shading, pass) {
+                    // The whole frame on the GPU (`gpu_frame`).
+                    let parts = super::gpu_frame::GpuParts {
+                        dev: &g.dev,
+                        stat: &g.stat,
+                        moving: &g.moving,
+                        shading,
+                    };
+                    return super::gpu_frame::render_frame_gpu(&parts, ctx, args, fb, work)
+                        .map_err(|source| RenderError::Gpu {
+                            device: "gpu",
+                            source,
+                        });
+                }
                 let tracer = crate::gpu::GpuTracer::new(&g.dev, &g.stat, &g.moving);
                 render_pass_with(scratch, fb, work, ctx, &tracer, args, pass);
                 // A batch that failed answered "no hit": the frame is not written.

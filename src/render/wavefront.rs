@@ -1009,9 +1009,9 @@ fn keep_crypto_ids(
 }
 
 /// What the centre-ray AOVs read besides the shading context.
-struct CentreInputs<'a> {
-    camera: &'a CameraModel,
-    next: Option<(&'a TriangleSoup, CameraModel)>,
+pub(super) struct CentreInputs<'a> {
+    pub(super) camera: &'a CameraModel,
+    pub(super) next: Option<(&'a TriangleSoup, CameraModel)>,
 }
 
 /// Screen motion of the centre ray's hit to the next frame: the hit point carried by its
@@ -1035,7 +1035,7 @@ fn motion_of(ctx: &ShadeContext<'_>, inp: &CentreInputs<'_>, hit: &Hit, point: V
 }
 
 /// AOVs of the pixels `px0..px0 + rays.len()` from their centre rays.
-fn write_aovs(
+pub(super) fn write_aovs(
     ctx: &ShadeContext<'_>,
     inp: &CentreInputs<'_>,
     fb: &mut FrameBuffers,
@@ -1097,7 +1097,7 @@ fn write_aovs(
 
 /// Cryptomatte ranks of the pixels from `px0` on, from the primary hits of all their
 /// samples (`spp` a pixel, in order).
-fn write_crypto(
+pub(super) fn write_crypto(
     ctx: &ShadeContext<'_>,
     names: &CryptoNames,
     buf: &mut CryptoBuffers,

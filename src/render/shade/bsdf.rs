@@ -289,7 +289,7 @@ impl ShadeContext<'_> {
     }
 
     /// The Blinn–Phong exponent of the highlight for lights (0: none).
-    pub(super) fn shininess(roughness: f32) -> f32 {
+    pub(in crate::render) fn shininess(roughness: f32) -> f32 {
         if roughness < 0.9 {
             // Capped: a point light is a delta, and the glint of one on a polished
             // surface would otherwise be a tiny spot of enormous radiance (one that

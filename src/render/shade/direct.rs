@@ -14,15 +14,15 @@ use crate::scene::{Falloff, LightKind};
 
 /// A light ready for shading.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct PreLight {
-    pub(super) kind: LightKind,
+pub(in crate::render) struct PreLight {
+    pub(in crate::render) kind: LightKind,
     /// Colour × intensity.
-    pub(super) power: Vec3,
-    pub(super) position: Vec3,
+    pub(in crate::render) power: Vec3,
+    pub(in crate::render) position: Vec3,
     /// Unit direction the light shines along.
-    pub(super) direction: Vec3,
-    pub(super) range: Option<f32>,
-    pub(super) falloff: Falloff,
+    pub(in crate::render) direction: Vec3,
+    pub(in crate::render) range: Option<f32>,
+    pub(in crate::render) falloff: Falloff,
 }
 
 /// The direction towards light `l` from `origin`, its distance (infinite for a

@@ -92,7 +92,7 @@ pub struct ShadeContext<'a> {
     pub options: ShadingOptions,
     /// Size of the scene (bounding box diagonal), for ray offsets.
     pub extent: f32,
-    lights: Vec<PreLight>,
+    pub(in crate::render) lights: Vec<PreLight>,
     area: AreaLights,
     mips: &'a TextureMips,
     /// glTF's default material, for triangles without one (made once, not a hit).
@@ -102,7 +102,7 @@ pub struct ShadeContext<'a> {
 /// Passes through alpha-cut surfaces a ray may make.
 const MAX_PASSES: u16 = 16;
 /// Contributions below this (max component of the weight) are dropped.
-const MIN_WEIGHT: f32 = 1e-4;
+pub(in crate::render) const MIN_WEIGHT: f32 = 1e-4;
 /// Largest Blinn–Phong exponent (roughness below about 0.3 gets this).
 const MAX_SHININESS: f32 = 256.0;
 /// From this roughness on, a surface traces no reflection ray. Chosen against Cycles on
@@ -111,7 +111,7 @@ const MAX_SHININESS: f32 = 256.0;
 /// fireflies, there being no multiple importance sampling.
 pub const GLOSSY_LIMIT: f32 = 0.4;
 /// GGX widths below this reflect as a perfect mirror.
-const MIRROR_ALPHA: f32 = 1e-3;
+pub(in crate::render) const MIRROR_ALPHA: f32 = 1e-3;
 /// Area-light samples a pixel gets at its camera rays' hits, over all its samples
 /// (`ceil(LIGHT_SAMPLES / spp)` a hit; one at deeper hits).
 const LIGHT_SAMPLES: u32 = 8;

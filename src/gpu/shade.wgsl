@@ -1,0 +1,768 @@
+// The GPU frame path (frame.rs): one depth level of a wavefront shaded on the GPU, its
+// shadow and next-level rays compacted in the CPU's order, its light summed into the
+// samples in the CPU's order, and the pixels averaged. The shading is
+// `render::shade::ShadeContext::shade` restricted to the subset `render::gpu_frame`
+// admits (constant materials, opaque, mirror or no reflection ray, punctual lights, a
+// constant background, no diffuse bounces), step for step; what depends on the material
+// alone (F0, the Blinn-Phong exponent and its normalisation, 1/ior, the spot's cone
+// cosines) comes computed by the CPU's own code in the tables.
+//
+// Determinism: every kernel writes only slots it owns (an item's candidates, a sample's
+// run, a pixel); compaction is by prefix sums (scan.wgsl) of per-item counts, so the
+// rays of the next level and the shadow rays are in item order and, per item, in the
+// CPU's order (lights in table order; refraction before reflection). Items stay sorted
+// by sample (children follow their parent), so one invocation a run of equal samples
+// adds that sample's terms one after the other, in the order the CPU adds them: the
+// level's own terms (emission, ambient, background) in item order, then light by light
+// the unblocked shadow rays in item order. No atomics.
+//
+// The rays made here go to the trace kernel (trace.wgsl) as they are, so their shear is
+// computed here as `geometry::Shear::new` computes it, to the bit: the axis choice by
+// comparisons, the divisions in f64 rounded once to f32 (the quotient of two f32 is
+// never an f32 midpoint and lies far enough from one that an f64 quotient a few ulps
+// off still rounds to the correctly rounded f32; docs/GPU.md). `shear_test` checks it.
+
+struct FP {
+    // items this level, lights, 1 at the camera rays' level, max depth
+    a: vec4<u32>,
+    // static triangles, row stride (invocations), pixels, samples a pixel
+    b: vec4<u32>,
+    // ambient light (RGB), scene extent
+    c: vec4<f32>,
+    // background (RGB), 1 / spp
+    d: vec4<f32>,
+    // MIN_WEIGHT
+    e: vec4<f32>,
+    // triangles in all, the items a level holds at most, the shadow rays likewise
+    g: vec4<u32>,
+    // workgroups along x of the grids over the capacities (the row strides / 64): the
+    // items' kernels, the closest hits, the any hits
+    h: vec4<u32>,
+}
+
+// trace.wgsl's `Ray`, the shear's axis bits as a u32 (the same 48 bytes).
+struct Ray {
+    o: vec4<f32>,
+    d: vec4<f32>,
+    s: vec3<f32>,
+    k: u32,
+}
+
+struct Item {
+    // weight (RGB)
+    w: vec4<f32>,
+    // sample, depth
+    m: vec4<u32>,
+}
+
+struct Shadow {
+    r: Ray,
+    // what it adds when unblocked (RGB), the light's number (as f32)
+    c: vec4<f32>,
+}
+
+// frame.rs `ShadeMaterial`.
+struct Mat {
+    albedo: vec3<f32>,
+    metallic: f32,
+    f0: vec3<f32>,
+    roughness: f32,
+    emission: vec3<f32>,
+    transmission: f32,
+    gloss: f32,
+    shininess: f32,
+    eta_entering: f32,
+    eta_leaving: f32,
+    double_sided: u32,
+    reflects: u32,
+    glint_norm: f32,
+    glint_scale: f32,
+}
+
+// frame.rs `ShadeLight`.
+struct Light {
+    position: vec3<f32>,
+    kind: u32,
+    direction: vec3<f32>,
+    range: f32,
+    power: vec3<f32>,
+    no_falloff: u32,
+    cos_outer: f32,
+    cone_scale: f32,
+    has_range: u32,
+    pad: u32,
+}
+
+@group(0) @binding(0) var<uniform> F: FP;
+@group(0) @binding(1) var<storage, read_write> rays: array<Ray>;
+@group(0) @binding(2) var<storage, read_write> items: array<Item>;
+@group(0) @binding(3) var<storage, read_write> hits: array<vec4<u32>>;
+@group(0) @binding(4) var<storage, read_write> surf_s: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> surf_m: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read_write> mats: array<Mat>;
+@group(0) @binding(7) var<storage, read_write> lights: array<Light>;
+@group(0) @binding(8) var<storage, read_write> local: array<vec4<f32>>;
+@group(0) @binding(9) var<storage, read_write> sh_cand: array<Shadow>;
+@group(0) @binding(10) var<storage, read_write> nx_cand_r: array<Ray>;
+@group(0) @binding(11) var<storage, read_write> nx_cand_i: array<Item>;
+@group(0) @binding(12) var<storage, read_write> sh_count: array<u32>;
+@group(0) @binding(13) var<storage, read_write> nx_count: array<u32>;
+@group(0) @binding(14) var<storage, read_write> sh_start: array<u32>;
+@group(0) @binding(15) var<storage, read_write> nx_start: array<u32>;
+@group(0) @binding(16) var<storage, read_write> sh_rays: array<Ray>;
+@group(0) @binding(17) var<storage, read_write> sh_add: array<vec4<f32>>;
+@group(0) @binding(18) var<storage, read_write> nx_rays: array<Ray>;
+@group(0) @binding(19) var<storage, read_write> nx_items: array<Item>;
+@group(0) @binding(20) var<storage, read_write> sh_hits: array<vec4<u32>>;
+@group(0) @binding(21) var<storage, read_write> radiance: array<vec4<f32>>;
+@group(0) @binding(22) var<storage, read_write> rgba: array<vec4<f32>>;
+
+// The camera (frame.rs `CameraRays`), for the camera rays' level.
+struct Cam {
+    // origin, tan(yfov / 2)
+    o: vec4<f32>,
+    // the rotation's columns; w: aspect, xmag, ymag
+    rx: vec4<f32>,
+    ry: vec4<f32>,
+    rz: vec4<f32>,
+    // image width, height, frame, samples a pixel
+    a: vec4<u32>,
+    // the jitter grid's columns and rows, overscan, the data window's width
+    b: vec4<u32>,
+    // the chunk's first pixel, 1 for orthographic, the zero of `nc`
+    c: vec4<u32>,
+}
+
+@group(0) @binding(23) var<uniform> C: Cam;
+
+// The next level's uniforms, made on the GPU (`next_level`): templates in, uniforms
+// out (this file's FP, then trace.wgsl's Params for the closest hits and for the any
+// hits) and then the dispatches' workgroup counts (the next level's items, its closest
+// hits, this level's any hits); and the frame's running totals (overflow, shadow rays,
+// next-level rays).
+@group(0) @binding(24) var<storage, read_write> templates: array<u32>;
+@group(0) @binding(25) var<storage, read_write> made: array<u32>;
+@group(0) @binding(26) var<storage, read_write> totals: array<u32>;
+
+const NONE: u32 = 0xffffffffu;
+const FRAC_1_PI: f32 = 0.31830988618379067;
+
+fn inf() -> f32 {
+    return bitcast<f32>(0x7f800000u);
+}
+
+// Tests by bits, which a driver may not assume NaN-free.
+fn finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
+}
+
+fn finite3(v: vec3<f32>) -> bool {
+    return finite(v.x) && finite(v.y) && finite(v.z);
+}
+
+fn is_nan(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7fffffffu) > 0x7f800000u;
+}
+
+fn is_zero3(v: vec3<f32>) -> bool {
+    return ((bitcast<u32>(v.x) | bitcast<u32>(v.y) | bitcast<u32>(v.z)) & 0x7fffffffu) == 0u;
+}
+
+fn max3(v: vec3<f32>) -> f32 {
+    return max(max(v.x, v.y), v.z);
+}
+
+// glam's `normalize_or_zero`.
+fn nz(v: vec3<f32>) -> vec3<f32> {
+    let r = 1.0 / sqrt(dot(v, v));
+    if finite(r) && r > 0.0 {
+        return v * r;
+    }
+    return vec3<f32>(0.0);
+}
+
+// `geometry::Shear::new(d)`: (sx, sy, sz) and kx | ky << 2 | kz << 4 | 1 << 8.
+fn shear(d: vec3<f32>, s: ptr<function, vec3<f32>>) -> u32 {
+    let a = abs(d);
+    var kz = 2u;
+    if a.x >= a.y && a.x >= a.z {
+        kz = 0u;
+    } else if a.y >= a.z {
+        kz = 1u;
+    }
+    let neg = d[kz] < 0.0;
+    var kx = 0u;
+    var ky = 1u;
+    switch kz {
+        case 0u: {
+            if neg { kx = 2u; ky = 1u; } else { kx = 1u; ky = 2u; }
+        }
+        case 1u: {
+            if neg { kx = 0u; ky = 2u; } else { kx = 2u; ky = 0u; }
+        }
+        default: {
+            if neg { kx = 1u; ky = 0u; } else { kx = 0u; ky = 1u; }
+        }
+    }
+    let z = f64(d[kz]);
+    *s = vec3<f32>(f32(f64(d[kx]) / z), f32(f64(d[ky]) / z), f32(1.0lf / z));
+    return kx | (ky << 2u) | (kz << 4u) | (1u << 8u);
+}
+
+// `trace::pack_ray` of `Ray::segment(o, d, t0, t1)`: the shear of a valid ray.
+fn make_ray(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> Ray {
+    var r: Ray;
+    r.o = vec4<f32>(o, t0);
+    r.d = vec4<f32>(d, t1);
+    r.s = vec3<f32>(0.0);
+    r.k = 0u;
+    if finite3(o) && finite3(d) && !is_zero3(d) && !is_nan(t0) && !is_nan(t1) {
+        var s = vec3<f32>(0.0);
+        r.k = shear(d, &s);
+        r.s = s;
+    }
+    return r;
+}
+
+// The camera rays, as `wavefront::sample_offset` and `CameraModel::ray` make them, to
+// the bit: Vulkan rounds f32 + - * correctly; a product that feeds an add goes through
+// `nc` (an xor with a zero from the uniform, as in trace.wgsl) so that nothing is fused;
+// the divisions are made in f64 and rounded once (correctly rounded, see `shear`); the
+// hash's 64-bit arithmetic is done on pairs of u32.
+fn nc(x: f32) -> f32 {
+    return bitcast<f32>(bitcast<u32>(x) ^ C.c.z);
+}
+
+fn nc3(v: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(nc(v.x), nc(v.y), nc(v.z));
+}
+
+fn div_rn(a: f32, b: f32) -> f32 {
+    return f32(f64(a) / f64(b));
+}
+
+// u64 as (low, high) words.
+fn add64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
+    let lo = a.x + b.x;
+    return vec2<u32>(lo, a.y + b.y + select(0u, 1u, lo < a.x));
+}
+
+// a >> s for 0 < s < 32.
+fn shr64(a: vec2<u32>, s: u32) -> vec2<u32> {
+    return vec2<u32>((a.x >> s) | (a.y << (32u - s)), a.y >> s);
+}
+
+// The full 64-bit product of two u32.
+fn mul32(a: u32, b: u32) -> vec2<u32> {
+    let a0 = a & 0xffffu;
+    let a1 = a >> 16u;
+    let b0 = b & 0xffffu;
+    let b1 = b >> 16u;
+    let p00 = a0 * b0;
+    let p01 = a0 * b1;
+    let p10 = a1 * b0;
+    let p11 = a1 * b1;
+    let mid = (p00 >> 16u) + (p01 & 0xffffu) + (p10 & 0xffffu);
+    return vec2<u32>((p00 & 0xffffu) | (mid << 16u), p11 + (p01 >> 16u) + (p10 >> 16u) + (mid >> 16u));
+}
+
+// a * b mod 2^64.
+fn mul64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
+    let p = mul32(a.x, b.x);
+    return vec2<u32>(p.x, p.y + a.x * b.y + a.y * b.x);
+}
+
+// `wavefront::hash`.
+fn hash4(v: vec4<u32>) -> vec2<u32> {
+    let g = vec2<u32>(0x7F4A7C15u, 0x9E3779B9u);
+    var h = g;
+    for (var i = 0u; i < 4u; i = i + 1u) {
+        h.x = h.x ^ v[i];
+        h = add64(h, g);
+        h = mul64(h ^ shr64(h, 30u), vec2<u32>(0x1CE4E5B9u, 0xBF58476Du));
+        h = mul64(h ^ shr64(h, 27u), vec2<u32>(0x133111EBu, 0x94D049BBu));
+        h = h ^ shr64(h, 31u);
+    }
+    return h;
+}
+
+// `wavefront::sample_offset(frame, x, y, k, spp)`.
+fn sample_offset(x: u32, y: u32, k: u32) -> vec2<f32> {
+    if C.a.w <= 1u {
+        return vec2<f32>(0.5);
+    }
+    let sx = C.b.x;
+    let sy = C.b.y;
+    let h = hash4(vec4<u32>(C.a.z, x, y, k));
+    // Integers under 2^24 times 2^-24: exact.
+    let rx = f32(h.y >> 8u) * (1.0 / 16777216.0);
+    let ry = f32(((h.y << 16u) | (h.x >> 16u)) & 0xffffffu) * (1.0 / 16777216.0);
+    // 0.999_999_9 as f32.
+    let top = bitcast<f32>(0x3f7ffffeu);
+    return vec2<f32>(
+        min(div_rn(f32(k % sx) + rx, f32(sx)), top),
+        min(div_rn(f32(k / sx) + ry, f32(sy)), top),
+    );
+}
+
+// The rotation times v: (X·vx + Y·vy) + Z·vz, as glam's Mat3 * Vec3.
+fn rotate(v: vec3<f32>) -> vec3<f32> {
+    return (nc3(C.rx.xyz * v.x) + nc3(C.ry.xyz * v.y)) + nc3(C.rz.xyz * v.z);
+}
+
+// `CameraModel::ray(px, py)`.
+fn camera_ray(px: f32, py: f32) -> Ray {
+    let sx = div_rn(2.0 * px, f32(C.a.x)) - 1.0;
+    let sy = 1.0 - div_rn(2.0 * py, f32(C.a.y));
+    if C.c.y == 0u {
+        let d = vec3<f32>(sx * C.rx.w * C.o.w, sy * C.o.w, -1.0);
+        return make_ray(C.o.xyz, rotate(d), 0.0, inf());
+    }
+    let o = rotate(vec3<f32>(sx * C.ry.w, sy * C.rz.w, 0.0));
+    return make_ray(C.o.xyz + o, rotate(vec3<f32>(0.0, 0.0, -1.0)), 0.0, inf());
+}
+
+fn grid_index(gid: vec3<u32>) -> u32 {
+    return gid.y * F.b.y + gid.x;
+}
+
+// The sample item `i` adds to: at the camera rays' level, item i is sample i.
+fn sample_of(i: u32) -> u32 {
+    if F.a.z != 0u {
+        return i;
+    }
+    return items[i].m.x;
+}
+
+fn tri_vec(t: u32, k: u32) -> vec4<f32> {
+    if t < F.b.x {
+        return surf_s[t * 6u + k];
+    }
+    return surf_m[(t - F.b.x) * 6u + k];
+}
+
+struct Surf {
+    point: vec3<f32>,
+    ng: vec3<f32>,
+    ns: vec3<f32>,
+    dir: vec3<f32>,
+    entering: bool,
+    mat: u32,
+}
+
+// `ShadeContext::surface` without textures.
+fn surface(r: Ray, h: vec4<u32>) -> Surf {
+    let t = h.y;
+    let u = bitcast<f32>(h.z);
+    let v = bitcast<f32>(h.w);
+    let w = 1.0 - u - v;
+    let a0 = tri_vec(t, 0u);
+    let a1 = tri_vec(t, 1u);
+    let a2 = tri_vec(t, 2u);
+    let p0 = a0.xyz;
+    let p1 = a1.xyz;
+    let p2 = a2.xyz;
+    var s: Surf;
+    s.point = p0 * w + p1 * u + p2 * v;
+    let e1 = p1 - p0;
+    let e2 = p2 - p0;
+    var ng = nz(cross(e1, e2));
+    s.dir = nz(r.d.xyz);
+    if is_zero3(ng) {
+        ng = -s.dir;
+    }
+    let front = ng;
+    s.entering = dot(ng, s.dir) < 0.0;
+    if !s.entering {
+        ng = -ng;
+    }
+    var ns = vec3<f32>(0.0);
+    if bitcast<u32>(a1.w) != 0u {
+        let n0 = tri_vec(t, 3u).xyz;
+        let n1 = tri_vec(t, 4u).xyz;
+        let n2 = tri_vec(t, 5u).xyz;
+        ns = nz(n0 * w + n1 * u + n2 * v);
+    }
+    if is_zero3(ns) || !finite3(ns) {
+        ns = front;
+    }
+    if dot(ns, ng) < 0.0 {
+        ns = -ns;
+    }
+    s.ng = ng;
+    s.ns = ns;
+    s.mat = bitcast<u32>(a0.w);
+    return s;
+}
+
+fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
+    let sin_t2 = eta * eta * (1.0 - cos_i * cos_i);
+    if sin_t2 >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = sqrt(1.0 - sin_t2);
+    let rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    return clamp(0.5 * (rs * rs + rp * rp), 0.0, 1.0);
+}
+
+fn reflect_(d: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    return d - 2.0 * dot(d, n) * n;
+}
+
+// `refract`: w = 0 on total internal reflection.
+fn refract_(d: vec3<f32>, n: vec3<f32>, eta: f32) -> vec4<f32> {
+    let cos_i = -dot(d, n);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    if k < 0.0 {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(nz(eta * d + (eta * cos_i - sqrt(k)) * n), 1.0);
+}
+
+struct Lobes {
+    v: vec3<f32>,
+    kr: vec3<f32>,
+    kt: vec3<f32>,
+    kd: vec3<f32>,
+    eta: f32,
+}
+
+// `ShadeContext::lobes` of a constant material.
+fn lobes(m: Mat, s: Surf) -> Lobes {
+    var l: Lobes;
+    l.v = -s.dir;
+    let cos_o = clamp(dot(s.ns, l.v), 0.0, 1.0);
+    l.eta = m.eta_leaving;
+    if s.entering {
+        l.eta = m.eta_entering;
+    }
+    var fresnel: vec3<f32>;
+    if m.transmission > 0.0 {
+        fresnel = vec3<f32>(fresnel_dielectric(cos_o, l.eta));
+    } else {
+        let x = 1.0 - cos_o;
+        let x2 = x * x;
+        let x4 = x2 * x2;
+        fresnel = m.f0 + (vec3<f32>(1.0) - m.f0) * (x4 * x);
+    }
+    l.kt = (vec3<f32>(1.0) - fresnel) * m.transmission * m.albedo;
+    if m.reflects != 0u {
+        l.kr = fresnel;
+        l.kd = m.albedo * ((1.0 - m.metallic) * (1.0 - m.transmission) * (1.0 - max3(fresnel)));
+    } else {
+        l.kr = vec3<f32>(0.0);
+        l.kd = m.albedo * ((1.0 - m.metallic) * (1.0 - m.transmission) * (1.0 - max3(fresnel) * m.gloss) + m.metallic * (1.0 - m.gloss));
+    }
+    return l;
+}
+
+// `ShadeContext::brdf` with the highlight: diffuse plus the capped Blinn-Phong glint.
+fn brdf(m: Mat, l: Lobes, s: Surf, to: vec3<f32>) -> vec3<f32> {
+    var b = l.kd * FRAC_1_PI;
+    if m.shininess > 0.0 {
+        let h = nz(to + l.v);
+        let nh = max(dot(s.ns, h), 0.0);
+        var p = 0.0;
+        if nh > 0.0 {
+            p = pow(nh, m.shininess);
+        }
+        b = b + m.f0 * m.glint_scale * min(m.glint_norm * p, 1e3);
+    }
+    return b;
+}
+
+@compute @workgroup_size(64)
+fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = grid_index(gid);
+    let n = F.a.x;
+    // The scans run over the capacity; the sums up to [n] read only counts written here.
+    if i >= n {
+        return;
+    }
+    let nl = F.a.y;
+    let first = F.a.z != 0u;
+    let r = rays[i];
+    var it: Item;
+    if first {
+        it.w = vec4<f32>(1.0, 1.0, 1.0, 0.0);
+        it.m = vec4<u32>(i, 0u, 0u, 0u);
+    } else {
+        it = items[i];
+    }
+    let h = hits[i];
+    let weight = it.w.xyz;
+    var add = vec3<f32>(0.0);
+    var nsh = 0u;
+    var nnx = 0u;
+    var cover = 0.0;
+    if h.y == NONE {
+        add = weight * F.d.xyz;
+    } else if h.y < F.g.x {
+        let s = surface(r, h);
+        cover = 1.0;
+        let m = mats[s.mat];
+        let lb = lobes(m, s);
+        var emitted = vec3<f32>(0.0);
+        if s.entering || m.double_sided != 0u {
+            emitted = m.emission;
+        }
+        add = weight * (emitted + lb.kd * F.c.xyz);
+        let ap = abs(s.point);
+        let eps = 1e-4 * max(max3(ap), 1e-3 * F.c.w);
+        let origin = s.point + s.ng * eps;
+        // Direct light: a shadow ray a light that lights the point, in table order.
+        for (var li = 0u; li < nl; li = li + 1u) {
+            let lt = lights[li];
+            var to: vec3<f32>;
+            var dist = inf();
+            var irr: vec3<f32>;
+            if lt.kind == 0u {
+                to = -lt.direction;
+                irr = lt.power;
+            } else {
+                let d = lt.position - origin;
+                let d2 = dot(d, d);
+                if d2 <= 0.0 || !finite(d2) {
+                    continue;
+                }
+                dist = sqrt(d2);
+                var att = 1.0;
+                if lt.no_falloff == 0u {
+                    att = 1.0 / d2;
+                }
+                if lt.has_range != 0u {
+                    let q = dist / lt.range;
+                    let q2 = q * q;
+                    let x = clamp(1.0 - q2 * q2, 0.0, 1.0);
+                    att = att * (x * x);
+                }
+                to = d / dist;
+                if lt.kind == 2u {
+                    let cd = dot(lt.direction, -to);
+                    let y = clamp((cd - lt.cos_outer) * lt.cone_scale, 0.0, 1.0);
+                    att = att * (y * y);
+                }
+                irr = lt.power * att;
+            }
+            let cos_i = dot(s.ns, to);
+            if cos_i <= 0.0 || dot(s.ng, to) <= 0.0 {
+                continue;
+            }
+            let c = weight * brdf(m, lb, s, to) * irr * cos_i;
+            if max3(c) <= F.e.x * 1e-2 || !finite3(c) {
+                continue;
+            }
+            var sr: Ray;
+            if finite(dist) {
+                sr = make_ray(origin, to, 0.0, dist * (1.0 - 1e-4));
+            } else {
+                sr = make_ray(origin, to, 0.0, inf());
+            }
+            var sh: Shadow;
+            sh.r = sr;
+            sh.c = vec4<f32>(c, f32(li));
+            sh_cand[i * nl + nsh] = sh;
+            nsh = nsh + 1u;
+        }
+        // `secondary`: refraction, then the mirror reflection.
+        if it.m.y < F.a.w {
+            var kr = lb.kr;
+            let kt_w = weight * lb.kt;
+            var next: Item;
+            next.m = vec4<u32>(it.m.x, it.m.y + 1u, 0u, 0u);
+            if max3(kt_w) > F.e.x {
+                var t = refract_(s.dir, s.ns, lb.eta);
+                if t.w == 0.0 {
+                    t = refract_(s.dir, s.ng, lb.eta);
+                }
+                if t.w != 0.0 && dot(t.xyz, s.ng) < 0.0 {
+                    next.w = vec4<f32>(kt_w, 0.0);
+                    nx_cand_r[i * 2u + nnx] = make_ray(s.point - s.ng * eps, t.xyz, 0.0, inf());
+                    nx_cand_i[i * 2u + nnx] = next;
+                    nnx = nnx + 1u;
+                } else {
+                    kr = kr + lb.kt;
+                }
+            }
+            let kr_w = weight * kr;
+            if max3(kr_w) > F.e.x {
+                var rd = reflect_(s.dir, s.ns);
+                if dot(rd, s.ng) <= 0.0 {
+                    rd = reflect_(s.dir, s.ng);
+                }
+                next.w = vec4<f32>(kr_w, 0.0);
+                nx_cand_r[i * 2u + nnx] = make_ray(origin, rd, 0.0, inf());
+                nx_cand_i[i * 2u + nnx] = next;
+                nnx = nnx + 1u;
+            }
+        }
+    }
+    // `BlockOut::add_split` keeps only nonzero, finite terms.
+    if is_zero3(add) || !finite3(add) {
+        add = vec3<f32>(0.0);
+    }
+    local[i] = vec4<f32>(add, 0.0);
+    if first {
+        // Each sample's coverage (a camera ray that met an opaque surface).
+        radiance[i] = vec4<f32>(0.0, 0.0, 0.0, cover);
+    }
+    sh_count[i] = nsh;
+    nx_count[i] = nnx;
+}
+
+// The candidates moved to their places: the prefix sums of the counts.
+@compute @workgroup_size(64)
+fn compact(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = grid_index(gid);
+    if i >= F.a.x {
+        return;
+    }
+    let nl = F.a.y;
+    // Past the capacities nothing is written: `next_level` flags the overflow and the
+    // host traces the chunk again with more room.
+    let a = sh_start[i];
+    for (var k = 0u; k < sh_count[i]; k = k + 1u) {
+        if a + k < F.g.z {
+            let c = sh_cand[i * nl + k];
+            sh_rays[a + k] = c.r;
+            sh_add[a + k] = c.c;
+        }
+    }
+    let b = nx_start[i];
+    for (var k = 0u; k < nx_count[i]; k = k + 1u) {
+        if b + k < F.g.y {
+            nx_rays[b + k] = nx_cand_r[i * 2u + k];
+            nx_items[b + k] = nx_cand_i[i * 2u + k];
+        }
+    }
+}
+
+// One invocation: the level's totals (the scans' last sums), the uniforms of the
+// shadow rays' any hits and of the next level (its items and their closest hits), made
+// from the templates with the counts, clamped to the capacities (an overflow is
+// flagged), and the frame's totals.
+// Workgroups (x, y, 1) of 64 for `n` invocations on a grid `x_cap` wide (the width
+// the row stride in the uniform was made for).
+fn groups(at: u32, n: u32, x_cap: u32) {
+    let g = (n + 63u) / 64u;
+    made[at] = min(g, x_cap);
+    made[at + 1u] = (g + x_cap - 1u) / x_cap;
+    made[at + 2u] = 1u;
+}
+
+@compute @workgroup_size(1)
+fn next_level() {
+    let cap = F.g.y;
+    let ns = sh_start[F.a.x];
+    let nn = nx_start[F.a.x];
+    var over = 0u;
+    var ns2 = ns;
+    if ns > F.g.z {
+        ns2 = F.g.z;
+        over = 1u;
+    }
+    var nn2 = nn;
+    if nn > cap {
+        nn2 = cap;
+        over = 1u;
+    }
+    totals[0] = totals[0] | over;
+    totals[1] = totals[1] + ns2;
+    totals[2] = totals[2] + nn2;
+    for (var w = 0u; w < 108u; w = w + 1u) {
+        made[w] = templates[w];
+    }
+    made[0] = nn2;
+    // Not the camera rays' level.
+    made[2] = 0u;
+    made[28] = nn2;
+    made[68] = ns2;
+    groups(108u, nn2, F.h.x);
+    groups(111u, nn2, F.h.y);
+    groups(114u, ns2, F.h.z);
+}
+
+// A run of items of one sample, added to it in the CPU's order: the items' own terms,
+// then light by light the unblocked shadow rays, in item order.
+@compute @workgroup_size(64)
+fn accum(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = grid_index(gid);
+    let n = F.a.x;
+    if i >= n {
+        return;
+    }
+    let s = sample_of(i);
+    if i > 0u && sample_of(i - 1u) == s {
+        return;
+    }
+    var e = i + 1u;
+    while e < n && sample_of(e) == s {
+        e = e + 1u;
+    }
+    let old = radiance[s];
+    var acc = old.xyz;
+    for (var j = i; j < e; j = j + 1u) {
+        acc = acc + local[j].xyz;
+    }
+    for (var l = 0u; l < F.a.y; l = l + 1u) {
+        for (var j = i; j < e; j = j + 1u) {
+            for (var k = sh_start[j]; k < sh_start[j + 1u]; k = k + 1u) {
+                let a = sh_add[k];
+                if u32(a.w) == l && sh_hits[k].y == NONE {
+                    acc = acc + a.xyz;
+                }
+            }
+        }
+    }
+    radiance[s] = vec4<f32>(acc, old.w);
+}
+
+// Each pixel's samples summed in order and averaged, as `trace_pass` does.
+@compute @workgroup_size(64)
+fn pixels(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let p = grid_index(gid);
+    if p >= F.b.z {
+        return;
+    }
+    let spp = F.b.w;
+    var c = vec3<f32>(0.0);
+    var a = 0.0;
+    for (var s = p * spp; s < (p + 1u) * spp; s = s + 1u) {
+        let r = radiance[s];
+        c = c + r.xyz;
+        a = a + r.w;
+    }
+    let inv = F.d.w;
+    rgba[p] = vec4<f32>(c * inv, min(a * inv, 1.0));
+}
+
+// The chunk's camera rays: sample s is sample s % spp of the chunk's pixel s / spp (the
+// samples of a pixel, the pixels of a row, the rows), as `trace_pass` makes them.
+@compute @workgroup_size(64)
+fn camera(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let s = grid_index(gid);
+    if s >= F.a.x {
+        return;
+    }
+    let spp = max(C.a.w, 1u);
+    let p = C.c.x + s / spp;
+    let k = s % spp;
+    let w = C.b.w;
+    // The camera's pixel, wrapping in the overscan border as the seeds take it.
+    let x = (p % w) - C.b.z;
+    let y = (p / w) - C.b.z;
+    let off = sample_offset(x, y, k);
+    rays[s] = camera_ray(f32(bitcast<i32>(x)) + off.x, f32(bitcast<i32>(y)) + off.y);
+}
+
+// For the tests: each ray's origin, direction and span remade here, with its shear.
+@compute @workgroup_size(64)
+fn shear_test(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = grid_index(gid);
+    if i >= F.a.x {
+        return;
+    }
+    let r = rays[i];
+    rays[i] = make_ray(r.o.xyz, r.d.xyz, r.o.w, r.d.w);
+}

@@ -1,0 +1,136 @@
+//! The tables the GPU frame path's kernels read (shade.wgsl's `Mat`, `Light` and `Cam`,
+//! and the triangles' surfaces), laid out as the kernels declare them: what depends on
+//! a material, a light or the camera alone, computed on the CPU by the CPU's own code
+//! (`render::gpu_frame`), so the kernels start from the CPU's very numbers.
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+
+/// A triangle as shading reads it: three positions (the first's `w`: the material's
+/// index in the table, the second's: 1 when it has vertex normals), then three
+/// normals. 96 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct SurfaceTriangle {
+    v: [[f32; 4]; 6],
+}
+
+impl SurfaceTriangle {
+    /// Positions `p`, vertex normals `n` if any, material `material` (an index into
+    /// the material table).
+    pub fn new(p: &[Vec3; 3], n: Option<&[Vec3; 3]>, material: u32) -> SurfaceTriangle {
+        let mut v = [[0.0f32; 4]; 6];
+        for k in 0..3 {
+            v[k] = [p[k].x, p[k].y, p[k].z, 0.0];
+            if let Some(n) = n {
+                v[3 + k] = [n[k].x, n[k].y, n[k].z, 0.0];
+            }
+        }
+        v[0][3] = f32::from_bits(material);
+        v[1][3] = f32::from_bits(u32::from(n.is_some()));
+        SurfaceTriangle { v }
+    }
+}
+
+/// A constant material, as shade.wgsl's `lobes` and `brdf` read it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct ShadeMaterial {
+    /// Base colour (RGB).
+    pub albedo: [f32; 3],
+    /// Clamped to [0, 1].
+    pub metallic: f32,
+    /// `mix(0.04, albedo, metallic)`.
+    pub f0: [f32; 3],
+    /// Clamped to [0, 1].
+    pub roughness: f32,
+    /// Emissive × strength.
+    pub emission: [f32; 3],
+    /// Clamped, × (1 − metallic).
+    pub transmission: f32,
+    /// `(1 − roughness)²`.
+    pub gloss: f32,
+    /// The Blinn–Phong exponent (0: no glint).
+    pub shininess: f32,
+    /// `1 / ior` and `ior`.
+    pub eta_entering: f32,
+    pub eta_leaving: f32,
+    /// 1 for double-sided.
+    pub double_sided: u32,
+    /// 1 when a (mirror) reflection ray is traced.
+    pub reflects: u32,
+    /// `(shininess + 8) / 8π`.
+    pub glint_norm: f32,
+    /// `1 − gloss / 2`.
+    pub glint_scale: f32,
+}
+
+/// A punctual light, as shade.wgsl reads it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct ShadeLight {
+    pub position: [f32; 3],
+    /// 0 directional, 1 point, 2 spot.
+    pub kind: u32,
+    /// Unit direction the light shines along.
+    pub direction: [f32; 3],
+    pub range: f32,
+    /// Colour × intensity.
+    pub power: [f32; 3],
+    /// 1 for `Falloff::None`.
+    pub no_falloff: u32,
+    /// The spot's `cos(outer)` and `1 / max(cos(inner) − cos(outer), 1e-3)`.
+    pub cos_outer: f32,
+    pub cone_scale: f32,
+    /// 1 when `range` applies.
+    pub has_range: u32,
+    pub pad: u32,
+}
+
+/// The camera as shade.wgsl's `camera` kernel makes the rays (`Cam`): the fields of
+/// `render::CameraModel` and of the frame, so that the rays are `CameraModel::ray`'s
+/// at `wavefront::sample_offset`'s points, to the bit.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct CameraRays {
+    pub origin: [f32; 3],
+    pub tan_half: f32,
+    /// The rotation's columns.
+    pub x_axis: [f32; 3],
+    pub aspect: f32,
+    pub y_axis: [f32; 3],
+    /// Orthographic half width and height (with `ortho` 1).
+    pub xmag: f32,
+    pub z_axis: [f32; 3],
+    pub ymag: f32,
+    /// The image's size (not the data window's).
+    pub width: u32,
+    pub height: u32,
+    pub frame: u32,
+    pub spp: u32,
+    /// The jitter grid: `ceil(√spp)` columns, `ceil(spp / columns)` rows.
+    pub grid_x: u32,
+    pub grid_y: u32,
+    pub overscan: u32,
+    /// The data window's width (image and border).
+    pub data_width: u32,
+    /// The first pixel (row-major in the data window) of the rays made.
+    pub first_pixel: u32,
+    /// 1 for an orthographic camera.
+    pub ortho: u32,
+    /// 0: the zero that keeps products from being fused (`nc`).
+    pub zero: u32,
+    pub pad: u32,
+}
+
+/// A frame's shading constants.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadeParams {
+    pub ambient: [f32; 3],
+    pub background: [f32; 3],
+    /// The scene's size (ray offsets).
+    pub extent: f32,
+    pub max_depth: u32,
+    /// Contributions at or below this are dropped (`shade::MIN_WEIGHT`).
+    pub min_weight: f32,
+}

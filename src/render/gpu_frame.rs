@@ -1,0 +1,697 @@
+//! The GPU frame path's render side (`--device gpu`, issue 37 part 2, first step): which
+//! scenes it takes ([`outside_subset`]), the tables the kernels read (materials,
+//! lights, surfaces) made from the CPU's own shading values, and a frame traced as
+//! [`wavefront::render_frame_with`](super::wavefront) traces it, but with each chunk's
+//! whole wavefront on the GPU (`gpu::GpuShading`, shade.wgsl): camera rays made here,
+//! pixels and (for the AOVs and Cryptomatte) the camera rays' hits read back.
+//!
+//! The subset is what `ShadeContext::shade` does without random numbers and without
+//! textures: constant, opaque materials (base colour, metallic, roughness, emission,
+//! transmission, IOR, double-sided); the mirror reflection (GGX width under
+//! `MIRROR_ALPHA`) or no reflection ray (roughness from `GLOSSY_LIMIT` on); refraction
+//! with exact dielectric Fresnel; punctual lights (the default light too); the options'
+//! or the scene's ambient light; a constant background. Anything else keeps shading on
+//! the CPU, traced on the GPU as before, and the log says which feature did.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::camera::CameraModel;
+use super::lights::emits;
+use super::options::RenderOptions;
+use super::shade::{FrameBuffers, FrameWork, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT, MIRROR_ALPHA};
+use super::wavefront::{sample_offset, write_aovs, write_crypto, CentreInputs, FrameArgs};
+use crate::geometry::Ray;
+use crate::gpu::{
+    CameraRays, GpuDevice, GpuError, GpuMoving, GpuShading, GpuStatic, GpuTracer, ShadeLight,
+    ShadeMaterial, ShadeParams, SurfaceTriangle,
+};
+use crate::scene::{AlphaMode, Falloff, LightKind, Material, Scene, TriangleSoup};
+
+/// Samples a chunk traces at most (bounds the GPU's buffers: a level's rays at most
+/// double, and its shadow rays are at most one a light an item).
+const CHUNK_SAMPLES: usize = 1 << 16;
+
+/// Why `scene` rendered with `opts` cannot take the GPU frame path (the first feature
+/// outside the subset, in words), or `None` when it can. `max_binding`: the adapter's
+/// largest storage binding (the surfaces of either part must fit one).
+pub(super) fn outside_subset(
+    scene: &Scene,
+    opts: &RenderOptions,
+    static_triangles: usize,
+    moving_triangles: usize,
+    max_binding: u64,
+) -> Option<String> {
+    if opts.blur().is_some() {
+        return Some("motion blur (--motion-blur)".into());
+    }
+    if opts.aovs.any_light_path() {
+        return Some("the light-path AOVs (--aov diffuse,specular,transmission,emission)".into());
+    }
+    if opts.shading.environment.is_some() {
+        return Some("an environment map (--environment)".into());
+    }
+    if opts.shading.diffuse_bounces > 0 {
+        return Some("diffuse bounces (--diffuse-bounces)".into());
+    }
+    for (i, m) in scene.materials.iter().enumerate() {
+        let name = match &m.name {
+            Some(n) => format!("material '{n}'"),
+            None => format!("material {i}"),
+        };
+        if let Some(why) = material_outside(m) {
+            return Some(format!("{name}: {why}"));
+        }
+    }
+    for (what, n) in [("static", static_triangles), ("moving", moving_triangles)] {
+        let bytes = n as u64 * std::mem::size_of::<SurfaceTriangle>() as u64;
+        if bytes > max_binding {
+            return Some(format!(
+                "the {what} triangles' surfaces ({bytes} bytes) exceed one GPU storage binding ({max_binding} bytes)"
+            ));
+        }
+    }
+    None
+}
+
+/// Why material `m` is outside the subset, if it is.
+fn material_outside(m: &Material) -> Option<&'static str> {
+    if m.base_color_texture.is_some()
+        || m.metallic_roughness_texture.is_some()
+        || m.emissive_texture.is_some()
+        || m.normal_texture.is_some()
+    {
+        return Some("a texture");
+    }
+    if m.ambient.is_some() {
+        return Some("its own ambient colour (AFF)");
+    }
+    let opaque = match m.alpha_mode {
+        AlphaMode::Opaque => true,
+        AlphaMode::Mask { cutoff } => m.base_color.w >= cutoff,
+        AlphaMode::Blend => m.base_color.w.clamp(0.0, 1.0) >= 1.0,
+    };
+    if !opaque {
+        return Some("alpha below 1 (pass-through)");
+    }
+    if emits(m) {
+        return Some("emission (its triangles are area lights)");
+    }
+    let roughness = m.roughness.clamp(0.0, 1.0);
+    if roughness < GLOSSY_LIMIT && roughness * roughness >= MIRROR_ALPHA {
+        return Some("glossy reflection (GGX sampling)");
+    }
+    None
+}
+
+/// The material table: the scene's materials, then glTF's default material (for
+/// triangles without one), each as `ShadeContext::lobes` and `glint` compute it.
+fn materials(scene: &Scene) -> Vec<ShadeMaterial> {
+    let default = Material::default();
+    scene
+        .materials
+        .iter()
+        .chain(std::iter::once(&default))
+        .map(|m| {
+            let albedo = m.base_color.truncate();
+            let metallic = m.metallic.clamp(0.0, 1.0);
+            let roughness = m.roughness.clamp(0.0, 1.0);
+            let transmission = (m.transmission.clamp(0.0, 1.0)) * (1.0 - metallic);
+            let gloss = (1.0 - roughness) * (1.0 - roughness);
+            let f0 = Vec3::splat(0.04).lerp(albedo, metallic);
+            let ior = if m.ior.is_finite() && m.ior >= 1.0 {
+                m.ior
+            } else {
+                1.5
+            };
+            let shininess = ShadeContext::shininess(roughness);
+            ShadeMaterial {
+                albedo: albedo.to_array(),
+                metallic,
+                f0: f0.to_array(),
+                roughness,
+                emission: (m.emissive * m.emissive_strength).to_array(),
+                transmission,
+                gloss,
+                shininess,
+                eta_entering: 1.0 / ior,
+                eta_leaving: ior,
+                double_sided: u32::from(m.double_sided),
+                reflects: u32::from(roughness < GLOSSY_LIMIT),
+                glint_norm: (shininess + 8.0) / (8.0 * std::f32::consts::PI),
+                glint_scale: 1.0 - gloss * 0.5,
+            }
+        })
+        .collect()
+}
+
+/// The punctual lights of `ctx` (posed for the frame; the default light included).
+fn lights(ctx: &ShadeContext<'_>) -> Vec<ShadeLight> {
+    ctx.lights
+        .iter()
+        .map(|l| {
+            let (kind, cos_outer, cone_scale) = match l.kind {
+                LightKind::Directional => (0, 0.0, 0.0),
+                LightKind::Point => (1, 0.0, 0.0),
+                LightKind::Spot {
+                    inner_cone_angle,
+                    outer_cone_angle,
+                } => {
+                    let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
+                    (2, co, 1.0 / (ci - co).max(1e-3))
+                }
+            };
+            ShadeLight {
+                position: l.position.to_array(),
+                kind,
+                direction: l.direction.to_array(),
+                range: l.range.unwrap_or(0.0),
+                power: l.power.to_array(),
+                no_falloff: u32::from(l.falloff == Falloff::None),
+                cos_outer,
+                cone_scale,
+                has_range: u32::from(l.range.is_some()),
+                pad: 0,
+            }
+        })
+        .collect()
+}
+
+/// The surfaces of `soup`'s triangles; a material number outside the table's
+/// `materials` scene materials takes the default material after them.
+pub(super) fn surfaces(soup: &TriangleSoup, materials: usize) -> Vec<SurfaceTriangle> {
+    soup.positions
+        .par_iter()
+        .enumerate()
+        .with_min_len(4096)
+        .map(|(i, p)| {
+            let m = soup
+                .material
+                .get(i)
+                .copied()
+                .filter(|&m| (m as usize) < materials)
+                .unwrap_or(materials as u32);
+            SurfaceTriangle::new(p, soup.normals.get(i), m)
+        })
+        .collect()
+}
+
+/// `camera` and the frame as the GPU makes their rays (`CameraModel::ray` at
+/// `sample_offset`'s points), from the data window's first pixel on.
+pub(super) fn camera_rays(camera: &CameraModel, frame: u32, spp: u32, overscan: u32) -> CameraRays {
+    let spp = spp.max(1);
+    // `sample_offset`'s grid.
+    let gx = (spp as f64).sqrt().ceil() as u32;
+    let (xmag, ymag) = camera.ortho.unwrap_or((0.0, 0.0));
+    let r = &camera.rotation;
+    CameraRays {
+        origin: camera.origin.to_array(),
+        tan_half: camera.tan_half,
+        x_axis: r.x_axis.to_array(),
+        aspect: camera.aspect,
+        y_axis: r.y_axis.to_array(),
+        xmag,
+        z_axis: r.z_axis.to_array(),
+        ymag,
+        width: camera.width,
+        height: camera.height,
+        frame,
+        spp,
+        grid_x: gx.max(1),
+        grid_y: spp.div_ceil(gx.max(1)),
+        overscan,
+        data_width: camera.width + 2 * overscan,
+        first_pixel: 0,
+        ortho: u32::from(camera.ortho.is_some()),
+        zero: 0,
+        pad: 0,
+    }
+}
+
+/// What the frame path needs of the GPU.
+pub(super) struct GpuParts<'a> {
+    pub dev: &'a GpuDevice,
+    pub stat: &'a GpuStatic,
+    pub moving: &'a GpuMoving,
+    pub shading: &'a GpuShading,
+}
+
+/// One frame (no motion blur) traced and shaded on the GPU into `fb` (from
+/// `wavefront::new_frame`): the same pixels `render_frame_with` makes on the CPU, to
+/// the rounding of the GPU's shading arithmetic (docs/GPU.md), and the same AOVs.
+pub(super) fn render_frame_gpu(
+    gpu: &GpuParts<'_>,
+    ctx: &ShadeContext<'_>,
+    args: &FrameArgs<'_>,
+    fb: &mut FrameBuffers,
+    work: &mut FrameWork,
+) -> Result<(), GpuError> {
+    let FrameArgs {
+        camera,
+        frame,
+        spp,
+        max_depth,
+        inputs,
+    } = *args;
+    let aovs = inputs.aovs;
+    let o = inputs.overscan as usize;
+    let (w, h) = (
+        camera.width as usize + 2 * o,
+        camera.height as usize + 2 * o,
+    );
+    let spp = spp.max(1) as usize;
+    let clock = Instant::now();
+    let mats = materials(ctx.scene);
+    let lts = lights(ctx);
+    let params = ShadeParams {
+        ambient: ctx.options.ambient.to_array(),
+        background: ctx.options.background.to_array(),
+        extent: ctx.extent,
+        max_depth,
+        min_weight: MIN_WEIGHT,
+    };
+    let moving_surf = surfaces(ctx.dynamic_soup, ctx.scene.materials.len());
+    work.shade += clock.elapsed();
+    let clock = Instant::now();
+    let surf = gpu.shading.moving(gpu.dev, &moving_surf)?;
+    work.trace += clock.elapsed();
+    let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
+    let any_aov = aovs.any_centre();
+    let centre_batch = spp > 1;
+    let want_hits = (any_aov && !centre_batch) || (crypto.is_some() && fb.crypto.is_some());
+    let centre_inputs = CentreInputs {
+        camera,
+        next: inputs.next.filter(|_| aovs.motion),
+    };
+    let pixel = |i: u32| i.wrapping_sub(o as u32);
+    let cam = camera_rays(camera, frame, spp as u32, inputs.overscan);
+    // A chunk's levels hold `capacity` items each (the buffers are sized before the
+    // GPU knows how many rays a level makes): twice the chunk's samples to begin with,
+    // doubled while a level outgrows it, up to what the adapter allows; past that the
+    // chunk is traced again in halves. A sample's light does not depend on the chunk or
+    // the room it is traced in, so neither changes a byte.
+    let max_capacity = GpuShading::max_capacity(gpu.dev, lts.len()) as usize;
+    let mut rows_per_chunk = ((CHUNK_SAMPLES.min(max_capacity / 4)) / (w * spp)).max(1);
+    let mut capacity = 0;
+    let mut y0 = 0;
+    while y0 < h {
+        let y1 = (y0 + rows_per_chunk).min(h);
+        let px0 = y0 * w;
+        let npix = (y1 - y0) * w;
+        let clock = Instant::now();
+        let chunk_camera = CameraRays {
+            first_pixel: u32::try_from(px0).map_err(|_| GpuError::TooLarge {
+                what: "an image (pixels numbered in 32 bits)",
+                needed: px0 as u64,
+                available: u64::from(u32::MAX),
+                adapter: gpu.dev.describe(),
+            })?,
+            ..cam
+        };
+        let out = gpu.shading.render_chunk(
+            gpu.dev,
+            gpu.stat,
+            gpu.moving,
+            &surf,
+            &mats,
+            &lts,
+            &params,
+            &chunk_camera,
+            npix as u64,
+            capacity.max(2 * npix * spp).min(max_capacity) as u64,
+            want_hits,
+        );
+        work.trace += clock.elapsed();
+        let out = match out {
+            Ok(Some(out)) => out,
+            Ok(None) if capacity < max_capacity => {
+                capacity = capacity.max(2 * npix * spp).saturating_mul(2);
+                continue;
+            }
+            Ok(None) | Err(GpuError::TooLarge { .. }) if y1 - y0 > 1 => {
+                rows_per_chunk = (y1 - y0) / 2;
+                capacity = 0;
+                continue;
+            }
+            Ok(None) => {
+                return Err(GpuError::TooLarge {
+                    what: "the rays of one row of pixels (the frame path's levels)",
+                    needed: (max_capacity * 48) as u64,
+                    available: gpu.dev.max_binding(),
+                    adapter: gpu.dev.describe(),
+                })
+            }
+            Err(e) => return Err(e),
+        };
+        capacity = 0;
+        work.rays.primary += (npix * spp) as u64;
+        work.rays.shadow += out.shadow_rays;
+        work.rays.secondary += out.secondary_rays;
+        let clock = Instant::now();
+        fb.rgba[px0..px0 + npix].copy_from_slice(&out.rgba);
+        if let Some(hits) = &out.camera_hits {
+            if any_aov && !centre_batch {
+                // One sample a pixel: the camera rays are the centre rays, made again
+                // here (the same bits: `camera_rays_are_the_cpus`).
+                let rays: Vec<Ray> = (0..npix)
+                    .into_par_iter()
+                    .with_min_len(1024)
+                    .map(|i| {
+                        let p = px0 + i;
+                        let (x, y) = (pixel((p % w) as u32), pixel((p / w) as u32));
+                        let (ox, oy) = sample_offset(frame, x, y, 0, 1);
+                        camera.ray(x as i32 as f32 + ox, y as i32 as f32 + oy)
+                    })
+                    .collect();
+                write_aovs(ctx, &centre_inputs, fb, px0, &rays, hits);
+            }
+            if let (Some(names), Some(buf)) = (crypto, fb.crypto.as_mut()) {
+                write_crypto(ctx, names, buf, px0, spp, hits);
+            }
+        }
+        work.shade += clock.elapsed();
+        if any_aov && centre_batch {
+            let clock = Instant::now();
+            let centre: Vec<Ray> = (0..npix)
+                .into_par_iter()
+                .with_min_len(1024)
+                .map(|i| {
+                    let p = px0 + i;
+                    let (x, y) = (pixel((p % w) as u32), pixel((p / w) as u32));
+                    camera.ray(x as i32 as f32 + 0.5, y as i32 as f32 + 0.5)
+                })
+                .collect();
+            work.rays.primary += npix as u64;
+            work.shade += clock.elapsed();
+            let clock = Instant::now();
+            let mut chits = vec![None; npix];
+            GpuTracer::new(gpu.dev, gpu.stat, gpu.moving)
+                .try_intersect_batch(&centre, &mut chits)?;
+            work.trace += clock.elapsed();
+            let clock = Instant::now();
+            write_aovs(ctx, &centre_inputs, fb, px0, &centre, &chits);
+            work.shade += clock.elapsed();
+        }
+        y0 = y1;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::options::MotionBlur;
+    use crate::scene::TextureRef;
+
+    /// The adapter, or `None` after saying why the test skips (a failure under CI).
+    fn test_device() -> Option<GpuDevice> {
+        match GpuDevice::open(crate::gpu::AdapterPolicy::Any) {
+            Ok(Some(d)) => Some(d),
+            other => {
+                let why = format!("{:?}", other.err());
+                assert!(
+                    std::env::var_os("CI").is_none(),
+                    "no GPU adapter under CI: {why}"
+                );
+                use std::io::Write;
+                let _ = writeln!(std::io::stderr(), "SKIPPED: no GPU adapter: {why}");
+                None
+            }
+        }
+    }
+
+    /// A level that outgrows its room is refused (`None`), and the chunk traced with
+    /// more room gives the same bytes whatever the room, in fresh buffers or in those a
+    /// larger chunk left: 256 pixels of glass over a floor make 512 rays at the second
+    /// level.
+    #[test]
+    fn a_level_that_outgrows_its_room_is_refused_and_room_changes_nothing() {
+        use crate::gpu::{GpuMoving, GpuStatic};
+        use crate::psf::{Psf, PsfParams};
+        let Some(dev) = test_device() else {
+            return;
+        };
+        let mut tris: Vec<[Vec3; 3]> = Vec::new();
+        let mut mat = Vec::new();
+        // A cube of glass (material 0) around the origin, half size 0.5.
+        for axis in 0..3 {
+            for sign in [-1.0f32, 1.0] {
+                let mut n = Vec3::ZERO;
+                n[axis] = sign;
+                let a = n.any_orthonormal_vector();
+                let b = n.cross(a);
+                let c = |s: f32, t: f32| (n + a * s + b * t) * 0.5;
+                tris.push([c(-1.0, -1.0), c(1.0, -1.0), c(1.0, 1.0)]);
+                tris.push([c(-1.0, -1.0), c(1.0, 1.0), c(-1.0, 1.0)]);
+                mat.extend([0, 0]);
+            }
+        }
+        // A floor (material 1).
+        let f = |x: f32, z: f32| Vec3::new(x, -1.0, z);
+        tris.push([f(-5.0, -5.0), f(-5.0, 5.0), f(5.0, 5.0)]);
+        tris.push([f(-5.0, -5.0), f(5.0, 5.0), f(5.0, -5.0)]);
+        mat.extend([1, 1]);
+        let psf = Psf::build(&tris, &PsfParams::for_static(tris.len())).unwrap();
+        let stat = GpuStatic::upload(&dev, &psf).unwrap();
+        let mut moving = GpuMoving::new(&dev).unwrap();
+        moving.update(&dev, &[]).unwrap();
+        let surf: Vec<SurfaceTriangle> = tris
+            .iter()
+            .zip(&mat)
+            .map(|(p, &m)| SurfaceTriangle::new(p, None, m))
+            .collect();
+        let shading = GpuShading::new(&dev, &surf).unwrap();
+        let no_moving = shading.moving(&dev, &[]).unwrap();
+        let scene = Scene {
+            materials: vec![
+                Material {
+                    transmission: 1.0,
+                    roughness: 0.0,
+                    metallic: 0.0,
+                    double_sided: true,
+                    ..Material::default()
+                },
+                Material {
+                    metallic: 0.0,
+                    ..Material::default()
+                },
+            ],
+            ..Scene::default()
+        };
+        let mats = materials(&scene);
+        let lts = [ShadeLight {
+            position: [2.0, 4.0, 3.0],
+            kind: 1,
+            power: [40.0; 3],
+            ..ShadeLight::default()
+        }];
+        let params = ShadeParams {
+            ambient: [0.05; 3],
+            background: [0.2, 0.3, 0.4],
+            extent: 10.0,
+            max_depth: 4,
+            min_weight: MIN_WEIGHT,
+        };
+        // Every pixel on the cube's front face.
+        let camera = CameraModel {
+            origin: Vec3::new(0.0, 0.1, 4.0),
+            rotation: glam::Mat3::IDENTITY,
+            tan_half: 0.1,
+            aspect: 1.0,
+            ortho: None,
+            width: 16,
+            height: 16,
+        };
+        let cam = camera_rays(&camera, 0, 1, 0);
+        let run = |capacity: u64| {
+            shading
+                .render_chunk(
+                    &dev, &stat, &moving, &no_moving, &mats, &lts, &params, &cam, 256, capacity,
+                    true,
+                )
+                .unwrap()
+        };
+        assert!(run(256).is_none(), "512 rays in the room of 256");
+        let snug = run(1024).unwrap();
+        let roomy = run(1 << 14).unwrap();
+        let bits = |o: &crate::gpu::ChunkOut| -> Vec<u32> {
+            o.rgba.iter().flatten().map(|x| x.to_bits()).collect()
+        };
+        // Again in the room of 1024, in the buffers the last run left (16384 items
+        // large, full of its numbers).
+        let again = run(1024).unwrap();
+        assert_eq!(bits(&snug), bits(&roomy));
+        assert_eq!(bits(&snug), bits(&again));
+        assert_eq!(snug.camera_hits, again.camera_hits);
+        assert_eq!(snug.camera_hits, roomy.camera_hits);
+        assert_eq!(
+            (snug.shadow_rays, snug.secondary_rays),
+            (roomy.shadow_rays, roomy.secondary_rays)
+        );
+        assert!(snug.secondary_rays >= 512, "{}", snug.secondary_rays);
+        assert!(snug.rgba.iter().all(|p| p[3] == 1.0 && p[0] > 0.0));
+    }
+
+    /// The camera rays the GPU makes (`sample_offset`'s jitter, `CameraModel::ray`, the
+    /// shear) are the CPU's to the bit: perspective and orthographic cameras turned
+    /// every way, one to sixteen samples, with and without an overscan border.
+    #[test]
+    fn camera_rays_are_the_cpus() {
+        let Some(dev) = test_device() else {
+            return;
+        };
+        let shading = GpuShading::new(&dev, &[]).unwrap();
+        let rotation = glam::Mat3::from_quat(
+            glam::Quat::from_rotation_y(0.7)
+                * glam::Quat::from_rotation_x(-0.3)
+                * glam::Quat::from_rotation_z(0.1),
+        );
+        for ortho in [None, Some((2.0, 1.3))] {
+            let camera = CameraModel {
+                origin: Vec3::new(1.25, -3.5, 7.1),
+                rotation,
+                tan_half: 0.41,
+                aspect: 37.0 / 23.0,
+                ortho,
+                width: 37,
+                height: 23,
+            };
+            for (spp, overscan) in [(1, 0), (1, 3), (3, 0), (4, 2), (16, 0)] {
+                let cam = camera_rays(&camera, 7, spp, overscan);
+                let (w, h) = (37 + 2 * overscan, 23 + 2 * overscan);
+                let gpu = shading
+                    .camera_rays_made_on_gpu(&dev, &cam, u64::from(w * h))
+                    .unwrap();
+                assert_eq!(gpu.len() as u32, w * h * spp);
+                for (s, g) in gpu.iter().enumerate() {
+                    let s = s as u32;
+                    let (p, k) = (s / spp, s % spp);
+                    let (x, y) = (
+                        (p % w).wrapping_sub(overscan),
+                        (p / w).wrapping_sub(overscan),
+                    );
+                    let (ox, oy) = sample_offset(7, x, y, k, spp);
+                    let r = camera.ray(x as i32 as f32 + ox, y as i32 as f32 + oy);
+                    assert_eq!(
+                        *g,
+                        crate::gpu::packed_on_cpu(&r),
+                        "ortho {ortho:?}, spp {spp}, overscan {overscan}: sample {k} of ({x}, {y})"
+                    );
+                }
+            }
+        }
+    }
+
+    fn scene_with(m: Material) -> Scene {
+        Scene {
+            materials: vec![m],
+            ..Scene::default()
+        }
+    }
+
+    fn why(scene: &Scene, opts: &RenderOptions) -> Option<String> {
+        outside_subset(scene, opts, 10, 10, 1 << 20)
+    }
+
+    /// Every feature the frame path does not shade sends the scene to the CPU's
+    /// shading, with its name; the subset's own materials do not.
+    #[test]
+    fn the_subset_and_what_falls_back() {
+        let opts = RenderOptions::default();
+        let inside = [
+            Material::default(),
+            Material {
+                roughness: 0.0,
+                metallic: 1.0,
+                ..Material::default()
+            },
+            Material {
+                roughness: 0.03,
+                transmission: 1.0,
+                double_sided: true,
+                ..Material::default()
+            },
+            Material {
+                roughness: 0.4,
+                alpha_mode: AlphaMode::Mask { cutoff: 0.5 },
+                ..Material::default()
+            },
+        ];
+        for m in inside {
+            assert_eq!(why(&scene_with(m.clone()), &opts), None, "{m:?}");
+        }
+        let tex = Some(TextureRef {
+            texture: 0,
+            tex_coord: 0,
+            transform: None,
+        });
+        let outside = [
+            (
+                Material {
+                    base_color_texture: tex,
+                    ..Material::default()
+                },
+                "a texture",
+            ),
+            (
+                Material {
+                    normal_texture: tex,
+                    ..Material::default()
+                },
+                "a texture",
+            ),
+            (
+                Material {
+                    ambient: Some(Vec3::ONE),
+                    ..Material::default()
+                },
+                "ambient colour",
+            ),
+            (
+                Material {
+                    alpha_mode: AlphaMode::Blend,
+                    base_color: glam::Vec4::new(1.0, 1.0, 1.0, 0.5),
+                    ..Material::default()
+                },
+                "pass-through",
+            ),
+            (
+                Material {
+                    emissive: Vec3::new(0.0, 0.0, 1.0),
+                    ..Material::default()
+                },
+                "area lights",
+            ),
+            (
+                Material {
+                    roughness: 0.2,
+                    ..Material::default()
+                },
+                "GGX",
+            ),
+        ];
+        for (m, said) in outside {
+            let w = why(&scene_with(m.clone()), &opts).unwrap_or_default();
+            assert!(w.contains(said) && w.contains("material 0"), "{m:?}: {w}");
+        }
+        let plain = scene_with(Material::default());
+        let blur = RenderOptions {
+            motion_blur: Some(MotionBlur {
+                shutter: 0.5,
+                steps: 3,
+            }),
+            ..RenderOptions::default()
+        };
+        assert!(why(&plain, &blur).unwrap().contains("motion blur"));
+        let mut paths = RenderOptions::default();
+        paths.aovs.specular = true;
+        assert!(why(&plain, &paths).unwrap().contains("light-path"));
+        let mut bounces = RenderOptions::default();
+        bounces.shading.diffuse_bounces = 1;
+        assert!(why(&plain, &bounces).unwrap().contains("diffuse bounces"));
+        let big = outside_subset(&plain, &RenderOptions::default(), 1 << 20, 0, 1 << 20);
+        assert!(big.unwrap().contains("static triangles' surfaces"));
+    }
+}

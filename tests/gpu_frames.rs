@@ -1,0 +1,511 @@
+//! The GPU frame path (`--device gpu` on a scene inside its subset, docs/GPU.md): whole
+//! frames traced and shaded on the GPU agree with `--device cpu` within a stated bound,
+//! two GPU runs give the same bytes, a scene outside the subset falls back to CPU
+//! shading (bit for bit the CPU's frames, as before) and says why in the log, and the
+//! rays the GPU makes carry the CPU's shear to the bit.
+//!
+//! The bound (`check_close`): the camera rays are the CPU's and so are their hits, so
+//! `Z` is equal on at least 99.9 % of the pixels (in fact on all); the RGB mean absolute
+//! difference is at most 1e-3 (times the image's mean RGB where that is above 1); and
+//! outside a one-pixel band around the Z discontinuities, no pixel's channel differs by
+//! more than [`PIXEL_BOUND`] (times the mean where above 1). Measured on lavapipe: mean
+//! differences of 1e-7 to 2e-7 and at most 1e-4 in any pixel (the GPU's sqrt, division
+//! and pow are not the CPU's to the last bit). A reflected or refracted ray made on the
+//! GPU differs from the CPU's in its last bits, so on another driver one that grazes an
+//! edge seen in a mirror or through glass could meet the other side of it: such a pixel
+//! would break the per-pixel bound while the mean stays far inside its own.
+//!
+//! Needs a GPU adapter (lavapipe in CI): tests/common/gpu.rs.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::build::{diffuse, linear, mesh, perspective, placed, SceneBuilder};
+use common::exr_read::read_exr;
+use common::farm::{ok, s, stderr};
+use common::render_scene::{cube, files_under, quad, temp_dir, write_scene};
+use glam::{Quat, Vec3, Vec4};
+use subfield::geometry::Ray;
+use subfield::gpu::{packed_on_cpu, GpuShading};
+use subfield::scene::{Animation, Falloff, LightDef, LightKind, Material, Node, Property, Scene};
+
+/// Largest difference a pixel's channel may have outside the Z edges' band (relative to
+/// the image's mean where that is above 1).
+const PIXEL_BOUND: f32 = 1e-3;
+
+/// A room inside the frame path's subset: a diffuse floor, a metal mirror, a half
+/// mirror (polished, half metallic), a coloured metal, a glass cube (refraction and
+/// Fresnel reflection), a rough red cube that moves and turns, a point, a spot (with a
+/// range) and a directional light.
+fn subset_scene() -> Scene {
+    let mut b = SceneBuilder::new();
+    let grey = b.add_material(diffuse("floor", Vec4::new(0.7, 0.7, 0.7, 1.0), 0.8));
+    let mirror = b.add_material(Material {
+        metallic: 1.0,
+        ..diffuse("mirror", Vec4::new(0.9, 0.9, 0.9, 1.0), 0.0)
+    });
+    let half = b.add_material(Material {
+        metallic: 0.5,
+        ..diffuse("half mirror", Vec4::new(0.3, 0.5, 0.8, 1.0), 0.01)
+    });
+    let gold = b.add_material(Material {
+        metallic: 1.0,
+        ..diffuse("gold", Vec4::new(1.0, 0.8, 0.3, 1.0), 0.6)
+    });
+    let glass = b.add_material(Material {
+        transmission: 1.0,
+        ior: 1.5,
+        double_sided: true,
+        ..diffuse("glass", Vec4::ONE, 0.0)
+    });
+    let red = b.add_material(diffuse("red", Vec4::new(0.8, 0.1, 0.1, 1.0), 0.4));
+    let statics = b.add_mesh(mesh(
+        "room",
+        vec![
+            quad(Vec3::ZERO, Vec3::Z * 5.0, Vec3::X * 5.0, grey),
+            quad(
+                Vec3::new(0.0, 1.5, -2.5),
+                Vec3::X * 2.0,
+                Vec3::Y * 1.5,
+                mirror,
+            ),
+            quad(
+                Vec3::new(-3.0, 1.0, -1.0),
+                Vec3::Z * 1.0,
+                Vec3::Y * 1.0,
+                half,
+            ),
+            cube(Vec3::splat(0.3), gold),
+        ],
+    ));
+    let glass_cube = b.add_mesh(mesh("glass", vec![cube(Vec3::splat(0.5), glass)]));
+    let red_cube = b.add_mesh(mesh("mover", vec![cube(Vec3::new(0.4, 0.4, 0.4), red)]));
+    let cam = b.add_camera(perspective("main", 0.8, None, 0.1, None));
+    let point = b.add_light(LightDef {
+        name: Some("bulb".into()),
+        kind: LightKind::Point,
+        color: Vec3::new(1.0, 0.95, 0.9),
+        intensity: 40.0,
+        range: None,
+        falloff: Falloff::InverseSquare,
+    });
+    let spot = b.add_light(LightDef {
+        name: Some("spot".into()),
+        kind: LightKind::Spot {
+            inner_cone_angle: 0.2,
+            outer_cone_angle: 0.5,
+        },
+        color: Vec3::new(0.6, 0.8, 1.0),
+        intensity: 60.0,
+        range: Some(12.0),
+        falloff: Falloff::InverseSquare,
+    });
+    let sun = b.add_light(LightDef {
+        name: Some("sun".into()),
+        kind: LightKind::Directional,
+        color: Vec3::ONE,
+        intensity: 1.5,
+        range: None,
+        falloff: Falloff::InverseSquare,
+    });
+    let room = b.add_node(Node {
+        name: Some("room".into()),
+        mesh: Some(statics),
+        ..Default::default()
+    });
+    let glass_node = b.add_node(Node {
+        name: Some("glass".into()),
+        mesh: Some(glass_cube),
+        transform: placed(Vec3::new(-1.5, 0.5, 0.0), Quat::IDENTITY),
+        ..Default::default()
+    });
+    let mover = b.add_node(Node {
+        name: Some("mover".into()),
+        mesh: Some(red_cube),
+        transform: placed(Vec3::new(1.0, 0.4, 0.5), Quat::IDENTITY),
+        ..Default::default()
+    });
+    let camera = b.add_node(Node {
+        name: Some("camera".into()),
+        camera: Some(cam),
+        transform: placed(
+            Vec3::new(0.0, 2.0, 6.0),
+            Quat::from_rotation_x(-(2.0f32 / 6.0).atan()),
+        ),
+        ..Default::default()
+    });
+    let bulb = b.add_node(Node {
+        name: Some("bulb".into()),
+        light: Some(point),
+        transform: placed(Vec3::new(2.0, 4.0, 3.0), Quat::IDENTITY),
+        ..Default::default()
+    });
+    let spot_node = b.add_node(Node {
+        name: Some("spot".into()),
+        light: Some(spot),
+        // Down onto the floor in front of the mirror.
+        transform: placed(
+            Vec3::new(0.5, 4.0, 0.5),
+            Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2),
+        ),
+        ..Default::default()
+    });
+    let sun_node = b.add_node(Node {
+        name: Some("sun".into()),
+        light: Some(sun),
+        transform: placed(
+            Vec3::ZERO,
+            Quat::from_rotation_x(-1.0) * Quat::from_rotation_y(0.5),
+        ),
+        ..Default::default()
+    });
+    for n in [room, glass_node, mover, camera, bulb, spot_node, sun_node] {
+        b.add_root(n);
+    }
+    b.add_animation(Animation {
+        name: Some("move".into()),
+        channels: vec![
+            linear(
+                mover,
+                Property::Translation,
+                vec![0.0, 1.0],
+                vec![1.0, 0.4, 0.5, -0.5, 1.2, 1.0],
+            ),
+            linear(
+                mover,
+                Property::Rotation,
+                vec![0.0, 1.0],
+                [
+                    Quat::IDENTITY.to_array(),
+                    Quat::from_rotation_y(1.5).to_array(),
+                ]
+                .concat(),
+            ),
+        ],
+    });
+    b.scene.fps = Some(24.0);
+    b.finish()
+}
+
+/// Renders `scene` on `device` into `dir/folder` with `extra` flags; the run's stderr.
+fn render(scene: &Path, dir: &Path, device: &str, folder: &str, extra: &[&str]) -> String {
+    let out = dir.join(format!("{folder}/f.##.exr"));
+    let mut args = vec![
+        "render",
+        s(scene),
+        "-o",
+        s(&out),
+        "--size",
+        "64x48",
+        "--aov",
+        "depth,normal,albedo,position,motion,cryptomatte",
+        "--float",
+        "--device",
+        device,
+    ];
+    args.extend_from_slice(extra);
+    stderr(&ok(&args))
+}
+
+fn channel<'a>(c: &'a [(String, Vec<f32>)], name: &str) -> &'a [f32] {
+    &c.iter()
+        .find(|(n, _)| n == name)
+        .unwrap_or_else(|| panic!("no channel {name}"))
+        .1
+}
+
+/// What two frames' differences came to.
+#[derive(Debug)]
+struct Diff {
+    z_equal: f64,
+    mean_abs: f32,
+    mean: f32,
+    max_outside_band: f32,
+}
+
+fn compare(a: &Path, b: &Path) -> Diff {
+    let (w, h, ca) = read_exr(a);
+    let (wb, hb, cb) = read_exr(b);
+    assert_eq!((w, h), (wb, hb));
+    // Coverage and the AOVs come from the camera rays' (or the centre rays') hits, which
+    // are the CPU's: equal to the bit.
+    assert!(ca.iter().any(|(n, _)| n.starts_with("CryptoObject")));
+    for ((na, va), (nb, vb)) in ca.iter().zip(&cb) {
+        assert_eq!(na, nb);
+        if !["R", "G", "B"].contains(&na.as_str()) {
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(va), bits(vb), "{}: channel {na} differs", b.display());
+        }
+    }
+    let (za, zb) = (channel(&ca, "Z"), channel(&cb, "Z"));
+    let n = w * h;
+    let z_equal = za
+        .iter()
+        .zip(zb)
+        .filter(|(x, y)| x.to_bits() == y.to_bits())
+        .count() as f64
+        / n as f64;
+    // The band: pixels with a neighbour (8-connected) whose Z differs by over 1 %.
+    let edge = |i: usize, j: usize| {
+        let (p, q) = (za[i], za[j]);
+        if p.is_infinite() || q.is_infinite() {
+            return p.is_infinite() != q.is_infinite();
+        }
+        (p - q).abs() > 0.01 * p.abs().max(q.abs())
+    };
+    let mut band = vec![false; n];
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            for (dx, dy) in [(1i64, 0i64), (0, 1), (1, 1), (1, -1)] {
+                let (x2, y2) = (x as i64 + dx, y as i64 + dy);
+                if x2 < 0 || y2 < 0 || x2 >= w as i64 || y2 >= h as i64 {
+                    continue;
+                }
+                let j = y2 as usize * w + x2 as usize;
+                if edge(i, j) {
+                    band[i] = true;
+                    band[j] = true;
+                }
+            }
+        }
+    }
+    let mut sum_abs = 0.0f64;
+    let mut sum = 0.0f64;
+    let mut per_pixel = vec![0.0f32; n];
+    for c in ["R", "G", "B"] {
+        let (x, y) = (channel(&ca, c), channel(&cb, c));
+        for i in 0..n {
+            let d = (x[i] - y[i]).abs();
+            assert!(y[i].is_finite(), "{}: {c} at {i} is {}", b.display(), y[i]);
+            sum_abs += f64::from(d);
+            sum += f64::from(x[i]);
+            per_pixel[i] = per_pixel[i].max(d);
+        }
+    }
+    let mean = (sum / (3 * n) as f64) as f32;
+    let scale = mean.max(1.0);
+    Diff {
+        z_equal,
+        mean_abs: (sum_abs / (3 * n) as f64) as f32,
+        mean,
+        max_outside_band: (0..n)
+            .filter(|&i| !band[i])
+            .map(|i| per_pixel[i] / scale)
+            .fold(0.0, f32::max),
+    }
+}
+
+/// The bound of the module docs, frame by frame; the differences found.
+fn check_close(dir: &Path, cpu: &str, gpu: &str) -> Vec<Diff> {
+    let frames = files_under(&dir.join(cpu));
+    assert!(!frames.is_empty());
+    assert_eq!(frames, files_under(&dir.join(gpu)));
+    let mut out = Vec::new();
+    for f in &frames {
+        let d = compare(&dir.join(cpu).join(f), &dir.join(gpu).join(f));
+        // Straight to stderr, so `--nocapture` shows the measured differences.
+        eprintln!("{gpu} {}: {d:?}", f.display());
+        assert!(
+            d.z_equal >= 0.999,
+            "{}: Z equal on {}",
+            f.display(),
+            d.z_equal
+        );
+        assert!(
+            d.mean_abs <= 1e-3 * d.mean.max(1.0),
+            "{}: mean |ΔRGB| {} (mean {})",
+            f.display(),
+            d.mean_abs,
+            d.mean
+        );
+        assert!(
+            d.max_outside_band <= PIXEL_BOUND,
+            "{}: a pixel off by {} (relative) outside the Z edges ({d:?})",
+            f.display(),
+            d.max_outside_band
+        );
+        out.push(d);
+    }
+    out
+}
+
+fn write(dir: &Path, scene: &Scene) -> PathBuf {
+    let p = dir.join("scene.glb");
+    subfield::import::write_gltf(scene, &p).unwrap();
+    p
+}
+
+/// Three frames of the moving cube, one sample a pixel, depth 3 (mirror in glass in
+/// mirror); then two samples at depth 1 with an overscan border, an exposure and a
+/// background that the mirrors and the glass show; then three samples at depth 0; each
+/// against the CPU (RGB within the bound, alpha and the AOVs to the bit). The first
+/// again, whole and in two shards: the same bytes.
+#[test]
+fn gpu_frames_agree_with_the_cpu() {
+    if common::gpu::device().is_none() {
+        return;
+    }
+    let dir = temp_dir("gpu-frames");
+    let scene = write(&dir, &subset_scene());
+    let a = ["--frames", "3..6", "--spp", "1", "--max-depth", "3"];
+    let stats = |name: &str| {
+        let p = dir.join(name);
+        (p.clone(), p.to_str().unwrap().to_string())
+    };
+    let (cpu_stats, cs) = stats("cpu1.csv");
+    let (gpu_stats, gs) = stats("gpu1.csv");
+    render(
+        &scene,
+        &dir,
+        "cpu",
+        "cpu1",
+        &[&a[..], &["--stats", &cs]].concat(),
+    );
+    let log = render(
+        &scene,
+        &dir,
+        "gpu",
+        "gpu1",
+        &[&a[..], &["--stats", &gs]].concat(),
+    );
+    // The same rays: camera, shadow and secondary counts (columns 6-8) frame by frame,
+    // so the GPU's shading made the CPU's decisions (which lights, which rays).
+    let counts = |p: &Path| -> Vec<Vec<String>> {
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').skip(6).take(3).map(String::from).collect())
+            .collect()
+    };
+    assert_eq!(counts(&cpu_stats), counts(&gpu_stats));
+    assert_eq!(counts(&cpu_stats).len(), 3);
+    assert!(
+        !log.contains("shading on the CPU"),
+        "the subset scene fell back: {log}"
+    );
+    check_close(&dir, "cpu1", "gpu1");
+
+    let b = [
+        "--frames",
+        "12",
+        "--spp",
+        "2",
+        "--max-depth",
+        "1",
+        "--overscan",
+        "2",
+        "--exposure",
+        "0.5",
+        "--background",
+        "0.2,0.3,0.4",
+    ];
+    render(&scene, &dir, "cpu", "cpu2", &b);
+    render(&scene, &dir, "gpu", "gpu2", &b);
+    check_close(&dir, "cpu2", "gpu2");
+
+    // No secondary rays at all, three samples (a 2x2 jitter grid, one cell empty).
+    let c = ["--frames", "20", "--spp", "3", "--max-depth", "0"];
+    render(&scene, &dir, "cpu", "cpu3", &c);
+    render(&scene, &dir, "gpu", "gpu3", &c);
+    check_close(&dir, "cpu3", "gpu3");
+
+    // Twice on the GPU, and in two shards: the same bytes.
+    render(&scene, &dir, "gpu", "gpu1again", &a);
+    for shard in ["0/2", "1/2"] {
+        let mut sharded = a.to_vec();
+        sharded.extend(["--shard", shard]);
+        render(&scene, &dir, "gpu", "gpu1sharded", &sharded);
+    }
+    for again in ["gpu1again", "gpu1sharded"] {
+        assert_eq!(
+            files_under(&dir.join("gpu1")),
+            files_under(&dir.join(again))
+        );
+        for f in files_under(&dir.join("gpu1")) {
+            assert_eq!(
+                std::fs::read(dir.join("gpu1").join(&f)).unwrap(),
+                std::fs::read(dir.join(again).join(&f)).unwrap(),
+                "{}: {again} differs from the first GPU run",
+                f.display()
+            );
+        }
+    }
+}
+
+/// A scene outside the subset (an emissive quad: an area light) traces on the GPU and
+/// shades on the CPU: its frames are the CPU's to the bit, and the log says why.
+#[test]
+fn outside_the_subset_falls_back_and_says_why() {
+    if common::gpu::device().is_none() {
+        return;
+    }
+    let dir = temp_dir("gpu-frames-fallback");
+    let scene = write_scene(&dir);
+    let a = ["--frames", "2", "--spp", "1"];
+    render(&scene, &dir, "cpu", "cpu", &a);
+    let log = render(&scene, &dir, "gpu", "gpu", &a);
+    assert!(
+        log.contains(
+            "note: shading on the CPU, tracing on the GPU: the GPU frame path does not take \
+             material 'lamp': emission (its triangles are area lights)"
+        ),
+        "stderr: {log}"
+    );
+    for f in files_under(&dir.join("cpu")) {
+        let (_, _, ca) = read_exr(&dir.join("cpu").join(&f));
+        let (_, _, cb) = read_exr(&dir.join("gpu").join(&f));
+        for ((na, va), (nb, vb)) in ca.iter().zip(&cb) {
+            assert_eq!(na, nb);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(va), bits(vb), "{}: channel {na} differs", f.display());
+        }
+    }
+}
+
+/// The rays the frame path makes on the GPU (shadow, reflected, refracted) carry the
+/// shear `geometry::Shear::new` computes, to the bit, and the same validity: random
+/// directions of every octant and scale, axis-aligned ones, and invalid rays.
+#[test]
+fn gpu_made_shears_equal_the_cpus() {
+    let Some(dev) = common::gpu::device() else {
+        return;
+    };
+    let shading = GpuShading::new(dev, &[]).unwrap();
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut rays = Vec::new();
+    for k in 0..200_000 {
+        let d = Vec3::new(next() * 2.0 - 1.0, next() * 2.0 - 1.0, next() * 2.0 - 1.0);
+        // Scales from 1e-6 to 1e6, some directions with a zero or tiny component.
+        let scale = 10f32.powf(next() * 12.0 - 6.0);
+        let mut d = d * scale;
+        match k % 10 {
+            0 => d.x = 0.0,
+            1 => d.y = -0.0,
+            2 => d.z *= 1e-7,
+            _ => {}
+        }
+        let o = Vec3::new(next(), next(), next()) * 100.0 - 50.0;
+        rays.push(Ray::segment(o, d, 0.0, next() * 10.0));
+    }
+    for d in [Vec3::X, -Vec3::Y, Vec3::Z, Vec3::ONE, -Vec3::ONE] {
+        rays.push(Ray::new(Vec3::ZERO, d));
+    }
+    // Invalid: zero direction, NaN, infinite origin, NaN span.
+    rays.push(Ray::new(Vec3::ONE, Vec3::ZERO));
+    rays.push(Ray::new(Vec3::ONE, Vec3::new(f32::NAN, 1.0, 0.0)));
+    rays.push(Ray::new(Vec3::new(f32::INFINITY, 0.0, 0.0), Vec3::X));
+    rays.push(Ray::segment(Vec3::ONE, Vec3::X, f32::NAN, 1.0));
+    let gpu = shading.rays_made_on_gpu(dev, &rays).unwrap();
+    for (r, g) in rays.iter().zip(&gpu) {
+        assert_eq!(*g, packed_on_cpu(r), "ray {r:?}");
+    }
+}
