@@ -1,5 +1,6 @@
 //! Batches of rays traced binned by subfield. The batch is cut into runs of `RUN`
-//! consecutive rays, traced in parallel; within a run, rays are put in order of the
+//! consecutive rays (shorter for a small batch, so every thread gets some), traced in
+//! parallel; within a run, rays are put in order of the
 //! subfield their direction picks (a stable counting sort, so neighbouring pixels stay
 //! together within a bin), traced in that order, and each result written straight to
 //! the ray's slot. Rays of one subfield then walk one grid and one set of tile lists one
@@ -17,6 +18,19 @@ use crate::geometry::Ray;
 /// data, few enough that two threads share a batch evenly.
 const RUN: usize = 4096;
 
+/// The shortest run a small batch is cut into, so that it still spreads over the
+/// threads: a still camera's mirror rays that a moving cloud may meet are ~1,700 a
+/// frame, each testing many of its triangles (10 ms a frame), and were one run on one
+/// thread whatever the thread count (`benches/PERF.md`, issue 38).
+const MIN_RUN: usize = 128;
+
+/// The run length for `n` rays: [`RUN`], or shorter so that every thread gets about
+/// eight runs, not below [`MIN_RUN`]. Each ray's answer does not depend on its run.
+fn run_for(n: usize) -> usize {
+    n.div_ceil(8 * rayon::current_num_threads().max(1))
+        .clamp(MIN_RUN, RUN)
+}
+
 /// `out[i] = f(&rays[i], key(&rays[i]))` for every ray, each run of [`RUN`] rays traced
 /// in order of the key (below `bins`).
 pub(crate) fn binned<T: Send + Copy>(
@@ -27,8 +41,9 @@ pub(crate) fn binned<T: Send + Copy>(
     f: impl Fn(&Ray, usize) -> T + Sync,
 ) {
     assert_eq!(rays.len(), out.len(), "one output slot per ray");
-    rays.par_chunks(RUN)
-        .zip(out.par_chunks_mut(RUN))
+    let run = run_for(rays.len());
+    rays.par_chunks(run)
+        .zip(out.par_chunks_mut(run))
         .for_each(|(rays, out)| {
             let mut keys = [0u16; RUN];
             let mut start = vec![0u32; bins + 1];
