@@ -17,6 +17,7 @@
 use bytemuck::{Pod, Zeroable};
 use rayon::prelude::*;
 
+use super::device::{storage_entry, uniform_entry};
 use super::moving::entry;
 use super::shade_tables::{CameraRays, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle};
 use super::trace::pack_ray;
@@ -53,9 +54,8 @@ pub struct ChunkOut {
     pub secondary_rays: u64,
 }
 
-/// Storage bindings of shade.wgsl (1..=22); 0 and 23 are uniforms.
-const BINDINGS: u32 = 22;
-/// The camera's uniform.
+/// The camera's uniform (shade.wgsl's bindings: 0 and this uniforms, 1..=22 and
+/// 24..=`LAST` storage).
 const CAMERA: u32 = 23;
 /// The last binding: 24..=26 are the next level's templates, uniforms and totals.
 const LAST: u32 = 26;
@@ -175,48 +175,14 @@ impl GpuShading {
             label: Some("shade.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("shade.wgsl").into()),
         });
-        let mut entries = vec![wgpu::BindGroupLayoutEntry {
-            binding: 0,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        }];
-        entries.extend((1..=BINDINGS).map(|binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: false },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        }));
-        entries.extend(
-            (CAMERA + 1..=LAST).map(|binding| wgpu::BindGroupLayoutEntry {
-                binding,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: false },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }),
-        );
-        entries.push(wgpu::BindGroupLayoutEntry {
-            binding: CAMERA,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        });
+        // The parameters (0) and the camera (`CAMERA`) uniform, every other binding
+        // storage.
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = (0..=LAST)
+            .map(|b| match b {
+                0 | CAMERA => uniform_entry(b),
+                _ => storage_entry(b, false),
+            })
+            .collect();
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frame"),
             entries: &entries,
