@@ -14,10 +14,16 @@ use crate::geometry::Ray;
 use crate::render::sampling::{sample_cosine, sample_ggx_vndf, smith_g1, Purpose};
 use crate::scene::Material;
 
-/// `x` to the whole power `n` by binary exponentiation (the same products in the same
-/// order as compiler-rt's `__powisf2`, which `f32::powi` calls, but inlined).
+/// `x` (at least 0) to the whole power `n` by binary exponentiation (the same products
+/// in the same order as compiler-rt's `__powisf2`, which `f32::powi` calls, but inlined),
+/// with results under `f32::MIN_POSITIVE` flushed to 0: a squaring that would leave the
+/// normal range stops the chain, because a product of subnormal floats takes a microcode
+/// assist (about a hundred cycles) on x86, and most points are far enough from a light's
+/// highlight that `nh^256` underflows (benches/PERF.md, issue 38, round 3).
 #[inline(always)]
 pub(super) fn powi(mut x: f32, mut n: u32) -> f32 {
+    // The square root of `f32::MIN_POSITIVE`, 2^-63: a smaller `x` squares to a subnormal.
+    const SQRT_MIN_POSITIVE: f32 = 1.084_202_2e-19;
     let mut r = 1.0;
     loop {
         if n & 1 == 1 {
@@ -25,7 +31,12 @@ pub(super) fn powi(mut x: f32, mut n: u32) -> f32 {
         }
         n >>= 1;
         if n == 0 {
-            return r;
+            return if r < f32::MIN_POSITIVE { 0.0 } else { r };
+        }
+        if x < SQRT_MIN_POSITIVE {
+            // `x² < MIN_POSITIVE` and `r ≤ 1` (`x < 1` from the start): the result is
+            // under the normal range.
+            return 0.0;
         }
         x *= x;
     }
@@ -364,12 +375,21 @@ mod tests {
     use super::*;
 
     #[test]
-    fn powi_is_the_library_power_to_the_bit() {
+    fn powi_is_the_library_power_to_the_bit_in_the_normal_range() {
         for n in [0u32, 1, 2, 5, 7, 64, 255, 256] {
-            for x in [0.0f32, 0.3, 0.9, 0.999_9, 1.0, 1.5] {
+            for x in [0.0f32, 0.3, 0.5, 0.71, 0.72, 0.9, 0.999_9, 1.0, 1.5] {
                 let n_ = std::hint::black_box(n as i32);
-                assert_eq!(powi(x, n).to_bits(), x.powi(n_).to_bits(), "{x}^{n}");
+                let lib = x.powi(n_);
+                let want = if lib < f32::MIN_POSITIVE { 0.0 } else { lib };
+                assert_eq!(powi(x, n).to_bits(), want.to_bits(), "{x}^{n}");
             }
+        }
+        // Near the edge of the normal range, where a subnormal is flushed to 0.
+        for i in 0..2000u32 {
+            let x = 0.70 + i as f32 * 1e-5;
+            let lib = x.powi(std::hint::black_box(256));
+            let want = if lib < f32::MIN_POSITIVE { 0.0 } else { lib };
+            assert_eq!(powi(x, 256).to_bits(), want.to_bits(), "{x}^256");
         }
     }
 
