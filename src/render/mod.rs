@@ -43,6 +43,7 @@ mod mips;
 mod options;
 mod output;
 mod planning;
+mod replay;
 mod sampling;
 mod sequence;
 mod shade;

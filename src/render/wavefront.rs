@@ -12,6 +12,7 @@ use super::aov::{project, rank, CryptoNames};
 use super::camera::CameraModel;
 use super::memo::{levels_kept, lights_kept, Mode, StaticMemo};
 use super::options::Aovs;
+use super::replay::{block_slots, shade_kept, BlockSlots, ShadeReplay};
 use super::sampling::Seed;
 use super::shade::{
     BlockOut, Cone, CryptoBuffers, FrameBuffers, FrameWork, Item, LightPathBuffers, ShadeContext,
@@ -67,6 +68,8 @@ pub struct FrameScratch {
     spare: Option<FrameBuffers>,
     /// The static answers of the last frame's camera and shadow rays.
     memo: StaticMemo,
+    /// The last frame's shading, where a still camera's rays repeat.
+    replay: ShadeReplay,
     /// Motion blur: the time step of each of the frame's samples, the samples of a
     /// chunk a step traces (chunk numbers), and each sample's Cryptomatte ids (object,
     /// material) until every step has traced.
@@ -509,6 +512,7 @@ fn trace_pass<T: Intersector>(
         blocked,
         spare: _,
         memo,
+        replay,
         sample_steps,
         picked,
         crypto_ids,
@@ -517,6 +521,9 @@ fn trace_pass<T: Intersector>(
     // The memo keeps a still camera's rays from frame to frame; a blurred frame's steps
     // each trace other samples (and a moving camera other rays), so it stands aside.
     let mode = memo.begin(camera, spp, w * h, layers.is_some() && pass.is_none());
+    // The shading of a still camera's rays, replayed where they repeat (one sample a
+    // pixel, as the memo; not with the passes' split).
+    let replayed = replay.begin(ctx, mode != Mode::Off && !light_paths, w * h);
     let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
     // The centre-ray AOVs: every frame's, or the one pass of a blurred frame that has them.
     let any_aov = aovs.any_centre() && pass.is_none_or(|p| p.aovs);
@@ -606,7 +613,12 @@ fn trace_pass<T: Intersector>(
             passes: 0,
             bounces: 0,
             diffuse: false,
-            seed: Seed::camera(frame, pixel(at.x), pixel(at.y), at.k),
+            // Made only when a ray of the frame can read it (`ShadeContext::random`).
+            seed: if ctx.random {
+                Seed::camera(frame, pixel(at.x), pixel(at.y), at.k)
+            } else {
+                Seed::default()
+            },
             cone,
             path: None,
         };
@@ -672,6 +684,33 @@ fn trace_pass<T: Intersector>(
             if outs.len() < blocks {
                 outs.resize_with(blocks, BlockOut::default);
             }
+            // The kept shading of this level's samples, cut by the blocks that own them
+            // (one sample a pixel: sample `s` of the chunk is slot `px0 + s`).
+            let mut slots: Vec<Option<BlockSlots<'_>>> = match replay.level(level) {
+                Some((kept, shadows, lights)) if level < replayed => {
+                    let (kept, shadows) = (&mut kept[px0..], &mut shadows[px0 * lights..]);
+                    let starts: Vec<usize> = (0..blocks)
+                        .map(|b| {
+                            if first {
+                                b * BLOCK
+                            } else {
+                                items[b * BLOCK].sample as usize
+                            }
+                        })
+                        .collect();
+                    block_slots(kept, shadows, lights, &starts)
+                        .into_iter()
+                        .map(Some)
+                        .collect()
+                }
+                _ => (0..blocks).map(|_| None).collect(),
+            };
+            // A deeper ray's slot: only a sample's one ray at the level is kept.
+            let alone = |i: usize| {
+                let s = items[i].sample;
+                (i == 0 || items[i - 1].sample != s)
+                    && items.get(i + 1).is_none_or(|n| n.sample != s)
+            };
             if first {
                 match sel {
                     // The camera rays: ray `i` is sample `i`.
@@ -679,14 +718,17 @@ fn trace_pass<T: Intersector>(
                         .par_iter_mut()
                         .zip(rays.par_chunks(BLOCK))
                         .zip(hits.par_chunks(BLOCK))
+                        .zip(slots.par_iter_mut())
                         .enumerate()
-                        .for_each(|(b, ((out, r), hs))| {
+                        .for_each(|(b, (((out, r), hs), slots))| {
                             out.clear();
                             out.light_paths = light_paths;
                             let mut at = walk(b * BLOCK);
                             for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
-                                let item = primary_item(b * BLOCK + k, &at);
-                                ctx.shade(ray, &item, *hit, max_depth, spp as u32, out);
+                                let s = b * BLOCK + k;
+                                let item = primary_item(s, &at);
+                                let slot = slots.as_mut().and_then(|v| v.get(s));
+                                shade_kept(ctx, ray, &item, *hit, max_depth, spp as u32, out, slot);
                                 at.advance();
                             }
                         }),
@@ -711,11 +753,17 @@ fn trace_pass<T: Intersector>(
                     .zip(rays.par_chunks(BLOCK))
                     .zip(items.par_chunks(BLOCK))
                     .zip(hits.par_chunks(BLOCK))
-                    .for_each(|(((out, r), it), hs)| {
+                    .zip(slots.par_iter_mut())
+                    .enumerate()
+                    .for_each(|(b, ((((out, r), it), hs), slots))| {
                         out.clear();
                         out.light_paths = light_paths;
-                        for ((ray, item), hit) in r.iter().zip(it).zip(hs) {
-                            ctx.shade(ray, item, *hit, max_depth, spp as u32, out);
+                        for (k, ((ray, item), hit)) in r.iter().zip(it).zip(hs).enumerate() {
+                            let slot = match slots.as_mut() {
+                                Some(v) if alone(b * BLOCK + k) => v.get(item.sample as usize),
+                                _ => None,
+                            };
+                            shade_kept(ctx, ray, item, *hit, max_depth, spp as u32, out, slot);
                         }
                     });
             }

@@ -77,6 +77,17 @@ pub fn quad(centre: Vec3, a: Vec3, b: Vec3, material: u32) -> Primitive {
 
 /// The test scene (1 s of animation, 24 fps recorded in `extras.fps`).
 pub fn scene() -> Scene {
+    scene_of(true)
+}
+
+/// The test scene without its emissive lamp (so no random numbers are drawn at one
+/// sample a pixel) and with the point light moving between frames 3 and 6 (0.125 s to
+/// 0.25 s) and still before and after.
+pub fn scene_without_emitters() -> Scene {
+    scene_of(false)
+}
+
+fn scene_of(lamp_on: bool) -> Scene {
     let mut b = SceneBuilder::new();
     let grey = b.add_material(diffuse("floor", Vec4::new(0.7, 0.7, 0.7, 1.0), 0.8));
     let mirror = b.add_material(Material {
@@ -94,24 +105,24 @@ pub fn scene() -> Scene {
         emissive: Vec3::new(1.0, 0.9, 0.6),
         ..diffuse("lamp", Vec4::ONE, 1.0)
     });
-    let statics = b.add_mesh(mesh(
-        "room",
-        vec![
-            quad(Vec3::ZERO, Vec3::Z * 5.0, Vec3::X * 5.0, grey),
-            quad(
-                Vec3::new(0.0, 1.5, -2.5),
-                Vec3::X * 2.0,
-                Vec3::Y * 1.5,
-                mirror,
-            ),
-            quad(
-                Vec3::new(3.0, 2.5, -2.0),
-                Vec3::X * 0.5,
-                Vec3::Y * 0.5,
-                lamp,
-            ),
-        ],
-    ));
+    let mut room_quads = vec![
+        quad(Vec3::ZERO, Vec3::Z * 5.0, Vec3::X * 5.0, grey),
+        quad(
+            Vec3::new(0.0, 1.5, -2.5),
+            Vec3::X * 2.0,
+            Vec3::Y * 1.5,
+            mirror,
+        ),
+    ];
+    if lamp_on {
+        room_quads.push(quad(
+            Vec3::new(3.0, 2.5, -2.0),
+            Vec3::X * 0.5,
+            Vec3::Y * 0.5,
+            lamp,
+        ));
+    }
+    let statics = b.add_mesh(mesh("room", room_quads));
     let glass_cube = b.add_mesh(mesh("glass", vec![cube(Vec3::splat(0.5), glass)]));
     let red_cube = b.add_mesh(mesh("mover", vec![cube(Vec3::new(0.4, 0.4, 0.4), red)]));
     let cam = b.add_camera(perspective("main", 0.8, None, 0.1, None));
@@ -185,35 +196,54 @@ pub fn scene() -> Scene {
     for n in [room, glass_node, mover, camera, side_cam, bulb, sun_node] {
         b.add_root(n);
     }
+    let mut bulb_keys = Vec::new();
+    if !lamp_on {
+        bulb_keys.push(linear(
+            bulb,
+            Property::Translation,
+            vec![0.0, 0.125, 0.25, 1.0],
+            vec![2.0, 4.0, 3.0, 2.0, 4.0, 3.0, 0.5, 3.5, 2.0, 0.5, 3.5, 2.0],
+        ));
+    }
     b.add_animation(Animation {
         name: Some("move".into()),
-        channels: vec![
-            linear(
-                mover,
-                Property::Translation,
-                vec![0.0, 1.0],
-                vec![1.0, 0.4, 0.5, 0.0, 1.2, 1.0],
-            ),
-            linear(
-                mover,
-                Property::Rotation,
-                vec![0.0, 1.0],
-                [
-                    Quat::IDENTITY.to_array(),
-                    Quat::from_rotation_y(1.5).to_array(),
-                ]
-                .concat(),
-            ),
-            linear(
-                camera,
-                Property::Translation,
-                vec![0.0, 1.0],
-                vec![0.0, 2.0, 6.0, 0.8, 2.2, 5.5],
-            ),
-        ],
+        channels: bulb_keys
+            .into_iter()
+            .chain([
+                linear(
+                    mover,
+                    Property::Translation,
+                    vec![0.0, 1.0],
+                    vec![1.0, 0.4, 0.5, 0.0, 1.2, 1.0],
+                ),
+                linear(
+                    mover,
+                    Property::Rotation,
+                    vec![0.0, 1.0],
+                    [
+                        Quat::IDENTITY.to_array(),
+                        Quat::from_rotation_y(1.5).to_array(),
+                    ]
+                    .concat(),
+                ),
+                linear(
+                    camera,
+                    Property::Translation,
+                    vec![0.0, 1.0],
+                    vec![0.0, 2.0, 6.0, 0.8, 2.2, 5.5],
+                ),
+            ])
+            .collect(),
     });
     b.scene.fps = Some(24.0);
     b.finish()
+}
+
+/// Writes [`scene_without_emitters`] as `dir/still.glb`.
+pub fn write_scene_without_emitters(dir: &Path) -> PathBuf {
+    let p = dir.join("still.glb");
+    subfield::import::write_gltf(&scene_without_emitters(), &p).unwrap();
+    p
 }
 
 /// Writes the test scene as `dir/scene.glb`.

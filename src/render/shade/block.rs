@@ -32,6 +32,77 @@ pub(in crate::render) struct Item {
     pub(in crate::render) path: Option<LightPath>,
 }
 
+impl Item {
+    /// No ray's bookkeeping (a placeholder).
+    pub(in crate::render) const NONE: Item = Item {
+        sample: u32::MAX,
+        weight: Vec3::ZERO,
+        coverage: 0.0,
+        depth: 0,
+        passes: 0,
+        bounces: 0,
+        diffuse: false,
+        seed: Seed(0),
+        cone: Cone {
+            width: 0.0,
+            spread: 0.0,
+        },
+        path: None,
+    };
+
+    /// The bits of every field, for an exact comparison.
+    #[inline]
+    pub(in crate::render) fn bits(&self) -> [u32; 12] {
+        [
+            self.sample,
+            self.weight.x.to_bits(),
+            self.weight.y.to_bits(),
+            self.weight.z.to_bits(),
+            self.coverage.to_bits(),
+            self.depth,
+            u32::from(self.passes) | u32::from(self.bounces) << 16 | u32::from(self.diffuse) << 24,
+            self.seed.0 as u32,
+            (self.seed.0 >> 32) as u32,
+            self.cone.width.to_bits(),
+            self.cone.spread.to_bits(),
+            self.path.map_or(u32::MAX, |p| p as u32),
+        ]
+    }
+}
+
+/// The most punctual lights whose shadow rays [`BlockOut::lengths`] follows (and the
+/// replay of a still camera's shading keeps, `render::replay`).
+pub(in crate::render) const REPLAY_LIGHTS: usize = 8;
+
+/// The lengths of a [`BlockOut`]'s lists at some point, to see what one ray's shading
+/// pushed.
+pub(in crate::render) struct Lengths {
+    add: usize,
+    split: usize,
+    cover: usize,
+    next: usize,
+    shadow: [usize; REPLAY_LIGHTS],
+    shadow_lists: usize,
+}
+
+impl Lengths {
+    /// Shadow batch `i`'s length (0 for a batch that was not there yet).
+    fn shadow_at(&self, i: usize) -> usize {
+        if i < self.shadow_lists {
+            self.shadow.get(i).copied().unwrap_or(usize::MAX)
+        } else {
+            0
+        }
+    }
+}
+
+/// Which of a [`BlockOut`]'s lists one ray's shading pushed to (one element each).
+pub(in crate::render) struct Pushed {
+    pub(in crate::render) add: bool,
+    pub(in crate::render) cover: bool,
+    pub(in crate::render) next: bool,
+}
+
 /// A block's shadow rays towards one light, each with what it adds to which sample
 /// when unblocked.
 #[derive(Default)]
@@ -110,8 +181,76 @@ impl BlockOut {
             l.split.push(split());
         }
     }
-    pub(super) fn next(&mut self, ray: Ray, item: Item) {
+    pub(in crate::render) fn next(&mut self, ray: Ray, item: Item) {
         self.next_rays.push(ray);
         self.next_items.push(item);
+    }
+
+    /// A shadow ray towards batch `light` that adds `add.1` to sample `add.0` when
+    /// unblocked (without the passes' split: not for [`BlockOut::light_paths`]).
+    pub(in crate::render) fn push_shadow(&mut self, ray: Ray, light: usize, add: (u32, Vec3)) {
+        if self.shadow.len() <= light {
+            self.shadow.resize_with(light + 1, ShadowList::default);
+        }
+        let l = &mut self.shadow[light];
+        l.rays.push(ray);
+        l.add.push(add);
+    }
+
+    /// The lists' lengths now (the shadow lists of the first `lights` batches, at most
+    /// [`REPLAY_LIGHTS`]).
+    pub(in crate::render) fn lengths(&self, lights: usize) -> Lengths {
+        let mut shadow = [0; REPLAY_LIGHTS];
+        for (n, l) in shadow.iter_mut().zip(self.shadow.iter().take(lights)) {
+            *n = l.rays.len();
+        }
+        Lengths {
+            add: self.add.len(),
+            split: self.split.len(),
+            cover: self.cover.len(),
+            next: self.next_rays.len(),
+            shadow,
+            shadow_lists: self.shadow.len(),
+        }
+    }
+
+    /// What was pushed since `before`, where that was at most one element to each list
+    /// and nothing to the passes' splits or to a shadow batch past the first `lights`;
+    /// else `None`.
+    pub(in crate::render) fn pushed_since(
+        &self,
+        before: &Lengths,
+        lights: usize,
+    ) -> Option<Pushed> {
+        let grew = |now: usize, then: usize| now.checked_sub(then).filter(|d| *d <= 1);
+        let add = grew(self.add.len(), before.add)?;
+        let cover = grew(self.cover.len(), before.cover)?;
+        let next = grew(self.next_rays.len(), before.next)?;
+        // Without random numbers (the replay's condition) no area light is sampled, so
+        // the punctual lights' batches are all there are.
+        if self.split.len() != before.split || lights > REPLAY_LIGHTS || self.shadow.len() > lights
+        {
+            return None;
+        }
+        for (i, l) in self.shadow.iter().enumerate() {
+            grew(l.rays.len(), before.shadow_at(i))?;
+        }
+        Some(Pushed {
+            add: add == 1,
+            cover: cover == 1,
+            next: next == 1,
+        })
+    }
+
+    /// The shadow ray batch `light` got since `before` (one at most, see
+    /// [`BlockOut::pushed_since`]), with its contribution.
+    pub(in crate::render) fn last_shadow_since(
+        &self,
+        before: &Lengths,
+        light: usize,
+    ) -> Option<(Ray, (u32, Vec3))> {
+        let l = self.shadow.get(light)?;
+        let then = before.shadow_at(light);
+        (l.rays.len() > then).then(|| (l.rays[l.rays.len() - 1], l.add[l.add.len() - 1]))
     }
 }

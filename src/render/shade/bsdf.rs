@@ -42,6 +42,17 @@ pub(super) fn powi(mut x: f32, mut n: u32) -> f32 {
     }
 }
 
+/// Whether a surface of material `m` may reflect through the GGX lobe (a random
+/// direction), as [`ShadeContext::lobes`] decides: a roughness texture can only lower the
+/// factor's roughness, so with one any factor may.
+pub(super) fn may_be_glossy(m: &Material) -> bool {
+    if m.metallic_roughness_texture.is_some() {
+        return true;
+    }
+    let roughness = m.roughness.clamp(0.0, 1.0);
+    roughness < GLOSSY_LIMIT && roughness * roughness >= MIRROR_ALPHA
+}
+
 /// What a surface's material makes of light, as [`ShadeContext::lobes`] finds it.
 #[derive(Clone, Copy)]
 pub(super) struct Lobes {
@@ -102,6 +113,7 @@ pub(super) fn secondary(
     eps: f32,
     origin: Vec3,
     cone: Cone,
+    random: bool,
     out: &mut BlockOut,
 ) {
     let (eta, kt, mut kr) = (lobes.eta, lobes.kt, lobes.kr);
@@ -113,7 +125,12 @@ pub(super) fn secondary(
         passes: item.passes,
         bounces: item.bounces,
         diffuse: false,
-        seed: item.seed.child(kind),
+        // Derived only when a ray can read it (`ShadeContext::random`).
+        seed: if random {
+            item.seed.child(kind)
+        } else {
+            item.seed
+        },
         cone: Cone {
             width: cone.width,
             spread,
@@ -265,7 +282,10 @@ impl ShadeContext<'_> {
         let fresnel = if transmission > 0.0 {
             Vec3::splat(fresnel_dielectric(cos_o, eta))
         } else {
-            f0 + (Vec3::ONE - f0) * (1.0 - cos_o).powi(5)
+            // `x⁵` as `f32::powi(x, 5)` multiplies, inlined (it was a call).
+            let x = 1.0 - cos_o;
+            let x2 = x * x;
+            f0 + (Vec3::ONE - f0) * (x * (x2 * x2))
         };
         let reflects = roughness < GLOSSY_LIMIT;
         let alpha = roughness * roughness;

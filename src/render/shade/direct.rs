@@ -25,9 +25,53 @@ pub(in crate::render) struct PreLight {
     pub(in crate::render) falloff: Falloff,
 }
 
+impl PreLight {
+    /// The bits of every field, for an exact comparison.
+    pub(in crate::render) fn bits(&self) -> [u32; 15] {
+        let (kind, a, b) = match self.kind {
+            LightKind::Directional => (0, 0, 0),
+            LightKind::Point => (1, 0, 0),
+            LightKind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => (2, inner_cone_angle.to_bits(), outer_cone_angle.to_bits()),
+            // Kinds added later: never equal to the frame before (no replay).
+            #[allow(unreachable_patterns)]
+            _ => (u32::MAX, 0, 0),
+        };
+        let v = |v: Vec3| [v.x.to_bits(), v.y.to_bits(), v.z.to_bits()];
+        let [px, py, pz] = v(self.power);
+        let [ox, oy, oz] = v(self.position);
+        let [dx, dy, dz] = v(self.direction);
+        [
+            kind,
+            a,
+            b,
+            px,
+            py,
+            pz,
+            ox,
+            oy,
+            oz,
+            dx,
+            dy,
+            dz,
+            self.range.map_or(u32::MAX, f32::to_bits),
+            u32::from(self.range.is_some()),
+            match self.falloff {
+                Falloff::None => 0,
+                Falloff::InverseSquare => 1,
+                #[allow(unreachable_patterns)]
+                _ => u32::MAX,
+            },
+        ]
+    }
+}
+
 /// The direction towards light `l` from `origin`, its distance (infinite for a
 /// directional light) and the irradiance it brings there (range and cone applied);
 /// `None` at the light itself or where the numbers overflow.
+#[inline]
 pub(super) fn light_at(l: &PreLight, origin: Vec3) -> Option<(Vec3, f32, Vec3)> {
     Some(match l.kind {
         LightKind::Directional => (-l.direction, f32::INFINITY, l.power),

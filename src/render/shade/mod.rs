@@ -76,7 +76,7 @@ use crate::geometry::{Hit, Ray};
 use crate::psf::Prim;
 use crate::scene::{Falloff, Light, LightKind, Material, Scene, TriangleSoup};
 
-pub(in crate::render) use block::{BlockOut, Item};
+pub(in crate::render) use block::{BlockOut, Item, REPLAY_LIGHTS};
 use bsdf::{diffuse_bounce, pass_through, secondary};
 use direct::PreLight;
 use frame::split_one;
@@ -97,6 +97,10 @@ pub struct ShadeContext<'a> {
     mips: &'a TextureMips,
     /// glTF's default material, for triangles without one (made once, not a hit).
     default_material: Material,
+    /// Whether any ray of the frame can draw random numbers (area lights, diffuse
+    /// bounces, a glossy lobe). Without, no ray's seed is ever read, so none is made:
+    /// a camera ray's is four rounds of a hash (benches/PERF.md, issue 38, round 3).
+    pub(in crate::render) random: bool,
 }
 
 /// Passes through alpha-cut surfaces a ray may make.
@@ -172,6 +176,14 @@ impl<'a> ShadeContext<'a> {
             // Traced bounce light replaces the stand-in.
             options.ambient = Vec3::ZERO;
         }
+        let default_material = Material::default();
+        let random = !area.is_empty()
+            || options.diffuse_bounces > 0
+            || scene
+                .materials
+                .iter()
+                .chain(std::iter::once(&default_material))
+                .any(bsdf::may_be_glossy);
         ShadeContext {
             scene,
             static_soup,
@@ -185,7 +197,8 @@ impl<'a> ShadeContext<'a> {
             lights: pre,
             area,
             mips,
-            default_material: Material::default(),
+            default_material,
+            random,
         }
     }
 
@@ -322,6 +335,16 @@ impl<'a> ShadeContext<'a> {
         if item.depth >= max_depth {
             return;
         }
-        secondary(&s, &lobes, item, weight, eps, origin, cone, out);
+        secondary(
+            &s,
+            &lobes,
+            item,
+            weight,
+            eps,
+            origin,
+            cone,
+            self.random,
+            out,
+        );
     }
 }

@@ -1,0 +1,341 @@
+//! A still camera's shading, kept from frame to frame and replayed.
+//!
+//! Shading a ray ([`ShadeContext::shade`]) is a function of the ray, its bookkeeping
+//! ([`Item`]), its hit and the frame's shading context: where the triangle hit is static
+//! and the context has not changed (the same lights to the bit, the same scene extent,
+//! no random numbers drawn), the same three give the same contributions, the same shadow
+//! rays and the same next ray, to the bit. A camera that stays put sends the same camera
+//! rays every frame, and most of them meet the same static triangle and spawn the same
+//! mirror rays; so per sample and level the ray, item and hit are kept with what their
+//! shading pushed, and a ray equal to the kept one in all three gets the kept pushes
+//! instead of being shaded again (benches/PERF.md, issue 38, round 3). Anything else (a
+//! moving triangle hit, a mover in front, a ray that pushed more than one of a kind) is
+//! shaded as always, and kept for the next frame where it can be.
+//!
+//! Only for one sample a pixel (the sample is the pixel), without the light-path passes
+//! or motion blur, and where the memo of static hits serves (a still camera): a moving
+//! camera's rays never repeat, so keeping them would only cost.
+//!
+//! Memory: 216 bytes a pixel and level ([`Kept`]) plus 52 a pixel, light and level,
+//! within [`REPLAY_BYTES`] for every level together: the camera rays and the mirror
+//! level at 640x480 with one light (157 MB), the camera rays alone at 1280x720 (247 MB),
+//! nothing at 1920x1080; nothing either with more than [`REPLAY_LIGHTS`] lights. A test
+//! holds these numbers.
+
+use glam::Vec3;
+
+use super::shade::{BlockOut, Item, ShadeContext, REPLAY_LIGHTS};
+use crate::geometry::{Hit, Ray};
+use crate::psf::Prim;
+
+/// The memory every level's kept shading may take together.
+pub(super) const REPLAY_BYTES: usize = 256 << 20;
+
+/// Levels whose shading is kept, at most (the camera rays' and the mirror's).
+const REPLAY_LEVELS: usize = 2;
+
+/// One sample's shading at one level: the ray, item and hit it was shaded for, and what
+/// it pushed (at most one of each kind; its shadow rays are in [`ShadeReplay`]'s
+/// `shadows`).
+#[derive(Clone, Copy)]
+pub(super) struct Kept {
+    valid: bool,
+    ray: Ray,
+    item: Item,
+    hit: Hit,
+    add: Option<(u32, Vec3)>,
+    cover: Option<(u32, f32)>,
+    next: Option<(Ray, Item)>,
+}
+
+const EMPTY: Kept = Kept {
+    valid: false,
+    ray: Ray {
+        origin: Vec3::ZERO,
+        dir: Vec3::ZERO,
+        t_min: 0.0,
+        t_max: 0.0,
+    },
+    item: Item::NONE,
+    hit: Hit {
+        t: 0.0,
+        tri: u32::MAX,
+        u: 0.0,
+        v: 0.0,
+    },
+    add: None,
+    cover: None,
+    next: None,
+};
+
+/// A kept shadow ray: the ray and what it adds to which sample when unblocked.
+pub(super) type KeptShadow = Option<(Ray, (u32, Vec3))>;
+
+/// The shading kept from the frames before (see the module's notes).
+#[derive(Default)]
+pub(super) struct ShadeReplay {
+    /// The context the kept shading was made in: the scene's extent and the lights, as
+    /// bits.
+    key: Vec<u32>,
+    /// Per level, per sample.
+    kept: Vec<Vec<Kept>>,
+    /// Per level, per sample and punctual light (`sample * lights + light`).
+    shadows: Vec<Vec<KeptShadow>>,
+    lights: usize,
+}
+
+/// The levels the replay keeps for `samples` samples and `lights` punctual lights (none
+/// beyond [`REPLAY_LIGHTS`] lights).
+pub(super) fn levels_replayed(samples: usize, lights: usize) -> usize {
+    if lights > REPLAY_LIGHTS {
+        return 0;
+    }
+    let per_level =
+        samples.max(1) * (std::mem::size_of::<Kept>() + lights * std::mem::size_of::<KeptShadow>());
+    (REPLAY_BYTES / per_level).min(REPLAY_LEVELS)
+}
+
+/// The bits of the shading context that may change from frame to frame.
+fn key_of(ctx: &ShadeContext<'_>) -> Vec<u32> {
+    let mut k = vec![ctx.extent.to_bits(), ctx.lights.len() as u32];
+    for l in &ctx.lights {
+        k.extend(l.bits());
+    }
+    k
+}
+
+impl ShadeReplay {
+    /// Starts a frame of `samples` samples: `on` where the replay may serve (see the
+    /// module's notes). Kept shading made in another context is dropped. The levels it
+    /// keeps this frame.
+    pub(super) fn begin(&mut self, ctx: &ShadeContext<'_>, on: bool, samples: usize) -> usize {
+        let lights = ctx.punctual_lights();
+        let levels = if on && !ctx.random {
+            levels_replayed(samples, lights)
+        } else {
+            0
+        };
+        if levels == 0 {
+            // Nothing kept while off: the memory goes back.
+            *self = ShadeReplay::default();
+            return 0;
+        }
+        let key = key_of(ctx);
+        let fits = self.key == key
+            && self.lights == lights
+            && self.kept.len() == levels
+            && self.kept.iter().all(|k| k.len() == samples);
+        if !fits {
+            self.key = key;
+            self.lights = lights;
+            self.kept = vec![vec![EMPTY; samples]; levels];
+            self.shadows = vec![vec![None; samples * lights]; levels];
+        }
+        levels
+    }
+
+    /// Level `level`'s kept shading and shadow rays, if it keeps any.
+    pub(super) fn level(
+        &mut self,
+        level: usize,
+    ) -> Option<(&mut [Kept], &mut [KeptShadow], usize)> {
+        let lights = self.lights;
+        match (self.kept.get_mut(level), self.shadows.get_mut(level)) {
+            (Some(k), Some(s)) => Some((k, s, lights)),
+            _ => None,
+        }
+    }
+}
+
+/// The bits of a ray.
+#[inline]
+fn ray_bits(r: &Ray) -> [u32; 8] {
+    [
+        r.origin.x.to_bits(),
+        r.origin.y.to_bits(),
+        r.origin.z.to_bits(),
+        r.dir.x.to_bits(),
+        r.dir.y.to_bits(),
+        r.dir.z.to_bits(),
+        r.t_min.to_bits(),
+        r.t_max.to_bits(),
+    ]
+}
+
+#[inline]
+fn hit_bits(h: &Hit) -> [u32; 4] {
+    [h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits()]
+}
+
+/// Shades `ray` (its `item`, its `hit`) into `out`, or replays what `slot` kept for the
+/// same three; keeps what the shading pushed in `slot` where it can (a static hit, at
+/// most one push of each kind). `slot` `None`: shaded as always.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+pub(super) fn shade_kept(
+    ctx: &ShadeContext<'_>,
+    ray: &Ray,
+    item: &Item,
+    hit: Option<Hit>,
+    max_depth: u32,
+    spp: u32,
+    out: &mut BlockOut,
+    slot: Option<(&mut Kept, &mut [KeptShadow])>,
+) {
+    let Some((kept, shadows)) = slot else {
+        ctx.shade(ray, item, hit, max_depth, spp, out);
+        return;
+    };
+    let static_hit = hit.filter(|h| {
+        matches!(
+            Prim::from_index(h.tri, ctx.static_soup.len()),
+            Prim::Static(_)
+        )
+    });
+    let Some(h) = static_hit else {
+        kept.valid = false;
+        ctx.shade(ray, item, hit, max_depth, spp, out);
+        return;
+    };
+    if kept.valid
+        && hit_bits(&kept.hit) == hit_bits(&h)
+        && ray_bits(&kept.ray) == ray_bits(ray)
+        && kept.item.bits() == item.bits()
+    {
+        if let Some(a) = kept.add {
+            out.add.push(a);
+        }
+        if let Some(c) = kept.cover {
+            out.cover.push(c);
+        }
+        for (light, s) in shadows.iter().enumerate() {
+            if let Some((r, add)) = s {
+                out.push_shadow(*r, light, *add);
+            }
+        }
+        if let Some((r, i)) = kept.next {
+            out.next(r, i);
+        }
+        return;
+    }
+    let before = out.lengths(shadows.len());
+    ctx.shade(ray, item, hit, max_depth, spp, out);
+    kept.valid = false;
+    let Some(pushed) = out.pushed_since(&before, shadows.len()) else {
+        return;
+    };
+    kept.ray = *ray;
+    kept.item = *item;
+    kept.hit = h;
+    kept.add = pushed.add.then(|| out.add[out.add.len() - 1]);
+    kept.cover = pushed.cover.then(|| out.cover[out.cover.len() - 1]);
+    kept.next = pushed.next.then(|| {
+        let n = out.next_rays.len() - 1;
+        (out.next_rays[n], out.next_items[n])
+    });
+    for (light, s) in shadows.iter_mut().enumerate() {
+        *s = out.last_shadow_since(&before, light);
+    }
+    kept.valid = true;
+}
+
+/// The kept slots one block of rays owns: from sample `start` on.
+pub(super) struct BlockSlots<'a> {
+    start: usize,
+    kept: &'a mut [Kept],
+    shadows: &'a mut [KeptShadow],
+    lights: usize,
+}
+
+impl BlockSlots<'_> {
+    /// Sample `s`'s slot, if this block owns it.
+    #[inline]
+    pub(super) fn get(&mut self, s: usize) -> Option<(&mut Kept, &mut [KeptShadow])> {
+        let i = s.checked_sub(self.start)?;
+        let kept = self.kept.get_mut(i)?;
+        let shadows = self
+            .shadows
+            .get_mut(i * self.lights..(i + 1) * self.lights)?;
+        Some((kept, shadows))
+    }
+}
+
+/// A level's slots cut into what each block of rays owns: block `b` the samples from
+/// `starts[b]` up to the next block's start (the last block up to the end). `starts`
+/// must not decrease (a level's rays are in sample order); a sample two blocks share
+/// belongs to the first, and is not kept anyway (it has more than one ray).
+pub(super) fn block_slots<'a>(
+    kept: &'a mut [Kept],
+    shadows: &'a mut [KeptShadow],
+    lights: usize,
+    starts: &[usize],
+) -> Vec<BlockSlots<'a>> {
+    let mut out = Vec::with_capacity(starts.len());
+    let (mut kept, mut shadows) = (kept, shadows);
+    let mut at = starts.first().copied().unwrap_or(0).min(kept.len());
+    let skip = (at * lights).min(shadows.len());
+    kept = &mut kept[at..];
+    shadows = &mut shadows[skip..];
+    for (b, &start) in starts.iter().enumerate() {
+        let end = starts
+            .get(b + 1)
+            .copied()
+            .unwrap_or(usize::MAX)
+            .max(start)
+            .min(at + kept.len());
+        let n = end.saturating_sub(at);
+        let (k, rest) = std::mem::take(&mut kept).split_at_mut(n);
+        let cut = (n * lights).min(shadows.len());
+        let (s, srest) = std::mem::take(&mut shadows).split_at_mut(cut);
+        out.push(BlockSlots {
+            start: at,
+            kept: k,
+            shadows: s,
+            lights,
+        });
+        kept = rest;
+        shadows = srest;
+        at = end;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn what_is_kept_at_each_size_is_as_documented() {
+        let kept = std::mem::size_of::<Kept>();
+        let shadow = std::mem::size_of::<KeptShadow>();
+        println!("Kept: {kept} bytes, a shadow: {shadow} bytes");
+        assert_eq!(levels_replayed(640 * 480, 1), 2);
+        assert_eq!(levels_replayed(1280 * 720, 1), 1);
+        assert_eq!(levels_replayed(1920 * 1080, 1), 0);
+        assert_eq!(levels_replayed(640 * 480, REPLAY_LIGHTS + 1), 0);
+        // Two levels at 640x480 with one light, in the module's notes: about 150 MB.
+        let two = 2 * 640 * 480 * (kept + shadow);
+        assert!((140 << 20..=160 << 20).contains(&two), "{two} bytes");
+    }
+
+    #[test]
+    fn each_block_owns_the_samples_from_its_start_to_the_next() {
+        let mut kept = vec![EMPTY; 10];
+        let mut shadows = vec![None; 20];
+        let mut views = block_slots(&mut kept, &mut shadows, 2, &[1, 3, 3, 7]);
+        let owned: Vec<Vec<usize>> = views
+            .iter_mut()
+            .map(|v| (0..12).filter(|&s| v.get(s).is_some()).collect())
+            .collect();
+        assert_eq!(
+            owned,
+            vec![vec![1, 2], vec![], vec![3, 4, 5, 6], vec![7, 8, 9]]
+        );
+        // Sample 4's two shadow slots are its own.
+        let (_, sh) = views[2].get(4).unwrap();
+        assert_eq!(sh.len(), 2);
+        sh[1] = Some((EMPTY.ray, (4, Vec3::ONE)));
+        drop(views);
+        assert!(shadows[9].is_some() && shadows.iter().filter(|s| s.is_some()).count() == 1);
+    }
+}
