@@ -83,22 +83,27 @@ fn frames_do_not_depend_on_the_thread_count() {
     assert_eq!(snapshot(&dir.join("t1")), a);
 }
 
-/// A camera that stays put (the side camera) at one sample a pixel: from the second
-/// frame on, the camera rays' static hits and the shadow rays' static answers are the
-/// ones kept from the frame before, and so are those of the mirror's and the glass's
-/// rays two levels down (`--max-depth 2`); only the moving cube is traced again. Every
-/// frame must be the bytes it is when rendered alone (nothing kept to reuse), AOVs
-/// included, whatever the thread count; and a camera that moves in some frames and stays
-/// in others changes nothing either.
-#[test]
-fn a_still_camera_reuses_static_hits_and_frames_stay_the_same() {
-    let dir = temp_dir("memo");
-    let scene = write_scene(&dir);
-    let render = |sub: &str, frames: &str, camera: &str, threads: &str| {
+/// Frame `k` of the render into `dir/sub` (`f.##.exr`).
+fn frame_of(dir: &Path, sub: &str, k: u32) -> Vec<u8> {
+    std::fs::read(dir.join(format!("{sub}/f.{k:02}.exr"))).unwrap()
+}
+
+/// Renders `frames` of `scene` through `camera` (96x72, `--max-depth 2`, `--aov aovs`)
+/// into `dir/name` on 2 threads and `dir/name1` on 1, and each frame of `check` alone,
+/// and asserts that each of those frames is the same bytes in all three.
+fn sequence_is_its_frames_alone(
+    dir: &Path,
+    scene: &Path,
+    (name, camera): (&str, &str),
+    frames: &str,
+    check: &[u32],
+    aovs: &str,
+) {
+    let render = |sub: &str, frames: &str, threads: &str| {
         let out = dir.join(format!("{sub}/f.##.exr"));
         ok(&[
             "render",
-            s(&scene),
+            s(scene),
             "-o",
             s(&out),
             "--frames",
@@ -110,31 +115,44 @@ fn a_still_camera_reuses_static_hits_and_frames_stay_the_same() {
             "--max-depth",
             "2",
             "--aov",
-            ALL_AOVS,
+            aovs,
             "--threads",
             threads,
             "--quiet",
         ]);
     };
-    let frame = |sub: &str, k: u32| std::fs::read(dir.join(format!("{sub}/f.{k:02}.exr"))).unwrap();
-    for (camera, name) in [("side camera", "still"), ("main", "moving")] {
-        render(name, "0..8", camera, "2");
-        render(&format!("{name}1"), "0..8", camera, "1");
-        for k in [0, 1, 4, 7] {
-            let alone = format!("{name}-alone{k}");
-            render(&alone, &k.to_string(), camera, "2");
-            assert!(
-                frame(name, k) == frame(&alone, k),
-                "{name} camera: frame {k} of a sequence differs from the frame rendered alone"
-            );
-            assert!(
-                frame(name, k) == frame(&format!("{name}1"), k),
-                "{name} camera: frame {k} differs between 1 and 2 threads"
-            );
-        }
+    render(name, frames, "2");
+    render(&format!("{name}1"), frames, "1");
+    for &k in check {
+        let alone = format!("{name}-alone{k}");
+        render(&alone, &k.to_string(), "2");
+        assert!(
+            frame_of(dir, name, k) == frame_of(dir, &alone, k),
+            "{name} camera: frame {k} of a sequence differs from the frame rendered alone"
+        );
+        assert!(
+            frame_of(dir, name, k) == frame_of(dir, &format!("{name}1"), k),
+            "{name} camera: frame {k} differs between 1 and 2 threads"
+        );
+    }
+}
+
+/// A camera that stays put (the side camera) at one sample a pixel: from the second
+/// frame on, the camera rays' static hits and the shadow rays' static answers are the
+/// ones kept from the frame before, and so are those of the mirror's and the glass's
+/// rays two levels down (`--max-depth 2`); only the moving cube is traced again. Every
+/// frame must be the bytes it is when rendered alone (nothing kept to reuse), AOVs
+/// included, whatever the thread count; and a camera that moves in some frames and stays
+/// in others changes nothing either.
+#[test]
+fn a_still_camera_reuses_static_hits_and_frames_stay_the_same() {
+    let dir = temp_dir("memo");
+    let scene = write_scene(&dir);
+    for camera in [("still", "side camera"), ("moving", "main")] {
+        sequence_is_its_frames_alone(&dir, &scene, camera, "0..8", &[0, 1, 4, 7], ALL_AOVS);
     }
     // The cube moves in front of the still camera: the frames are not all one picture.
-    assert!(frame("still", 0) != frame("still", 7));
+    assert!(frame_of(&dir, "still", 0) != frame_of(&dir, "still", 7));
 }
 
 /// A still camera at one sample a pixel in a scene without emitters (no random numbers):
@@ -148,46 +166,18 @@ fn a_still_camera_reuses_static_hits_and_frames_stay_the_same() {
 fn a_still_camera_replays_its_shading_and_frames_stay_the_same() {
     let dir = temp_dir("replay");
     let scene = write_scene_without_emitters(&dir);
-    let render = |sub: &str, frames: &str, threads: &str| {
-        let out = dir.join(format!("{sub}/f.##.exr"));
-        ok(&[
-            "render",
-            s(&scene),
-            "-o",
-            s(&out),
-            "--frames",
-            frames,
-            "--size",
-            "96x72",
-            "--camera",
-            "side camera",
-            "--max-depth",
-            "2",
-            "--aov",
-            "Z,N",
-            "--threads",
-            threads,
-            "--quiet",
-        ]);
-    };
-    let frame = |sub: &str, k: u32| std::fs::read(dir.join(format!("{sub}/f.{k:02}.exr"))).unwrap();
-    render("seq", "0..12", "2");
-    render("seq1", "0..12", "1");
-    for k in [0, 2, 4, 5, 7, 11] {
-        let alone = format!("alone{k}");
-        render(&alone, &k.to_string(), "2");
-        assert!(
-            frame("seq", k) == frame(&alone, k),
-            "frame {k} of a still camera's sequence differs from the frame rendered alone"
-        );
-        assert!(
-            frame("seq", k) == frame("seq1", k),
-            "frame {k} differs between 1 and 2 threads"
-        );
-    }
+    let checked = [0, 2, 4, 5, 7, 11];
+    sequence_is_its_frames_alone(
+        &dir,
+        &scene,
+        ("seq", "side camera"),
+        "0..12",
+        &checked,
+        "Z,N",
+    );
     // The light moves: frames 2 and 7 differ; the cube moves: 7 and 11 differ.
-    assert!(frame("seq", 2) != frame("seq", 7));
-    assert!(frame("seq", 7) != frame("seq", 11));
+    assert!(frame_of(&dir, "seq", 2) != frame_of(&dir, "seq", 7));
+    assert!(frame_of(&dir, "seq", 7) != frame_of(&dir, "seq", 11));
 }
 
 #[test]

@@ -44,6 +44,22 @@ impl Ray {
         self.origin + self.dir * t
     }
 
+    /// The bits of its numbers, for an exact comparison (`-0.0` is not `0.0` here, and a
+    /// NaN is itself).
+    #[inline]
+    pub fn bits(&self) -> [u32; 8] {
+        [
+            self.origin.x.to_bits(),
+            self.origin.y.to_bits(),
+            self.origin.z.to_bits(),
+            self.dir.x.to_bits(),
+            self.dir.y.to_bits(),
+            self.dir.z.to_bits(),
+            self.t_min.to_bits(),
+            self.t_max.to_bits(),
+        ]
+    }
+
     /// A ray is traceable when its numbers are finite and its direction is not zero.
     /// Queries on other rays return no hit.
     pub fn is_valid(&self) -> bool {

@@ -100,23 +100,10 @@ pub(super) struct StaticMemo {
     answers: Vec<bool>,
 }
 
-/// The bits of a ray, for an exact comparison (`-0.0` is not `0.0` here, and a NaN is
-/// itself).
+/// The same ray to the bit ([`Ray::bits`]).
 #[inline]
 fn same(a: &Ray, b: &Ray) -> bool {
-    let bits = |r: &Ray| {
-        [
-            r.origin.x.to_bits(),
-            r.origin.y.to_bits(),
-            r.origin.z.to_bits(),
-            r.dir.x.to_bits(),
-            r.dir.y.to_bits(),
-            r.dir.z.to_bits(),
-            r.t_min.to_bits(),
-            r.t_max.to_bits(),
-        ]
-    };
-    bits(a) == bits(b)
+    a.bits() == b.bits()
 }
 
 /// A slot no shadow ray has filled: a ray of zero direction, which every query answers

@@ -147,21 +147,6 @@ impl ShadeReplay {
     }
 }
 
-/// The bits of a ray.
-#[inline]
-fn ray_bits(r: &Ray) -> [u32; 8] {
-    [
-        r.origin.x.to_bits(),
-        r.origin.y.to_bits(),
-        r.origin.z.to_bits(),
-        r.dir.x.to_bits(),
-        r.dir.y.to_bits(),
-        r.dir.z.to_bits(),
-        r.t_min.to_bits(),
-        r.t_max.to_bits(),
-    ]
-}
-
 #[inline]
 fn hit_bits(h: &Hit) -> [u32; 4] {
     [h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits()]
@@ -199,7 +184,7 @@ pub(super) fn shade_kept(
     };
     if kept.valid
         && hit_bits(&kept.hit) == hit_bits(&h)
-        && ray_bits(&kept.ray) == ray_bits(ray)
+        && kept.ray.bits() == ray.bits()
         && kept.item.bits() == item.bits()
     {
         if let Some(a) = kept.add {
