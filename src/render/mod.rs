@@ -163,11 +163,14 @@ pub enum RenderError {
     #[error("the frame writer stopped unexpectedly")]
     WriterGone,
     /// The GPU tracer (`--device gpu`): no adapter, a scene too large for it, or the
-    /// device failing mid-run (the frame in flight is not written).
+    /// device failing mid-run (the frame in flight, `frame`, is not written; the frames
+    /// before it are, and `--resume` carries on from it).
     #[cfg(feature = "gpu")]
-    #[error("--device {device}: {source}")]
+    #[error("--device {device}: {}{source}", frame.map(|f| format!("frame {f}: ")).unwrap_or_default())]
     Gpu {
         device: &'static str,
+        /// The frame being rendered when it failed (`None`: before the first).
+        frame: Option<u32>,
         #[source]
         source: crate::gpu::GpuError,
     },
@@ -179,6 +182,24 @@ pub enum RenderError {
 }
 
 impl RenderError {
+    /// The error as it stopped the rendering of `frame`: a GPU fault names the frame
+    /// (the one line a render prints then says which frame was lost and why).
+    pub(crate) fn in_frame(self, frame: u32) -> RenderError {
+        match self {
+            #[cfg(feature = "gpu")]
+            RenderError::Gpu {
+                device,
+                frame: None,
+                source,
+            } => RenderError::Gpu {
+                device,
+                frame: Some(frame),
+                source,
+            },
+            e => e,
+        }
+    }
+
     /// An error opening the baked file `path`, naming it (an I/O error names it already).
     pub(crate) fn baked(path: &std::path::Path, e: FormatError) -> RenderError {
         match e {
@@ -250,4 +271,33 @@ pub struct RenderSummary {
     pub preview: Option<PathBuf>,
     pub static_seconds: f64,
     pub wall: Duration,
+}
+
+#[cfg(all(test, feature = "gpu"))]
+mod tests {
+    use super::RenderError;
+    use crate::gpu::GpuError;
+
+    #[test]
+    fn a_gpu_fault_in_a_frame_names_the_frame_and_the_cause() {
+        let lost = || RenderError::Gpu {
+            device: "gpu",
+            frame: None,
+            source: GpuError::OutOfMemory("a buffer of 2 GiB".into()),
+        };
+        assert_eq!(
+            lost().in_frame(12).to_string(),
+            "--device gpu: frame 12: the GPU ran out of memory (a buffer of 2 GiB)"
+        );
+        // Before any frame (opening the device): no frame to name.
+        assert_eq!(
+            lost().to_string(),
+            "--device gpu: the GPU ran out of memory (a buffer of 2 GiB)"
+        );
+        // A frame already named stays named; other errors are left as they are.
+        let named = lost().in_frame(3).in_frame(4).to_string();
+        assert!(named.contains("frame 3:"), "{named}");
+        let other = RenderError::WriterGone.in_frame(5).to_string();
+        assert!(!other.contains("frame 5"), "{other}");
+    }
 }

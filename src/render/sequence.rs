@@ -223,6 +223,7 @@ fn open_device(choice: TraceDevice) -> Result<Option<Device>, RenderError> {
         };
         GpuDevice::open(policy).map_err(|source| RenderError::Gpu {
             device: choice.name(),
+            frame: None,
             source,
         })
     }
@@ -258,6 +259,7 @@ fn tracing(
         Some(dev) => {
             let gpu = |source| RenderError::Gpu {
                 device: "gpu",
+                frame: None,
                 source,
             };
             let stat = crate::gpu::GpuStatic::upload(&dev, psf).map_err(gpu)?;
@@ -518,7 +520,7 @@ impl Frames<'_> {
                         }
                     }
                     Err(e) => {
-                        written.first_error.get_or_insert(e);
+                        written.first_error.get_or_insert(e.in_frame(frame));
                         break;
                     }
                 }
@@ -584,6 +586,7 @@ impl Frames<'_> {
                 .update(&g.dev, &dyn_soup.positions)
                 .map_err(|source| RenderError::Gpu {
                     device: "gpu",
+                    frame: None,
                     source,
                 })?,
         }
@@ -652,6 +655,7 @@ impl Frames<'_> {
                     return super::gpu_frame::render_frame_gpu(&parts, ctx, args, fb, work)
                         .map_err(|source| RenderError::Gpu {
                             device: "gpu",
+                            frame: Some(args.frame),
                             source,
                         });
                 }
@@ -661,6 +665,7 @@ impl Frames<'_> {
                 if let Some(source) = tracer.take_error() {
                     return Err(RenderError::Gpu {
                         device: "gpu",
+                        frame: Some(args.frame),
                         source,
                     });
                 }
