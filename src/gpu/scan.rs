@@ -215,3 +215,65 @@ impl LiveScan {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A live scan gives the CPU's exclusive sums of its count's values and one more,
+    /// and writes nothing past them: counts on both sides of the block edges, one to
+    /// three levels of blocks, in one kept plan whose scratch the larger counts left
+    /// full.
+    #[test]
+    fn live_scans_equal_the_cpus_and_stop_at_the_count() {
+        let dev = match GpuDevice::open(super::super::AdapterPolicy::Any) {
+            Ok(Some(d)) => d,
+            other => {
+                let why = format!("{:?}", other.err());
+                assert!(
+                    std::env::var_os("CI").is_none(),
+                    "no GPU adapter under CI: {why}"
+                );
+                use std::io::Write;
+                let _ = writeln!(std::io::stderr(), "SKIPPED: no GPU adapter: {why}");
+                return;
+            }
+        };
+        let cap: u64 = (1 << 17) + 1;
+        let values: Vec<u32> = (0..cap as u32)
+            .map(|i| i.wrapping_mul(2_654_435_761) >> 30)
+            .collect();
+        let usage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST;
+        let src = dev.buffer("values", cap * 4, usage).unwrap();
+        dev.write(&src, 0, bytemuck::cast_slice(&values));
+        let dst = dev.buffer("sums", cap * 4, usage).unwrap();
+        // The count is word 1 of this buffer.
+        let count = dev.buffer("count", 16, usage).unwrap();
+        let plan = ScanPlan::new(&dev, cap, 1, 1, &[&count]).unwrap();
+        assert_eq!(plan.caps, [cap, 513, 3]);
+        let scan = LiveScan::new(&dev, &plan, &src, &dst).unwrap();
+        for n in [
+            131_072u32, 0, 1, 254, 255, 256, 257, 511, 65_535, 65_536, 65_537, 300, 100_000,
+        ] {
+            dev.write(&count, 0, bytemuck::cast_slice(&[7u32, n, 7, 7]));
+            dev.write(&dst, 0, &vec![0xffu8; cap as usize * 4]);
+            let mut enc = dev.device.create_command_encoder(&Default::default());
+            plan.encode(&dev, &mut enc, 0);
+            scan.encode(&dev, &mut enc, &plan);
+            let got: Vec<u32> = bytemuck::pod_collect_to_vec(
+                &dev.read_back(enc, &dst, cap * 4).unwrap()[..cap as usize * 4],
+            );
+            let mut sum = 0u32;
+            for (i, &g) in got.iter().enumerate() {
+                if i <= n as usize {
+                    assert_eq!(g, sum, "count {n}: sum {i}");
+                    sum += values[i];
+                } else {
+                    assert_eq!(g, u32::MAX, "count {n}: word {i} written");
+                }
+            }
+        }
+    }
+}
