@@ -575,12 +575,19 @@ impl GpuShading {
         ];
         let trace_any = tracer.bind_uniform(&ta_uni, sh_rays, sh_hits);
         let mut enc = dev.device.create_command_encoder(&Default::default());
-        // Every level up to the deepest the items can reach (an empty level costs
-        // grids whose invocations stop at once).
+        // Every level up to the deepest the items can reach: `--max-depth`, or the
+        // camera rays' level alone when no material makes a ray (no mirror reflection,
+        // no transmission: `shade` then writes no next-level ray, whatever the depth).
+        // A level that turns out empty costs the plan and a few passes of no
+        // workgroups.
+        let makes_rays = materials
+            .iter()
+            .any(|m| m.reflects != 0 || m.transmission != 0.0);
+        let deepest = if makes_rays { shading.max_depth } else { 0 };
         // Word offsets in `made`: this file's uniform, the closest hits', the any
         // hits', then the workgroups (items, closest, any).
         let (w_f, w_tc, w_ta, w_args) = (0u64, 28u64, 68u64, 108u64);
-        for level in 0..=shading.max_depth as usize {
+        for level in 0..=deepest as usize {
             let (g, k) = (&bind[level % 2], level % 2);
             if level == 0 {
                 Self::dispatch(&mut enc, &self.camera_pipe, g, nsamples);
