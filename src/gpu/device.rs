@@ -42,6 +42,7 @@ pub struct GpuDevice {
     pub(super) scan_layout: wgpu::BindGroupLayout,
     pub(super) scan_pipe: wgpu::ComputePipeline,
     pub(super) add_pipe: wgpu::ComputePipeline,
+    pub(super) plan_pipe: wgpu::ComputePipeline,
 }
 
 impl std::fmt::Debug for GpuDevice {
@@ -236,6 +237,7 @@ impl GpuDevice {
         let scatter_pipe = pipe("scatter", &grid_layout, &moving_mod);
         let scan_pipe = pipe("scan", &scan_layout, &scan_mod);
         let add_pipe = pipe("add", &scan_layout, &scan_mod);
+        let plan_pipe = pipe("plan", &scan_layout, &scan_mod);
         let dev = GpuDevice {
             device,
             queue,
@@ -251,6 +253,7 @@ impl GpuDevice {
             scan_layout,
             scan_pipe,
             add_pipe,
+            plan_pipe,
         };
         // A kernel that does not compile is reported here, not at the first trace.
         dev.wait()?;

@@ -19,6 +19,7 @@ use rayon::prelude::*;
 
 use super::device::{storage_entry, uniform_entry};
 use super::moving::entry;
+use super::scan::{LiveScan, ScanPlan};
 use super::shade_tables::{CameraRays, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle};
 use super::trace::pack_ray;
 use super::{GpuDevice, GpuError, GpuMoving, GpuStatic, GpuTracer};
@@ -121,6 +122,15 @@ struct Room {
     sh_hits: wgpu::Buffer,
     cam_hits: wgpu::Buffer,
     rgba: wgpu::Buffer,
+    /// The uniforms' templates and the next level's uniforms (`next_level`).
+    templates: wgpu::Buffer,
+    made: wgpu::Buffer,
+    /// The two scans of a level (shadow rays, next-level rays) over its items and one
+    /// more, their length read on the GPU: from `templates` at the camera rays' level,
+    /// from `made` after.
+    plan: ScanPlan,
+    sh_scan: LiveScan,
+    nx_scan: LiveScan,
 }
 
 impl Room {
@@ -133,6 +143,22 @@ impl Room {
             npix,
         } = size;
         let b = |what, bytes| dev.buffer(what, bytes, USAGE);
+        let (sh_count, nx_count) = (
+            b("the shadow ray counts", (cap + 1) * 4)?,
+            b("the next ray counts", (cap + 1) * 4)?,
+        );
+        let (sh_start, nx_start) = (
+            b("the shadow ray starts", (cap + 1) * 4)?,
+            b("the next ray starts", (cap + 1) * 4)?,
+        );
+        let templates = b("the uniforms' templates", 108 * 4)?;
+        let made = dev.buffer(
+            "the next level's uniforms",
+            117 * 4,
+            USAGE | wgpu::BufferUsages::INDIRECT,
+        )?;
+        // The items' count is word 0 of either (shade.wgsl's `F.a.x`).
+        let plan = ScanPlan::new(dev, cap + 1, 0, 1, &[&templates, &made])?;
         Ok(Room {
             size,
             rays: [b("the rays", cap * 48)?, b("the next rays", cap * 48)?],
@@ -143,15 +169,20 @@ impl Room {
             sh_cand: b("the shadow ray candidates", cand * 64)?,
             nx_cand_r: b("the next rays' candidates", cap * 2 * 48)?,
             nx_cand_i: b("the next items' candidates", cap * 2 * 32)?,
-            sh_count: b("the shadow ray counts", (cap + 1) * 4)?,
-            nx_count: b("the next ray counts", (cap + 1) * 4)?,
-            sh_start: b("the shadow ray starts", (cap + 1) * 4)?,
-            nx_start: b("the next ray starts", (cap + 1) * 4)?,
+            sh_scan: LiveScan::new(dev, &plan, &sh_count, &sh_start)?,
+            nx_scan: LiveScan::new(dev, &plan, &nx_count, &nx_start)?,
+            sh_count,
+            nx_count,
+            sh_start,
+            nx_start,
             sh_rays: b("the shadow rays", caps * 48)?,
             sh_add: b("the shadow rays' light", caps * 16)?,
             sh_hits: b("the shadow rays' hits", caps * 16)?,
             cam_hits: b("the camera rays' hits", nsamples * 16)?,
             rgba: b("the pixels", npix * 16)?,
+            templates,
+            made,
+            plan,
         })
     }
 }
@@ -449,6 +480,11 @@ impl GpuShading {
             sh_hits,
             cam_hits,
             rgba,
+            templates,
+            made,
+            plan,
+            sh_scan,
+            nx_scan,
             ..
         } = &room;
         // The uniforms: this file's for the items (a grid over the capacity and one
@@ -481,10 +517,8 @@ impl GpuShading {
         let mut words: Vec<u32> = bytemuck::cast_slice(bytemuck::bytes_of(&p)).to_vec();
         words.extend_from_slice(&closest);
         words.extend_from_slice(&any);
-        let templates = dev.buffer("the uniforms' templates", 108 * 4, USAGE)?;
-        dev.write(&templates, 0, bytemuck::cast_slice(&words));
+        dev.write(templates, 0, bytemuck::cast_slice(&words));
         let indirect = USAGE | wgpu::BufferUsages::INDIRECT;
-        let made = dev.buffer("the next level's uniforms", 117 * 4, indirect)?;
         // The workgroups of the items' kernels, the closest hits and the any hits (as
         // `next_level` counts them); the camera rays' level's from here.
         let groups = |n: u64, x_cap: u32| {
@@ -528,8 +562,8 @@ impl GpuShading {
                 Some(radiance),
                 None,
                 Some(&cam),
-                Some(&templates),
-                Some(&made),
+                Some(templates),
+                Some(made),
                 Some(&totals),
             ];
             self.group(dev, &bufs)
@@ -541,12 +575,19 @@ impl GpuShading {
         ];
         let trace_any = tracer.bind_uniform(&ta_uni, sh_rays, sh_hits);
         let mut enc = dev.device.create_command_encoder(&Default::default());
-        // Every level up to the deepest the items can reach (an empty level costs
-        // grids whose invocations stop at once).
+        // Every level up to the deepest the items can reach: `--max-depth`, or the
+        // camera rays' level alone when no material makes a ray (no mirror reflection,
+        // no transmission: `shade` then writes no next-level ray, whatever the depth).
+        // A level that turns out empty costs the plan and a few passes of no
+        // workgroups.
+        let makes_rays = materials
+            .iter()
+            .any(|m| m.reflects != 0 || m.transmission != 0.0);
+        let deepest = if makes_rays { shading.max_depth } else { 0 };
         // Word offsets in `made`: this file's uniform, the closest hits', the any
         // hits', then the workgroups (items, closest, any).
         let (w_f, w_tc, w_ta, w_args) = (0u64, 28u64, 68u64, 108u64);
-        for level in 0..=shading.max_depth as usize {
+        for level in 0..=deepest as usize {
             let (g, k) = (&bind[level % 2], level % 2);
             if level == 0 {
                 Self::dispatch(&mut enc, &self.camera_pipe, g, nsamples);
@@ -556,17 +597,21 @@ impl GpuShading {
                 enc.copy_buffer_to_buffer(hits, 0, cam_hits, 0, nsamples * 16);
             }
             Self::dispatch_indirect(&mut enc, &self.shade_pipe, g, &args, 0);
-            super::scan::exclusive_scan(dev, &mut enc, sh_count, sh_start, cap + 1)?;
-            super::scan::exclusive_scan(dev, &mut enc, nx_count, nx_start, cap + 1)?;
+            // The scans over the level's items and one more (the totals), their count
+            // read on the GPU: the camera rays' from the templates, the others from what
+            // the last level's `next_level` made.
+            plan.encode(dev, &mut enc, usize::from(level > 0));
+            sh_scan.encode(dev, &mut enc, plan);
+            nx_scan.encode(dev, &mut enc, plan);
             Self::dispatch(&mut enc, &self.next_pipe, g, 1);
-            enc.copy_buffer_to_buffer(&made, w_ta * 4, &ta_uni, 0, 40 * 4);
-            enc.copy_buffer_to_buffer(&made, (w_args + 6) * 4, &args, 24, 12);
+            enc.copy_buffer_to_buffer(made, w_ta * 4, &ta_uni, 0, 40 * 4);
+            enc.copy_buffer_to_buffer(made, (w_args + 6) * 4, &args, 24, 12);
             Self::dispatch_indirect(&mut enc, &self.compact_pipe, g, &args, 0);
             tracer.encode_group_indirect(&mut enc, &trace_any, &args, 24);
             Self::dispatch_indirect(&mut enc, &self.accum_pipe, g, &args, 0);
-            enc.copy_buffer_to_buffer(&made, w_f * 4, &f_uni, 0, 28 * 4);
-            enc.copy_buffer_to_buffer(&made, w_tc * 4, &tc_uni, 0, 40 * 4);
-            enc.copy_buffer_to_buffer(&made, w_args * 4, &args, 0, 24);
+            enc.copy_buffer_to_buffer(made, w_f * 4, &f_uni, 0, 28 * 4);
+            enc.copy_buffer_to_buffer(made, w_tc * 4, &tc_uni, 0, 40 * 4);
+            enc.copy_buffer_to_buffer(made, w_args * 4, &args, 0, 24);
         }
         let (_, _, stride) = GpuDevice::grid_of(npix, 64);
         let p = params(0, 0, false, 0, 0, stride, npix, spp, None);

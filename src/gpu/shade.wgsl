@@ -476,7 +476,8 @@ fn brdf(m: Mat, l: Lobes, s: Surf, to: vec3<f32>) -> vec3<f32> {
 fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = grid_index(gid);
     let n = F.a.x;
-    // The scans run over the capacity; the sums up to [n] read only counts written here.
+    // The scans run over the items and one more; the sums up to [n] read only counts
+    // written here.
     if i >= n {
         return;
     }
