@@ -522,8 +522,10 @@ fn trace_pass<T: Intersector>(
     // each trace other samples (and a moving camera other rays), so it stands aside.
     let mode = memo.begin(camera, spp, w * h, layers.is_some() && pass.is_none());
     // The shading of a still camera's rays, replayed where they repeat (one sample a
-    // pixel, as the memo; not with the passes' split).
-    let replayed = replay.begin(ctx, mode != Mode::Off && !light_paths, w * h);
+    // pixel, as the memo; not with the passes' split). Kept from the second frame of
+    // an unmoved camera on (`Mode::Reuse`): a camera that moves every frame allocates
+    // and fills nothing.
+    let replayed = replay.begin(ctx, mode == Mode::Reuse && !light_paths, w * h);
     let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
     // The centre-ray AOVs: every frame's, or the one pass of a blurred frame that has them.
     let any_aov = aovs.any_centre() && pass.is_none_or(|p| p.aovs);
