@@ -8,6 +8,7 @@
 
 mod common;
 
+use std::path::Path;
 use std::process::Command;
 
 use common::exr_read::read_exr;
@@ -18,6 +19,49 @@ fn contains(hay: &[u8], needle: &str) -> bool {
     hay.windows(needle.len()).any(|w| w == needle.as_bytes())
 }
 
+/// Renders `scene`'s frames 2..5 at 40x30 on `device` into `dir/folder` with `extra`.
+fn render_on(dir: &Path, scene: &Path, device: &str, folder: &str, extra: &[&str]) {
+    let out = dir.join(format!("{folder}/f.##.exr"));
+    let mut args = vec![
+        "render",
+        s(scene),
+        "-o",
+        s(&out),
+        "--frames",
+        "2..5",
+        "--size",
+        "40x30",
+        "--device",
+        device,
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    ok(&args);
+}
+
+/// Every frame in `dir/a` is channel for channel, bit for bit, the one in `dir/b`; how
+/// many there are.
+fn same_frames(dir: &Path, a: &str, b: &str, what: &str) -> usize {
+    let frames = files_under(&dir.join(a));
+    for f in &frames {
+        let (wa, ha, ca) = read_exr(&dir.join(a).join(f));
+        let (wb, hb, cb) = read_exr(&dir.join(b).join(f));
+        assert_eq!((wa, ha), (wb, hb), "{what}");
+        assert_eq!(ca.len(), cb.len(), "{what}");
+        for ((na, va), (nb, vb)) in ca.iter().zip(&cb) {
+            assert_eq!(na, nb, "{what}");
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(va),
+                bits(vb),
+                "{what}: {}: channel {na} differs",
+                f.display()
+            );
+        }
+    }
+    frames.len()
+}
+
 #[test]
 fn gpu_frames_equal_cpu_frames() {
     if common::gpu::device().is_none() {
@@ -25,59 +69,87 @@ fn gpu_frames_equal_cpu_frames() {
     }
     let dir = temp_dir("gpu-vs-cpu");
     let scene = write_scene(&dir);
-    // The same frames on `device` into `folder`, with `extra` flags.
-    let render = |device: &str, folder: &str, extra: &[&str]| {
-        let out = dir.join(format!("{folder}/f.##.exr"));
-        let mut args = vec![
-            "render",
-            s(&scene),
-            "-o",
-            s(&out),
-            "--frames",
-            "2..5",
-            "--size",
-            "40x30",
-            "--spp",
-            "2",
-            "--aov",
-            "depth,normal,albedo,position,motion",
-            "--float",
-            "--device",
-            device,
-            "--quiet",
-        ];
-        args.extend_from_slice(extra);
-        ok(&args);
-    };
-    render("cpu", "cpu", &[]);
-    render("gpu", "gpu", &[]);
-    let frames = files_under(&dir.join("cpu"));
-    assert_eq!(frames.len(), 3);
-    for f in &frames {
-        let (a, b) = (dir.join("cpu").join(f), dir.join("gpu").join(f));
-        let (wa, ha, ca) = read_exr(&a);
-        let (wb, hb, cb) = read_exr(&b);
-        assert_eq!((wa, ha), (wb, hb));
-        assert_eq!(ca.len(), cb.len());
-        for ((na, va), (nb, vb)) in ca.iter().zip(&cb) {
-            assert_eq!(na, nb);
-            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(va), bits(vb), "{}: channel {na} differs", f.display());
-        }
+    let extra = [
+        "--spp",
+        "2",
+        "--aov",
+        "depth,normal,albedo,position,motion",
+        "--float",
+    ];
+    render_on(&dir, &scene, "cpu", "cpu", &extra);
+    render_on(&dir, &scene, "gpu", "gpu", &extra);
+    assert_eq!(same_frames(&dir, "cpu", "gpu", "AOVs"), 3);
+    for f in &files_under(&dir.join("cpu")) {
         // The header names the device that traced.
-        assert!(contains(&std::fs::read(&a).unwrap(), "device=cpu"));
-        assert!(contains(&std::fs::read(&b).unwrap(), "device=gpu"));
+        assert!(contains(
+            &std::fs::read(dir.join("cpu").join(f)).unwrap(),
+            "device=cpu"
+        ));
+        assert!(contains(
+            &std::fs::read(dir.join("gpu").join(f)).unwrap(),
+            "device=gpu"
+        ));
     }
 
     // --resume over the CPU's frames with --device gpu re-renders them (other options).
-    render("gpu", "cpu", &["--resume"]);
-    for f in &frames {
+    let mut resumed = extra.to_vec();
+    resumed.push("--resume");
+    render_on(&dir, &scene, "gpu", "cpu", &resumed);
+    for f in &files_under(&dir.join("cpu")) {
         let bytes = std::fs::read(dir.join("cpu").join(f)).unwrap();
         assert!(
             contains(&bytes, "device=gpu"),
             "{} not re-rendered",
             f.display()
         );
+    }
+}
+
+/// The rest of the shading model with tracing on the GPU (the scene's emissive lamp keeps
+/// it off the GPU frame path: shading on the CPU): motion blur, the light-path passes
+/// and Cryptomatte, diffuse bounces, an environment map, overscan and exposure, glossy
+/// sampling with several samples a pixel. The frames are the CPU's to the bit.
+#[test]
+fn every_shading_feature_renders_the_cpus_frames_with_gpu_tracing() {
+    if common::gpu::device().is_none() {
+        return;
+    }
+    let dir = temp_dir("gpu-features");
+    let scene = write_scene(&dir);
+    // A 4x2 Radiance map, flat scanlines (RGBE: these values are exact).
+    let map = dir.join("sky.hdr");
+    let mut hdr = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 2 +X 4\n".to_vec();
+    for k in 0..8u8 {
+        hdr.extend_from_slice(&[64 + 16 * k, 128, 200 - 8 * k, 129]);
+    }
+    std::fs::write(&map, hdr).unwrap();
+    let features: [(&str, Vec<&str>); 5] = [
+        (
+            "blur",
+            vec!["--shutter", "0.5", "--motion-steps", "3", "--spp", "3"],
+        ),
+        (
+            "passes",
+            vec![
+                "--aov",
+                "diffuse,specular,transmission,emission,cryptomatte",
+            ],
+        ),
+        ("bounces", vec!["--diffuse-bounces", "1", "--spp", "2"]),
+        (
+            "environment",
+            vec!["--environment", s(&map), "--max-depth", "2"],
+        ),
+        (
+            "overscan",
+            vec!["--overscan", "3", "--exposure", "1.5", "--spp", "4"],
+        ),
+    ];
+    for (name, extra) in &features {
+        let (cpu, gpu) = (format!("{name}-cpu"), format!("{name}-gpu"));
+        render_on(&dir, &scene, "cpu", &cpu, extra);
+        render_on(&dir, &scene, "gpu", &gpu, extra);
+        assert_eq!(same_frames(&dir, &cpu, &gpu, name), 3, "{name}");
     }
 }
 
