@@ -21,14 +21,14 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::build::{diffuse, linear, mesh, perspective, placed, SceneBuilder};
+use common::build::{diffuse, mesh, perspective, placed, SceneBuilder};
 use common::exr_read::read_exr;
 use common::farm::{ok, s, stderr};
-use common::render_scene::{cube, files_under, quad, temp_dir, write_scene};
+use common::render_scene::{cube, files_under, quad, temp_dir, tumbling, write_scene};
 use glam::{Quat, Vec3, Vec4};
 use subfield::geometry::Ray;
 use subfield::gpu::{packed_on_cpu, GpuShading};
-use subfield::scene::{Animation, Falloff, LightDef, LightKind, Material, Node, Property, Scene};
+use subfield::scene::{Animation, Falloff, LightDef, LightKind, Material, Node, Scene};
 
 /// Largest difference a pixel's channel may have outside the Z edges' band (relative to
 /// the image's mean where that is above 1).
@@ -165,24 +165,7 @@ fn subset_scene() -> Scene {
     }
     b.add_animation(Animation {
         name: Some("move".into()),
-        channels: vec![
-            linear(
-                mover,
-                Property::Translation,
-                vec![0.0, 1.0],
-                vec![1.0, 0.4, 0.5, -0.5, 1.2, 1.0],
-            ),
-            linear(
-                mover,
-                Property::Rotation,
-                vec![0.0, 1.0],
-                [
-                    Quat::IDENTITY.to_array(),
-                    Quat::from_rotation_y(1.5).to_array(),
-                ]
-                .concat(),
-            ),
-        ],
+        channels: tumbling(mover, Vec3::new(-0.5, 1.2, 1.0)).into(),
     });
     b.scene.fps = Some(24.0);
     b.finish()

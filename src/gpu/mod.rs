@@ -71,3 +71,22 @@ pub enum GpuError {
     #[error(transparent)]
     Triangles(#[from] crate::psf::PsfError),
 }
+
+/// For unit tests: the adapter, or `None` after saying why the test skips (a failure
+/// under `CI`, where lavapipe must be there).
+#[cfg(test)]
+pub(crate) fn test_device() -> Option<GpuDevice> {
+    match GpuDevice::open(AdapterPolicy::Any) {
+        Ok(Some(d)) => Some(d),
+        other => {
+            let why = format!("{:?}", other.err());
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "no GPU adapter under CI: {why}"
+            );
+            use std::io::Write;
+            let _ = writeln!(std::io::stderr(), "SKIPPED: no GPU adapter: {why}");
+            None
+        }
+    }
+}

@@ -405,23 +405,6 @@ mod tests {
     use crate::render::options::MotionBlur;
     use crate::scene::TextureRef;
 
-    /// The adapter, or `None` after saying why the test skips (a failure under CI).
-    fn test_device() -> Option<GpuDevice> {
-        match GpuDevice::open(crate::gpu::AdapterPolicy::Any) {
-            Ok(Some(d)) => Some(d),
-            other => {
-                let why = format!("{:?}", other.err());
-                assert!(
-                    std::env::var_os("CI").is_none(),
-                    "no GPU adapter under CI: {why}"
-                );
-                use std::io::Write;
-                let _ = writeln!(std::io::stderr(), "SKIPPED: no GPU adapter: {why}");
-                None
-            }
-        }
-    }
-
     /// A level that outgrows its room is refused (`None`), and the chunk traced with
     /// more room gives the same bytes whatever the room, in fresh buffers or in those a
     /// larger chunk left: 256 pixels of glass over a floor make 512 rays at the second
@@ -430,7 +413,7 @@ mod tests {
     fn a_level_that_outgrows_its_room_is_refused_and_room_changes_nothing() {
         use crate::gpu::{GpuMoving, GpuStatic};
         use crate::psf::{Psf, PsfParams};
-        let Some(dev) = test_device() else {
+        let Some(dev) = crate::gpu::test_device() else {
             return;
         };
         let mut tris: Vec<[Vec3; 3]> = Vec::new();
@@ -539,7 +522,7 @@ mod tests {
     /// every way, one to sixteen samples, with and without an overscan border.
     #[test]
     fn camera_rays_are_the_cpus() {
-        let Some(dev) = test_device() else {
+        let Some(dev) = crate::gpu::test_device() else {
             return;
         };
         let shading = GpuShading::new(&dev, &[]).unwrap();

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{Quat, Vec3, Vec4};
 use subfield::scene::{
-    Animation, Falloff, LightDef, LightKind, Material, Node, Primitive, Property, Scene,
+    Animation, Channel, Falloff, LightDef, LightKind, Material, Node, Primitive, Property, Scene,
 };
 
 use super::build::{diffuse, linear, mesh, perspective, placed, tris, SceneBuilder};
@@ -73,6 +73,29 @@ pub fn quad(centre: Vec3, a: Vec3, b: Vec3, material: u32) -> Primitive {
         material,
         ..Primitive::default()
     }
+}
+
+/// The moving cube's channels: over 1 s from (1, 0.4, 0.5) to `to`, turning 1.5 rad
+/// about +Y.
+pub fn tumbling(node: usize, to: Vec3) -> [Channel; 2] {
+    [
+        linear(
+            node,
+            Property::Translation,
+            vec![0.0, 1.0],
+            vec![1.0, 0.4, 0.5, to.x, to.y, to.z],
+        ),
+        linear(
+            node,
+            Property::Rotation,
+            vec![0.0, 1.0],
+            [
+                Quat::IDENTITY.to_array(),
+                Quat::from_rotation_y(1.5).to_array(),
+            ]
+            .concat(),
+        ),
+    ]
 }
 
 /// The test scene (1 s of animation, 24 fps recorded in `extras.fps`).
@@ -196,9 +219,15 @@ fn scene_of(lamp_on: bool) -> Scene {
     for n in [room, glass_node, mover, camera, side_cam, bulb, sun_node] {
         b.add_root(n);
     }
-    let mut bulb_keys = Vec::new();
+    let mut channels: Vec<Channel> = tumbling(mover, Vec3::new(0.0, 1.2, 1.0)).into();
+    channels.push(linear(
+        camera,
+        Property::Translation,
+        vec![0.0, 1.0],
+        vec![0.0, 2.0, 6.0, 0.8, 2.2, 5.5],
+    ));
     if !lamp_on {
-        bulb_keys.push(linear(
+        channels.push(linear(
             bulb,
             Property::Translation,
             vec![0.0, 0.125, 0.25, 1.0],
@@ -207,33 +236,7 @@ fn scene_of(lamp_on: bool) -> Scene {
     }
     b.add_animation(Animation {
         name: Some("move".into()),
-        channels: bulb_keys
-            .into_iter()
-            .chain([
-                linear(
-                    mover,
-                    Property::Translation,
-                    vec![0.0, 1.0],
-                    vec![1.0, 0.4, 0.5, 0.0, 1.2, 1.0],
-                ),
-                linear(
-                    mover,
-                    Property::Rotation,
-                    vec![0.0, 1.0],
-                    [
-                        Quat::IDENTITY.to_array(),
-                        Quat::from_rotation_y(1.5).to_array(),
-                    ]
-                    .concat(),
-                ),
-                linear(
-                    camera,
-                    Property::Translation,
-                    vec![0.0, 1.0],
-                    vec![0.0, 2.0, 6.0, 0.8, 2.2, 5.5],
-                ),
-            ])
-            .collect(),
+        channels,
     });
     b.scene.fps = Some(24.0);
     b.finish()
