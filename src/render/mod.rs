@@ -196,7 +196,11 @@ impl RenderError {
                 frame: Some(frame),
                 source,
             },
-            e => e,
+            e => {
+                // Only a GPU fault names its frame (and without the GPU there is none).
+                let _ = frame;
+                e
+            }
         }
     }
 
