@@ -60,6 +60,13 @@ impl Ray {
         ]
     }
 
+    /// Whether `other` is this ray to the bit ([`Ray::bits`]), without a call to
+    /// `memcmp` (a still camera compares two rays a pixel and level every frame).
+    #[inline]
+    pub fn same_bits(&self, other: &Ray) -> bool {
+        same_words(&self.bits(), &other.bits())
+    }
+
     /// A ray is traceable when its numbers are finite and its direction is not zero.
     /// Queries on other rays return no hit.
     pub fn is_valid(&self) -> bool {
@@ -69,6 +76,13 @@ impl Ray {
             && !self.t_min.is_nan()
             && !self.t_max.is_nan()
     }
+}
+
+/// Whether two arrays of words are equal, by folding their differences (inlined and
+/// branch-free, where `==` on arrays of this size calls `memcmp`).
+#[inline]
+pub(crate) fn same_words<const N: usize>(a: &[u32; N], b: &[u32; N]) -> bool {
+    a.iter().zip(b).fold(0, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
 /// A ray-triangle hit: parameter `t` along the ray, the triangle's index, and the

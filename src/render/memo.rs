@@ -103,7 +103,7 @@ pub(super) struct StaticMemo {
 /// The same ray to the bit ([`Ray::bits`]).
 #[inline]
 fn same(a: &Ray, b: &Ray) -> bool {
-    a.bits() == b.bits()
+    a.same_bits(b)
 }
 
 /// A slot no shadow ray has filled: a ray of zero direction, which every query answers

@@ -27,7 +27,7 @@
 use glam::Vec3;
 
 use super::shade::{BlockOut, Item, ShadeContext, REPLAY_LIGHTS};
-use crate::geometry::{Hit, Ray};
+use crate::geometry::{same_words, Hit, Ray};
 use crate::psf::Prim;
 
 /// The memory every level's kept shading may take together.
@@ -185,9 +185,9 @@ pub(super) fn shade_kept(
         return;
     };
     if kept.valid
-        && hit_bits(&kept.hit) == hit_bits(&h)
-        && kept.ray.bits() == ray.bits()
-        && kept.item.bits() == item.bits()
+        && same_words(&hit_bits(&kept.hit), &hit_bits(&h))
+        && kept.ray.same_bits(ray)
+        && same_words(&kept.item.bits(), &item.bits())
     {
         if let Some(a) = kept.add {
             out.add.push(a);
