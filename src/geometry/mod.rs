@@ -96,6 +96,17 @@ pub struct Hit {
 }
 
 impl Hit {
+    /// The bits of its numbers, for an exact comparison.
+    #[inline]
+    pub fn bits(&self) -> [u32; 4] {
+        [
+            self.t.to_bits(),
+            self.tri,
+            self.u.to_bits(),
+            self.v.to_bits(),
+        ]
+    }
+
     /// The tie rule every intersector in this crate follows: the smaller `t` wins; at an
     /// exactly equal `t` the smaller triangle index wins. It makes "the closest hit" a
     /// function of the scene and the ray alone, so different structures can be compared

@@ -169,7 +169,8 @@ pub enum RenderError {
     #[error("--device {device}: {}{source}", frame.map(|f| format!("frame {f}: ")).unwrap_or_default())]
     Gpu {
         device: &'static str,
-        /// The frame being rendered when it failed (`None`: before the first).
+        /// The frame being rendered when it failed (`None`: before the first); the frame
+        /// loop fills it in ([`RenderError::in_frame`]).
         frame: Option<u32>,
         #[source]
         source: crate::gpu::GpuError,

@@ -149,11 +149,6 @@ impl ShadeReplay {
     }
 }
 
-#[inline]
-fn hit_bits(h: &Hit) -> [u32; 4] {
-    [h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits()]
-}
-
 /// Shades `ray` (its `item`, its `hit`) into `out`, or replays what `slot` kept for the
 /// same three; keeps what the shading pushed in `slot` where it can (a static hit, at
 /// most one push of each kind). `slot` `None`: shaded as always.
@@ -185,7 +180,7 @@ pub(super) fn shade_kept(
         return;
     };
     if kept.valid
-        && same_words(&hit_bits(&kept.hit), &hit_bits(&h))
+        && same_words(&kept.hit.bits(), &h.bits())
         && kept.ray.same_bits(ray)
         && same_words(&kept.item.bits(), &item.bits())
     {

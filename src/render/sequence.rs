@@ -655,7 +655,7 @@ impl Frames<'_> {
                     return super::gpu_frame::render_frame_gpu(&parts, ctx, args, fb, work)
                         .map_err(|source| RenderError::Gpu {
                             device: "gpu",
-                            frame: Some(args.frame),
+                            frame: None,
                             source,
                         });
                 }
@@ -665,7 +665,7 @@ impl Frames<'_> {
                 if let Some(source) = tracer.take_error() {
                     return Err(RenderError::Gpu {
                         device: "gpu",
-                        frame: Some(args.frame),
+                        frame: None,
                         source,
                     });
                 }

@@ -35,9 +35,6 @@ impl PreLight {
                 inner_cone_angle,
                 outer_cone_angle,
             } => (2, inner_cone_angle.to_bits(), outer_cone_angle.to_bits()),
-            // Kinds added later: never equal to the frame before (no replay).
-            #[allow(unreachable_patterns)]
-            _ => (u32::MAX, 0, 0),
         };
         let v = |v: Vec3| [v.x.to_bits(), v.y.to_bits(), v.z.to_bits()];
         let [px, py, pz] = v(self.power);
@@ -61,8 +58,6 @@ impl PreLight {
             match self.falloff {
                 Falloff::None => 0,
                 Falloff::InverseSquare => 1,
-                #[allow(unreachable_patterns)]
-                _ => u32::MAX,
             },
         ]
     }
