@@ -503,6 +503,11 @@ impl GpuShading {
             spp,
             Some((shading, total_tris)),
         );
+        // Seeds are made only when a material reads them (a glossy lobe), as the CPU's
+        // `ShadeContext::random`: their values matter only where they are read.
+        if materials.iter().any(|m| m.reflects == 2) {
+            p.e[1] = 1.0;
+        }
         p.g[1] = cap32;
         p.g[2] = caps32;
         let x_of = |n: u64| GpuDevice::grid_of(n, 64).0;

@@ -2,7 +2,7 @@
 // shadow and next-level rays compacted in the CPU's order, its light summed into the
 // samples in the CPU's order, and the pixels averaged. The shading is
 // `render::shade::ShadeContext::shade` restricted to the subset `render::gpu_frame`
-// admits (constant materials, opaque, mirror or no reflection ray, punctual lights, a
+// admits (constant materials, opaque, a mirror, GGX or no reflection ray, punctual lights, a
 // constant background, no diffuse bounces), step for step; what depends on the material
 // alone (F0, the Blinn-Phong exponent and its normalisation, 1/ior, the spot's cone
 // cosines) comes computed by the CPU's own code in the tables.
@@ -31,7 +31,7 @@ struct FP {
     c: vec4<f32>,
     // background (RGB), 1 / spp
     d: vec4<f32>,
-    // MIN_WEIGHT
+    // MIN_WEIGHT, 1 when a material reads random numbers (a glossy lobe)
     e: vec4<f32>,
     // triangles in all, the items a level holds at most, the shadow rays likewise
     g: vec4<u32>,
@@ -51,7 +51,8 @@ struct Ray {
 struct Item {
     // weight (RGB)
     w: vec4<f32>,
-    // sample, depth
+    // sample, depth, the random numbers' seed (`sampling::Seed`, low and high words;
+    // made only when a material reads it: F.e.y)
     m: vec4<u32>,
 }
 
@@ -272,18 +273,49 @@ fn mul64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
     return vec2<u32>(p.x, p.y + a.x * b.y + a.y * b.x);
 }
 
+// SplitMix64's finaliser (`sampling::mix`).
+fn mix64(x: vec2<u32>) -> vec2<u32> {
+    var h = mul64(x ^ shr64(x, 30u), vec2<u32>(0x1CE4E5B9u, 0xBF58476Du));
+    h = mul64(h ^ shr64(h, 27u), vec2<u32>(0x133111EBu, 0x94D049BBu));
+    return h ^ shr64(h, 31u);
+}
+
 // `wavefront::hash`.
 fn hash4(v: vec4<u32>) -> vec2<u32> {
     let g = vec2<u32>(0x7F4A7C15u, 0x9E3779B9u);
     var h = g;
     for (var i = 0u; i < 4u; i = i + 1u) {
         h.x = h.x ^ v[i];
-        h = add64(h, g);
-        h = mul64(h ^ shr64(h, 30u), vec2<u32>(0x1CE4E5B9u, 0xBF58476Du));
-        h = mul64(h ^ shr64(h, 27u), vec2<u32>(0x133111EBu, 0x94D049BBu));
-        h = h ^ shr64(h, 31u);
+        h = mix64(add64(h, g));
     }
     return h;
+}
+
+// `Seed::camera(frame, x, y, k)` of this chunk's frame; `p`: x, y, k.
+fn seed_camera(p: vec3<u32>) -> vec2<u32> {
+    let g = vec2<u32>(0x7F4A7C15u, 0x9E3779B9u);
+    var h = vec2<u32>(0xD1CE4E5Bu, 0x5DEECE66u);
+    let v = vec4<u32>(C.a.z, p.x, p.y, p.z);
+    for (var i = 0u; i < 4u; i = i + 1u) {
+        h.x = h.x ^ v[i];
+        h = add64(mix64(h), g);
+    }
+    return h;
+}
+
+// `Seed::child(kind)`: the seed of a ray this one spawns (0 reflection, 1 refraction).
+fn seed_child(s: vec2<u32>, kind: u32) -> vec2<u32> {
+    return mix64(s ^ mul64(vec2<u32>(kind + 1u, 0u), vec2<u32>(0x6659FD93u, 0xD6E8FEB8u)));
+}
+
+// `Seed::get(purpose, i)`: two uniform numbers in [0, 1), the CPU's to the bit
+// (integers under 2^24 times 2^-24).
+fn seed_get(s: vec2<u32>, purpose: u32, i: u32) -> vec2<f32> {
+    let h = mix64(s ^ mix64(vec2<u32>(i, purpose)));
+    return vec2<f32>(
+        f32(h.y >> 8u) * (1.0 / 16777216.0),
+        f32(((h.y << 16u) | (h.x >> 16u)) & 0xffffffu) * (1.0 / 16777216.0),
+    );
 }
 
 // `wavefront::sample_offset(frame, x, y, k, spp)`.
@@ -420,6 +452,54 @@ fn refract_(d: vec3<f32>, n: vec3<f32>, eta: f32) -> vec4<f32> {
     return vec4<f32>(nz(eta * d + (eta * cos_i - sqrt(k)) * n), 1.0);
 }
 
+// `sampling::basis`: an orthonormal basis (t, b) around unit n (Duff et al. 2017).
+fn basis_t(n: vec3<f32>, sign: f32) -> vec3<f32> {
+    let a = -1.0 / (sign + n.z);
+    return vec3<f32>(1.0 + sign * n.x * n.x * a, sign * (n.x * n.y * a), -sign * n.x);
+}
+
+fn basis_b(n: vec3<f32>, sign: f32) -> vec3<f32> {
+    let a = -1.0 / (sign + n.z);
+    return vec3<f32>(n.x * n.y * a, sign + n.y * n.y * a, -n.y);
+}
+
+// `1.0f32.copysign(x)`.
+fn sign_of(x: f32) -> f32 {
+    return select(1.0, -1.0, (bitcast<u32>(x) & 0x80000000u) != 0u);
+}
+
+// `sampling::smith_g1`: GGX Smith masking for a direction at cosine `c`, width `alpha`.
+fn smith_g1(c: f32, alpha: f32) -> f32 {
+    let c2 = max(c * c, 1e-8);
+    let t2 = (1.0 - c2) / c2;
+    return 2.0 / (1.0 + sqrt(1.0 + alpha * alpha * t2));
+}
+
+// `sampling::sample_ggx_vndf`: a GGX normal drawn from those visible from `v` (Heitz
+// 2018) around unit n, width `alpha`, from the uniform pair `r`.
+fn sample_ggx_vndf(v: vec3<f32>, n: vec3<f32>, alpha: f32, r: vec2<f32>) -> vec3<f32> {
+    let sign = sign_of(n.z);
+    let t = basis_t(n, sign);
+    let b = basis_b(n, sign);
+    let vl = vec3<f32>(dot(v, t), dot(v, b), max(dot(v, n), 1e-6));
+    let vh = normalize(vec3<f32>(alpha * vl.x, alpha * vl.y, vl.z));
+    let len2 = vh.x * vh.x + vh.y * vh.y;
+    var t1 = vec3<f32>(1.0, 0.0, 0.0);
+    if len2 > 0.0 {
+        t1 = vec3<f32>(-vh.y, vh.x, 0.0) / sqrt(len2);
+    }
+    let t2 = cross(vh, t1);
+    let rad = sqrt(r.x);
+    let phi = 2.0 * 3.14159265358979323846 * r.y;
+    let p1 = rad * cos(phi);
+    let s = 0.5 * (1.0 + vh.z);
+    let p2 = (1.0 - s) * sqrt(max(1.0 - p1 * p1, 0.0)) + s * rad * sin(phi);
+    let p3 = sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0));
+    let nh = t1 * p1 + t2 * p2 + vh * p3;
+    let m = normalize(vec3<f32>(alpha * nh.x, alpha * nh.y, max(nh.z, 1e-6)));
+    return nz(t * m.x + b * m.y + n * m.z);
+}
+
 struct Lobes {
     v: vec3<f32>,
     kr: vec3<f32>,
@@ -485,9 +565,13 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     let first = F.a.z != 0u;
     let r = rays[i];
     var it: Item;
+    let random = F.e.y != 0.0;
     if first {
         it.w = vec4<f32>(1.0, 1.0, 1.0, 0.0);
         it.m = vec4<u32>(i, 0u, 0u, 0u);
+        if random {
+            it.m = vec4<u32>(i, 0u, seed_camera(camera_sample(i)));
+        }
     } else {
         it = items[i];
     }
@@ -566,13 +650,17 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             sh_cand[i * nl + nsh] = sh;
             nsh = nsh + 1u;
         }
-        // `secondary`: refraction, then the mirror reflection.
+        // `secondary`: refraction, then the mirror or GGX reflection.
         if it.m.y < F.a.w {
             var kr = lb.kr;
             let kt_w = weight * lb.kt;
             var next: Item;
+            let seed = it.m.zw;
             next.m = vec4<u32>(it.m.x, it.m.y + 1u, 0u, 0u);
             if max3(kt_w) > F.e.x {
+                if random {
+                    next.m = vec4<u32>(it.m.x, it.m.y + 1u, seed_child(seed, 1u));
+                }
                 var t = refract_(s.dir, s.ns, lb.eta);
                 if t.w == 0.0 {
                     t = refract_(s.dir, s.ng, lb.eta);
@@ -587,7 +675,10 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
             }
             let kr_w = weight * kr;
-            if max3(kr_w) > F.e.x {
+            if random {
+                next.m = vec4<u32>(it.m.x, it.m.y + 1u, seed_child(seed, 0u));
+            }
+            if max3(kr_w) > F.e.x && m.reflects == 1u {
                 var rd = reflect_(s.dir, s.ns);
                 if dot(rd, s.ng) <= 0.0 {
                     rd = reflect_(s.dir, s.ng);
@@ -596,6 +687,22 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 nx_cand_r[i * 2u + nnx] = make_ray(origin, rd, 0.0, inf());
                 nx_cand_i[i * 2u + nnx] = next;
                 nnx = nnx + 1u;
+            } else if max3(kr_w) > F.e.x && m.reflects == 2u {
+                // One direction from the visible normals: the weight is F · G1(l)
+                // (Purpose::Glossy is 1).
+                let alpha = m.roughness * m.roughness;
+                let mh = sample_ggx_vndf(lb.v, s.ns, alpha, seed_get(seed, 1u, 0u));
+                let rd = reflect_(s.dir, mh);
+                let cos_l = dot(rd, s.ns);
+                if cos_l > 0.0 && dot(rd, s.ng) > 0.0 {
+                    let w = kr_w * smith_g1(cos_l, alpha);
+                    if max3(w) > F.e.x {
+                        next.w = vec4<f32>(w, 0.0);
+                        nx_cand_r[i * 2u + nnx] = make_ray(origin, rd, 0.0, inf());
+                        nx_cand_i[i * 2u + nnx] = next;
+                        nnx = nnx + 1u;
+                    }
+                }
             }
         }
     }
@@ -738,6 +845,17 @@ fn pixels(@builtin(global_invocation_id) gid: vec3<u32>) {
     rgba[p] = vec4<f32>(c * inv, min(a * inv, 1.0));
 }
 
+// Sample s of the chunk: its camera pixel (x, y, wrapping in the overscan border as the
+// seeds take it) and its number k in the pixel. Sample s is sample s % spp of the
+// chunk's pixel s / spp (the samples of a pixel, the pixels of a row, the rows), as
+// `trace_pass` walks them.
+fn camera_sample(s: u32) -> vec3<u32> {
+    let spp = max(C.a.w, 1u);
+    let p = C.c.x + s / spp;
+    let w = C.b.w;
+    return vec3<u32>((p % w) - C.b.z, (p / w) - C.b.z, s % spp);
+}
+
 // The chunk's camera rays: sample s is sample s % spp of the chunk's pixel s / spp (the
 // samples of a pixel, the pixels of a row, the rows), as `trace_pass` makes them.
 @compute @workgroup_size(64)
@@ -746,15 +864,9 @@ fn camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     if s >= F.a.x {
         return;
     }
-    let spp = max(C.a.w, 1u);
-    let p = C.c.x + s / spp;
-    let k = s % spp;
-    let w = C.b.w;
-    // The camera's pixel, wrapping in the overscan border as the seeds take it.
-    let x = (p % w) - C.b.z;
-    let y = (p / w) - C.b.z;
-    let off = sample_offset(x, y, k);
-    rays[s] = camera_ray(f32(bitcast<i32>(x)) + off.x, f32(bitcast<i32>(y)) + off.y);
+    let p = camera_sample(s);
+    let off = sample_offset(p.x, p.y, p.z);
+    rays[s] = camera_ray(f32(bitcast<i32>(p.x)) + off.x, f32(bitcast<i32>(p.y)) + off.y);
 }
 
 // For the tests: each ray's origin, direction and span remade here, with its shear.

@@ -57,7 +57,8 @@ pub struct ShadeMaterial {
     pub eta_leaving: f32,
     /// 1 for double-sided.
     pub double_sided: u32,
-    /// 1 when a (mirror) reflection ray is traced.
+    /// The reflection ray traced: 0 none, 1 the mirror's, 2 one drawn from the GGX
+    /// lobe (width `roughness²`; its numbers from the item's seed).
     pub reflects: u32,
     /// `(shininess + 8) / 8π`.
     pub glint_norm: f32,

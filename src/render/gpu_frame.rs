@@ -5,10 +5,11 @@
 //! whole wavefront on the GPU (`gpu::GpuShading`, shade.wgsl): camera rays made here,
 //! pixels and (for the AOVs and Cryptomatte) the camera rays' hits read back.
 //!
-//! The subset is what `ShadeContext::shade` does without random numbers and without
-//! textures: constant, opaque materials (base colour, metallic, roughness, emission,
-//! transmission, IOR, double-sided); the mirror reflection (GGX width under
-//! `MIRROR_ALPHA`) or no reflection ray (roughness from `GLOSSY_LIMIT` on); refraction
+//! The subset is what `ShadeContext::shade` does without textures: constant, opaque
+//! materials (base colour, metallic, roughness, emission, transmission, IOR,
+//! double-sided); the mirror reflection (GGX width under `MIRROR_ALPHA`), one reflection
+//! ray drawn from the GGX lobe (the random numbers made from the CPU's seeds, to the
+//! bit) or none (roughness from `GLOSSY_LIMIT` on); refraction
 //! with exact dielectric Fresnel; punctual lights (the default light too); the options'
 //! or the scene's ambient light; a constant background. Anything else keeps shading on
 //! the CPU, traced on the GPU as before, and the log says which feature did.
@@ -99,10 +100,6 @@ fn material_outside(m: &Material) -> Option<&'static str> {
     if emits(m) {
         return Some("emission (its triangles are area lights)");
     }
-    let roughness = m.roughness.clamp(0.0, 1.0);
-    if roughness < GLOSSY_LIMIT && roughness * roughness >= MIRROR_ALPHA {
-        return Some("glossy reflection (GGX sampling)");
-    }
     None
 }
 
@@ -139,7 +136,13 @@ fn materials(scene: &Scene) -> Vec<ShadeMaterial> {
                 eta_entering: 1.0 / ior,
                 eta_leaving: ior,
                 double_sided: u32::from(m.double_sided),
-                reflects: u32::from(roughness < GLOSSY_LIMIT),
+                reflects: if roughness >= GLOSSY_LIMIT {
+                    0
+                } else if roughness * roughness < MIRROR_ALPHA {
+                    1
+                } else {
+                    2
+                },
                 glint_norm: (shininess + 8.0) / (8.0 * std::f32::consts::PI),
                 glint_scale: 1.0 - gloss * 0.5,
             }
@@ -647,18 +650,18 @@ mod tests {
                 },
                 "area lights",
             ),
-            (
-                Material {
-                    roughness: 0.2,
-                    ..Material::default()
-                },
-                "GGX",
-            ),
         ];
         for (m, said) in outside {
             let w = why(&scene_with(m.clone()), &opts).unwrap_or_default();
             assert!(w.contains(said) && w.contains("material 0"), "{m:?}: {w}");
         }
+        // Glossy (GGX) reflection is inside: its numbers come from the items' seeds.
+        let glossy = Material {
+            roughness: 0.2,
+            ..Material::default()
+        };
+        assert_eq!(why(&scene_with(glossy.clone()), &opts), None);
+        assert_eq!(materials(&scene_with(glossy))[0].reflects, 2);
         let plain = scene_with(Material::default());
         let blur = RenderOptions {
             motion_blur: Some(MotionBlur {

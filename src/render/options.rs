@@ -470,7 +470,8 @@ impl PartialEq for CancelFlag {
     }
 }
 
-/// Where frames are traced (`--device`, DESIGN.md §4). Shading stays on the CPU either way.
+/// Where frames are traced (`--device`, DESIGN.md §4); on the GPU, scenes inside the frame
+/// path's subset are shaded there too (`render::gpu_frame`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum TraceDevice {
     /// The CPU tracer on every core (the default).
