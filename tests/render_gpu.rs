@@ -13,7 +13,8 @@ use std::process::Command;
 
 use common::exr_read::read_exr;
 use common::farm::{ok, s};
-use common::render_scene::{files_under, temp_dir, write_scene};
+use common::render_scene::{files_under, scene, temp_dir, write_scene};
+use subfield::scene::{AlphaMode, Material};
 
 fn contains(hay: &[u8], needle: &str) -> bool {
     hay.windows(needle.len()).any(|w| w == needle.as_bytes())
@@ -37,6 +38,21 @@ fn render_on(dir: &Path, scene: &Path, device: &str, folder: &str, extra: &[&str
     ];
     args.extend_from_slice(extra);
     ok(&args);
+}
+
+/// The test scene with one more material, unused, that keeps it off the GPU frame path
+/// (alpha below 1: shading on the CPU, tracing on the GPU), as `dir/veiled.glb`.
+fn write_scene_shaded_on_cpu(dir: &Path) -> std::path::PathBuf {
+    let mut sc = scene();
+    sc.materials.push(Material {
+        name: Some("veil".into()),
+        base_color: glam::Vec4::new(1.0, 1.0, 1.0, 0.5),
+        alpha_mode: AlphaMode::Blend,
+        ..Material::default()
+    });
+    let p = dir.join("veiled.glb");
+    subfield::import::write_gltf(&sc, &p).unwrap();
+    p
 }
 
 /// Every frame in `dir/a` is channel for channel, bit for bit, the one in `dir/b`; how
@@ -68,7 +84,7 @@ fn gpu_frames_equal_cpu_frames() {
         return;
     }
     let dir = temp_dir("gpu-vs-cpu");
-    let scene = write_scene(&dir);
+    let scene = write_scene_shaded_on_cpu(&dir);
     let extra = [
         "--spp",
         "2",
@@ -105,8 +121,8 @@ fn gpu_frames_equal_cpu_frames() {
     }
 }
 
-/// The rest of the shading model with tracing on the GPU (the scene's emissive lamp keeps
-/// it off the GPU frame path: shading on the CPU): motion blur, the light-path passes
+/// The rest of the shading model with tracing on the GPU (an unused translucent material
+/// keeps the scene off the GPU frame path: shading on the CPU): motion blur, the light-path passes
 /// and Cryptomatte, diffuse bounces, an environment map, overscan and exposure, glossy
 /// sampling with several samples a pixel. The frames are the CPU's to the bit.
 #[test]
@@ -115,7 +131,7 @@ fn every_shading_feature_renders_the_cpus_frames_with_gpu_tracing() {
         return;
     }
     let dir = temp_dir("gpu-features");
-    let scene = write_scene(&dir);
+    let scene = write_scene_shaded_on_cpu(&dir);
     // A 4x2 Radiance map, flat scanlines (RGBE: these values are exact).
     let map = dir.join("sky.hdr");
     let mut hdr = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 2 +X 4\n".to_vec();

@@ -20,7 +20,9 @@ use rayon::prelude::*;
 use super::device::{storage_entry, uniform_entry};
 use super::moving::entry;
 use super::scan::{LiveScan, ScanPlan};
-use super::shade_tables::{CameraRays, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle};
+use super::shade_tables::{
+    CameraRays, ShadeEmitter, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle,
+};
 use super::trace::pack_ray;
 use super::{GpuDevice, GpuError, GpuMoving, GpuStatic, GpuTracer};
 use crate::geometry::{Hit, Ray};
@@ -58,8 +60,9 @@ pub struct ChunkOut {
 /// The camera's uniform (shade.wgsl's bindings: 0 and this uniforms, 1..=22 and
 /// 24..=`LAST` storage).
 const CAMERA: u32 = 23;
-/// The last binding: 24..=26 are the next level's templates, uniforms and totals.
-const LAST: u32 = 26;
+/// The last binding: 24..=26 are the next level's templates, uniforms and totals, 27 the
+/// emitters (area lights).
+const LAST: u32 = 27;
 
 /// The frame path's kernels and the static triangles' surfaces (uploaded once).
 pub struct GpuShading {
@@ -398,9 +401,10 @@ impl GpuShading {
 
     /// The most items a level can hold with `lights` lights: what one binding and a
     /// budget of 256 MiB for a chunk's buffers allow (the frame path's buffers take
-    /// some 368 + 144 · lights bytes an item).
-    pub fn max_capacity(dev: &GpuDevice, lights: usize) -> u64 {
-        let l = lights as u64;
+    /// some 368 + 144 · slots bytes an item, `slots` the shadow rays an item may make:
+    /// the punctual lights, and the area-light samples at a camera ray's hit).
+    pub fn max_capacity(dev: &GpuDevice, slots: usize) -> u64 {
+        let l = slots as u64;
         let per_binding = dev.max_binding() / (64 * l).max(96);
         let budget = (256u64 << 20) / (368 + 144 * l);
         per_binding.min(budget).clamp(1024, 1 << 22)
@@ -409,11 +413,13 @@ impl GpuShading {
     /// Traces and shades the camera rays of `npix` pixels from `camera.first_pixel` on
     /// (made here, `camera.spp` a pixel, in the CPU's sample order) over the static
     /// part and the frame's moving part (`moving`, `surfaces`), with `materials`
-    /// (indexed by the surfaces' material numbers) and `lights`: each pixel's averaged
+    /// (indexed by the surfaces' material numbers), `lights` and `emitters` (the area
+    /// lights, `shading.light_samples` shadow rays to them at a camera ray's hit, one
+    /// deeper): each pixel's averaged
     /// RGB and coverage, and the camera rays' hits when `want_hits`.
     ///
     /// The levels run without the host: each level's buffers hold `capacity` items (at
-    /// least the chunk's samples) and `capacity` × lights shadow rays, and the next
+    /// least the chunk's samples) and `capacity` × slots shadow rays, and the next
     /// level's counts go into its uniforms on the GPU. `Ok(None)`: a level outgrew them
     /// (nothing of the chunk is kept; trace it again with more room or fewer pixels).
     #[allow(clippy::too_many_arguments)]
@@ -425,6 +431,7 @@ impl GpuShading {
         surfaces: &GpuSurfaces,
         materials: &[ShadeMaterial],
         lights: &[ShadeLight],
+        emitters: &[ShadeEmitter],
         shading: &ShadeParams,
         camera: &CameraRays,
         npix: u64,
@@ -438,22 +445,38 @@ impl GpuShading {
         }
         let cap = capacity.max(nsamples);
         let nl = lights.len() as u64;
-        let caps = (cap * nl).max(1);
-        let (cap32, caps32, nl32) =
-            match (u32::try_from(cap), u32::try_from(caps), u32::try_from(nl)) {
-                (Ok(a), Ok(b), Ok(c)) => (a, b, c),
-                _ => return Err(dev.too_large("a level of the frame path", caps * 48)),
-            };
+        // An item's shadow ray slots: one a punctual light, and the area-light samples
+        // of a camera ray's hit (deeper hits make one).
+        let area_samples = if emitters.is_empty() {
+            0
+        } else {
+            u64::from(shading.light_samples.max(1))
+        };
+        let slots = nl + area_samples;
+        let caps = (cap * slots).max(1);
+        let (cap32, caps32, nl32, ne32) = match (
+            u32::try_from(cap),
+            u32::try_from(caps),
+            u32::try_from(nl),
+            u32::try_from(emitters.len()),
+        ) {
+            (Ok(a), Ok(b), Ok(c), Ok(d)) => (a, b, c, d),
+            _ => return Err(dev.too_large("a level of the frame path", caps * 48)),
+        };
         let tracer = GpuTracer::new(dev, stat, moving);
         let mats = dev.storage_with("the materials", bytemuck::cast_slice(materials))?;
         let lts = dev.storage_with("the lights", bytemuck::cast_slice(lights))?;
+        let ems = match emitters.is_empty() {
+            true => None,
+            false => Some(dev.storage_with("the emitters", bytemuck::cast_slice(emitters))?),
+        };
         let cam = dev.uniform(bytemuck::bytes_of(camera));
         // The buffers of the last chunk when they are large enough (every one is written
         // before it is read), else new ones.
         let size = RoomSize {
             cap,
             caps,
-            cand: cap * nl,
+            cand: cap * slots,
             nsamples,
             npix,
         };
@@ -503,16 +526,17 @@ impl GpuShading {
             spp,
             Some((shading, total_tris)),
         );
-        // Seeds are made only when a material reads them (a glossy lobe), as the CPU's
+        // Seeds are made only when a ray reads them (a glossy lobe, area lights), as the CPU's
         // `ShadeContext::random`: their values matter only where they are read.
-        if materials.iter().any(|m| m.reflects == 2) {
+        if materials.iter().any(|m| m.reflects == 2) || !emitters.is_empty() {
             p.e[1] = 1.0;
         }
         p.g[1] = cap32;
         p.g[2] = caps32;
+        p.g[3] = ne32;
         let x_of = |n: u64| GpuDevice::grid_of(n, 64).0;
         let x_caps = [x_of(cap + 1), x_of(cap), x_of(caps)];
-        p.h = [x_caps[0], x_caps[1], x_caps[2], 0];
+        p.h = [x_caps[0], x_caps[1], x_caps[2], area_samples as u32];
         let mut closest = tracer.params_words(cap, false)?;
         let any = tracer.params_words(caps, true)?;
         let f_uni = dev.uniform(bytemuck::bytes_of(&p));
@@ -570,6 +594,7 @@ impl GpuShading {
                 Some(templates),
                 Some(made),
                 Some(&totals),
+                ems.as_ref(),
             ];
             self.group(dev, &bufs)
         };

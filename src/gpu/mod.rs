@@ -25,7 +25,9 @@ mod trace;
 pub use device::{AdapterPolicy, GpuDevice};
 pub use frame::{packed_on_cpu, ChunkOut, GpuShading, GpuSurfaces};
 pub use moving::GpuMoving;
-pub use shade_tables::{CameraRays, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle};
+pub use shade_tables::{
+    CameraRays, ShadeEmitter, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle,
+};
 pub use static_part::GpuStatic;
 pub use trace::GpuTracer;
 

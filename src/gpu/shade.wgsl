@@ -33,10 +33,12 @@ struct FP {
     d: vec4<f32>,
     // MIN_WEIGHT, 1 when a material reads random numbers (a glossy lobe)
     e: vec4<f32>,
-    // triangles in all, the items a level holds at most, the shadow rays likewise
+    // triangles in all, the items a level holds at most, the shadow rays likewise,
+    // the emitters (area lights)
     g: vec4<u32>,
     // workgroups along x of the grids over the capacities (the row strides / 64): the
-    // items' kernels, the closest hits, the any hits
+    // items' kernels, the closest hits, the any hits; the area-light samples at a
+    // camera ray's hit (0 without emitters)
     h: vec4<u32>,
 }
 
@@ -118,6 +120,22 @@ struct Light {
 @group(0) @binding(21) var<storage, read_write> radiance: array<vec4<f32>>;
 @group(0) @binding(22) var<storage, read_write> rgba: array<vec4<f32>>;
 
+// frame.rs `ShadeEmitter`: an emissive triangle, drawn by `cdf`.
+struct Emitter {
+    p0: vec3<f32>,
+    area: f32,
+    e1: vec3<f32>,
+    tri: u32,
+    e2: vec3<f32>,
+    material: u32,
+    normal: vec3<f32>,
+    two_sided: u32,
+    cdf: f32,
+    cdf_below: f32,
+    pad0: u32,
+    pad1: u32,
+}
+
 // The camera (frame.rs `CameraRays`), for the camera rays' level.
 struct Cam {
     // origin, tan(yfov / 2)
@@ -144,6 +162,8 @@ struct Cam {
 @group(0) @binding(24) var<storage, read_write> templates: array<u32>;
 @group(0) @binding(25) var<storage, read_write> made: array<u32>;
 @group(0) @binding(26) var<storage, read_write> totals: array<u32>;
+// The area lights (F.g.w of them).
+@group(0) @binding(27) var<storage, read_write> emitters: array<Emitter>;
 
 const NONE: u32 = 0xffffffffu;
 const FRAC_1_PI: f32 = 0.31830988618379067;
@@ -352,6 +372,46 @@ fn camera_ray(px: f32, py: f32) -> Ray {
     }
     let o = rotate(vec3<f32>(sx * C.ry.w, sy * C.rz.w, 0.0));
     return make_ray(C.o.xyz + o, rotate(vec3<f32>(0.0, 0.0, -1.0)), 0.0, inf());
+}
+
+// An item's shadow ray slots: a punctual light each, then the area-light samples.
+fn slots() -> u32 {
+    return F.a.y + F.h.w;
+}
+
+// The shadow rays' batches: the punctual lights, then one for every area-light sample.
+fn batches() -> u32 {
+    return F.a.y + select(0u, 1u, F.g.w > 0u);
+}
+
+// 0.999_999_9 as f32.
+fn top() -> f32 {
+    return bitcast<f32>(0x3f7ffffeu);
+}
+
+// `sampling::stratified`: the i-th of n stratified pairs in [0, 1)^2 from r (cell i of
+// an a x b grid, a the largest divisor of n up to its square root).
+fn stratified(i: u32, n: u32, r: vec2<f32>) -> vec2<f32> {
+    if n <= 1u {
+        return r;
+    }
+    // floor(sqrt(n)), exactly.
+    var a = u32(sqrt(f32(n)));
+    while a * a > n {
+        a = a - 1u;
+    }
+    while (a + 1u) * (a + 1u) <= n {
+        a = a + 1u;
+    }
+    while a > 1u && n % a != 0u {
+        a = a - 1u;
+    }
+    let b = n / max(a, 1u);
+    let j = i % n;
+    return vec2<f32>(
+        min(div_rn(f32(j % a) + r.x, f32(a)), top()),
+        min(div_rn(f32(j / a) + r.y, f32(b)), top()),
+    );
 }
 
 fn grid_index(gid: vec3<u32>) -> u32 {
@@ -647,8 +707,89 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             var sh: Shadow;
             sh.r = sr;
             sh.c = vec4<f32>(c, f32(li));
-            sh_cand[i * nl + nsh] = sh;
+            sh_cand[i * slots() + nsh] = sh;
             nsh = nsh + 1u;
+        }
+        // `area_light`: shadow rays to points on the emissive triangles (one batch after
+        // the punctual lights'), each emitter drawn by power, the point stratified; at a
+        // camera ray's hit the pixel's samples share one stratification (cell j * spp + k
+        // for light sample j of pixel sample k), the emitter choice over the cells in a
+        // scrambled order.
+        let ne = F.g.w;
+        if ne > 0u {
+            let spp = max(F.b.w, 1u);
+            var n = 1u;
+            var k = 0u;
+            var cells = 1u;
+            if it.m.y == 0u {
+                n = F.h.w;
+                k = it.m.x % spp;
+                cells = n * spp;
+            }
+            let seed = it.m.zw;
+            for (var j = 0u; j < n; j = j + 1u) {
+                let cell = j * (cells / n) + k;
+                // Purpose::AreaLight is 2.
+                let rp = seed_get(seed, 2u, 2u * j);
+                var scrambled = f32(cell);
+                if cells % 7919u != 0u {
+                    scrambled = f32((cell * 7919u) % cells);
+                }
+                let pick = min(div_rn(scrambled + rp.x, f32(cells)), top());
+                let rs = stratified(cell, cells, seed_get(seed, 2u, 2u * j + 1u));
+                // `AreaLights::pick`: the first emitter whose cdf is above `pick`.
+                var lo = 0u;
+                var hi = ne;
+                while lo < hi {
+                    let mid = (lo + hi) / 2u;
+                    if emitters[mid].cdf <= pick {
+                        lo = mid + 1u;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                let e = emitters[min(lo, ne - 1u)];
+                let pe = e.cdf - e.cdf_below;
+                if !(pe > 0.0) || e.tri == h.y {
+                    continue;
+                }
+                let su = sqrt(rs.x);
+                let lp = e.p0 + e.e1 * (su * (1.0 - rs.y)) + e.e2 * (su * rs.y);
+                let pdf_area = pe / e.area;
+                let d = lp - origin;
+                let d2 = dot(d, d);
+                if !(d2 > 0.0 && finite(d2)) {
+                    continue;
+                }
+                let dist = sqrt(d2);
+                let to = d / dist;
+                let cos_i = dot(s.ns, to);
+                if cos_i <= 0.0 || dot(s.ng, to) <= 0.0 {
+                    continue;
+                }
+                var cos_l = -dot(e.normal, to);
+                if e.two_sided != 0u {
+                    cos_l = abs(cos_l);
+                }
+                if cos_l <= 0.0 {
+                    continue;
+                }
+                let le = mats[e.material].emission;
+                // The glint only on a surface without a reflection ray.
+                var b = lb.kd * FRAC_1_PI;
+                if m.reflects == 0u {
+                    b = brdf(m, lb, s, to);
+                }
+                let c = weight * b * le * (cos_i * cos_l / (d2 * pdf_area * f32(n)));
+                if max3(c) <= F.e.x * 1e-2 || !finite3(c) {
+                    continue;
+                }
+                var sh: Shadow;
+                sh.r = make_ray(origin, to, 0.0, dist * (1.0 - 1e-3));
+                sh.c = vec4<f32>(c, f32(nl));
+                sh_cand[i * slots() + nsh] = sh;
+                nsh = nsh + 1u;
+            }
         }
         // `secondary`: refraction, then the mirror or GGX reflection.
         if it.m.y < F.a.w {
@@ -726,7 +867,7 @@ fn compact(@builtin(global_invocation_id) gid: vec3<u32>) {
     if i >= F.a.x {
         return;
     }
-    let nl = F.a.y;
+    let nl = slots();
     // Past the capacities nothing is written: `next_level` flags the overflow and the
     // host traces the chunk again with more room.
     let a = sh_start[i];
@@ -813,7 +954,7 @@ fn accum(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var j = i; j < e; j = j + 1u) {
         acc = acc + local[j].xyz;
     }
-    for (var l = 0u; l < F.a.y; l = l + 1u) {
+    for (var l = 0u; l < batches(); l = l + 1u) {
         for (var j = i; j < e; j = j + 1u) {
             for (var k = sh_start[j]; k < sh_start[j + 1u]; k = k + 1u) {
                 let a = sh_add[k];

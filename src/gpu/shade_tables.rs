@@ -88,6 +88,31 @@ pub struct ShadeLight {
     pub pad: u32,
 }
 
+/// An emissive triangle (an area light), as shade.wgsl's `Emitter` reads it: the CPU's
+/// `AreaLights` table, drawn by `cdf` (the first whose `cdf` is above the number).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct ShadeEmitter {
+    pub p0: [f32; 3],
+    pub area: f32,
+    /// `p1 − p0`.
+    pub e1: [f32; 3],
+    /// The triangle's number (as the tracer numbers them).
+    pub tri: u32,
+    /// `p2 − p0`.
+    pub e2: [f32; 3],
+    /// Its material's row of the material table.
+    pub material: u32,
+    /// The unit geometric normal.
+    pub normal: [f32; 3],
+    /// 1 when it emits from both sides.
+    pub two_sided: u32,
+    /// The cumulative probability up to it, and up to the one before (0 for the first).
+    pub cdf: f32,
+    pub cdf_below: f32,
+    pub pad: [u32; 2],
+}
+
 /// The camera as shade.wgsl's `camera` kernel makes the rays (`Cam`): the fields of
 /// `render::CameraModel` and of the frame, so that the rays are `CameraModel::ray`'s
 /// at `wavefront::sample_offset`'s points, to the bit.
@@ -134,4 +159,7 @@ pub struct ShadeParams {
     pub max_depth: u32,
     /// Contributions at or below this are dropped (`shade::MIN_WEIGHT`).
     pub min_weight: f32,
+    /// Shadow rays to the area lights at a camera ray's hit (`ceil(LIGHT_SAMPLES /
+    /// spp)`; one at deeper hits); read only when there are emitters.
+    pub light_samples: u32,
 }

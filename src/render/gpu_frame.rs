@@ -22,18 +22,24 @@ use rayon::prelude::*;
 use super::camera::CameraModel;
 use super::lights::emits;
 use super::options::RenderOptions;
-use super::shade::{FrameBuffers, FrameWork, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT, MIRROR_ALPHA};
+use super::shade::{
+    FrameBuffers, FrameWork, ShadeContext, GLOSSY_LIMIT, LIGHT_SAMPLES, MIN_WEIGHT, MIRROR_ALPHA,
+};
 use super::wavefront::{sample_offset, write_aovs, write_crypto, CentreInputs, FrameArgs};
 use crate::geometry::Ray;
 use crate::gpu::{
-    CameraRays, GpuDevice, GpuError, GpuMoving, GpuShading, GpuStatic, GpuTracer, ShadeLight,
-    ShadeMaterial, ShadeParams, SurfaceTriangle,
+    CameraRays, GpuDevice, GpuError, GpuMoving, GpuShading, GpuStatic, GpuTracer, ShadeEmitter,
+    ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle,
 };
 use crate::scene::{AlphaMode, Falloff, LightKind, Material, Scene, TriangleSoup};
 
 /// Samples a chunk traces at most (bounds the GPU's buffers: a level's rays at most
 /// double, and its shadow rays are at most one a light an item).
 const CHUNK_SAMPLES: usize = 1 << 16;
+
+/// The most samples a pixel the kernel's area-light strata take (`(spp + 7) · 7919`
+/// stays under 2^32).
+const MAX_AREA_SPP: u32 = 1 << 19;
 
 /// Why `scene` rendered with `opts` cannot take the GPU frame path (the first feature
 /// outside the subset, in words), or `None` when it can. `max_binding`: the adapter's
@@ -56,6 +62,13 @@ pub(super) fn outside_subset(
     }
     if opts.shading.diffuse_bounces > 0 {
         return Some("diffuse bounces (--diffuse-bounces)".into());
+    }
+    // The area lights' strata are numbered in 32 bits (`cell · 7919` a camera ray's
+    // hit, up to `spp + 7` cells).
+    if opts.spp > MAX_AREA_SPP && scene.materials.iter().any(emits) {
+        return Some(format!(
+            "area lights at more than {MAX_AREA_SPP} samples a pixel (--spp)"
+        ));
     }
     for (i, m) in scene.materials.iter().enumerate() {
         let name = match &m.name {
@@ -96,9 +109,6 @@ fn material_outside(m: &Material) -> Option<&'static str> {
     };
     if !opaque {
         return Some("alpha below 1 (pass-through)");
-    }
-    if emits(m) {
-        return Some("emission (its triangles are area lights)");
     }
     None
 }
@@ -178,6 +188,27 @@ fn lights(ctx: &ShadeContext<'_>) -> Vec<ShadeLight> {
                 has_range: u32::from(l.range.is_some()),
                 pad: 0,
             }
+        })
+        .collect()
+}
+
+/// The area lights of `ctx` (the frame's emissive triangles, static and posed), as the
+/// CPU draws them.
+fn emitters(ctx: &ShadeContext<'_>) -> Vec<ShadeEmitter> {
+    ctx.area
+        .table()
+        .map(|(e, cdf, cdf_below)| ShadeEmitter {
+            p0: e.p0.to_array(),
+            area: e.area,
+            e1: e.e1.to_array(),
+            tri: e.tri,
+            e2: e.e2.to_array(),
+            material: e.material,
+            normal: e.normal.to_array(),
+            two_sided: u32::from(e.two_sided),
+            cdf,
+            cdf_below,
+            pad: [0; 2],
         })
         .collect()
 }
@@ -268,12 +299,14 @@ pub(super) fn render_frame_gpu(
     let clock = Instant::now();
     let mats = materials(ctx.scene);
     let lts = lights(ctx);
+    let ems = emitters(ctx);
     let params = ShadeParams {
         ambient: ctx.options.ambient.to_array(),
         background: ctx.options.background.to_array(),
         extent: ctx.extent,
         max_depth,
         min_weight: MIN_WEIGHT,
+        light_samples: LIGHT_SAMPLES.div_ceil(spp.max(1) as u32),
     };
     let moving_surf = surfaces(ctx.dynamic_soup, ctx.scene.materials.len());
     work.shade += clock.elapsed();
@@ -295,7 +328,13 @@ pub(super) fn render_frame_gpu(
     // doubled while a level outgrows it, up to what the adapter allows; past that the
     // chunk is traced again in halves. A sample's light does not depend on the chunk or
     // the room it is traced in, so neither changes a byte.
-    let max_capacity = GpuShading::max_capacity(gpu.dev, lts.len()) as usize;
+    let slots = lts.len()
+        + if ems.is_empty() {
+            0
+        } else {
+            params.light_samples as usize
+        };
+    let max_capacity = GpuShading::max_capacity(gpu.dev, slots) as usize;
     let mut rows_per_chunk = ((CHUNK_SAMPLES.min(max_capacity / 4)) / (w * spp)).max(1);
     let mut capacity = 0;
     let mut y0 = 0;
@@ -320,6 +359,7 @@ pub(super) fn render_frame_gpu(
             &surf,
             &mats,
             &lts,
+            &ems,
             &params,
             &chunk_camera,
             npix as u64,
@@ -479,6 +519,7 @@ mod tests {
             extent: 10.0,
             max_depth: 4,
             min_weight: MIN_WEIGHT,
+            light_samples: 8,
         };
         // Every pixel on the cube's front face.
         let camera = CameraModel {
@@ -494,7 +535,17 @@ mod tests {
         let run = |capacity: u64| {
             shading
                 .render_chunk(
-                    &dev, &stat, &moving, &no_moving, &mats, &lts, &params, &cam, 256, capacity,
+                    &dev,
+                    &stat,
+                    &moving,
+                    &no_moving,
+                    &mats,
+                    &lts,
+                    &[],
+                    &params,
+                    &cam,
+                    256,
+                    capacity,
                     true,
                 )
                 .unwrap()
@@ -643,13 +694,6 @@ mod tests {
                 },
                 "pass-through",
             ),
-            (
-                Material {
-                    emissive: Vec3::new(0.0, 0.0, 1.0),
-                    ..Material::default()
-                },
-                "area lights",
-            ),
         ];
         for (m, said) in outside {
             let w = why(&scene_with(m.clone()), &opts).unwrap_or_default();
@@ -662,6 +706,20 @@ mod tests {
         };
         assert_eq!(why(&scene_with(glossy.clone()), &opts), None);
         assert_eq!(materials(&scene_with(glossy))[0].reflects, 2);
+        // So are area lights, up to the samples a pixel their strata are numbered for.
+        let lamp = scene_with(Material {
+            emissive: Vec3::new(0.0, 0.0, 1.0),
+            ..Material::default()
+        });
+        assert_eq!(why(&lamp, &opts), None);
+        let many = RenderOptions {
+            spp: MAX_AREA_SPP + 1,
+            ..RenderOptions::default()
+        };
+        assert!(why(&lamp, &many)
+            .unwrap()
+            .contains("area lights at more than"));
+        assert_eq!(why(&scene_with(Material::default()), &many), None);
         let plain = scene_with(Material::default());
         let blur = RenderOptions {
             motion_blur: Some(MotionBlur {

@@ -135,6 +135,19 @@ impl AreaLights {
         self.emitters.is_empty()
     }
 
+    /// The emitters in drawing order, each with its cumulative probability and the one
+    /// below it (what [`AreaLights::sample`] reads), for the GPU's table.
+    pub fn table(&self) -> impl Iterator<Item = (&Emitter, f32, f32)> + '_ {
+        self.emitters
+            .iter()
+            .zip(&self.cdf)
+            .enumerate()
+            .map(|(i, (e, &c))| {
+                let below = if i == 0 { 0.0 } else { self.cdf[i - 1] };
+                (e, c, below)
+            })
+    }
+
     #[cfg(test)]
     pub fn len(&self) -> usize {
         self.emitters.len()

@@ -93,7 +93,7 @@ pub struct ShadeContext<'a> {
     /// Size of the scene (bounding box diagonal), for ray offsets.
     pub extent: f32,
     pub(in crate::render) lights: Vec<PreLight>,
-    area: AreaLights,
+    pub(in crate::render) area: AreaLights,
     mips: &'a TextureMips,
     /// glTF's default material, for triangles without one (made once, not a hit).
     default_material: Material,
@@ -118,7 +118,7 @@ pub const GLOSSY_LIMIT: f32 = 0.4;
 pub(in crate::render) const MIRROR_ALPHA: f32 = 1e-3;
 /// Area-light samples a pixel gets at its camera rays' hits, over all its samples
 /// (`ceil(LIGHT_SAMPLES / spp)` a hit; one at deeper hits).
-const LIGHT_SAMPLES: u32 = 8;
+pub(in crate::render) const LIGHT_SAMPLES: u32 = 8;
 
 /// A ray cone (Akenine-Möller et al. 2021): its width where the ray starts and how fast
 /// it widens (radians), for texture level of detail.
