@@ -516,7 +516,56 @@ fn area_lights_agree_with_the_cpu() {
     agree(&dir, &lamp, "lamp", &two);
 }
 
-/// A scene outside the subset (diffuse bounces) traces on the GPU and shades on the
+/// An environment map and diffuse bounces on the GPU: misses look the map up (turned
+/// and scaled), bounce rays are drawn with the CPU's numbers (`Purpose::Diffuse`, the
+/// bounce's seed), add no emission of their own and go on past `--max-depth`: the room
+/// under a 4x2 map at depth 2, with two bounces and two samples, and the lamp scene with
+/// one bounce and no mirror depth.
+#[test]
+fn environment_and_bounces_agree_with_the_cpu() {
+    if common::gpu::device().is_none() {
+        return;
+    }
+    let dir = temp_dir("gpu-frames-env");
+    // A 4x2 Radiance map, flat scanlines (RGBE: these values are exact).
+    let map = dir.join("sky.hdr");
+    let mut hdr = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 2 +X 4\n".to_vec();
+    for k in 0..8u8 {
+        hdr.extend_from_slice(&[64 + 16 * k, 128, 200 - 8 * k, 129]);
+    }
+    std::fs::write(&map, hdr).unwrap();
+    let room = write(&dir, &subset_scene());
+    let sky = ["--environment", s(&map), "--environment-rotation", "30"];
+    let a = ["--frames", "4..6", "--spp", "1", "--max-depth", "2"];
+    agree(&dir, &room, "env", &[&a[..], &sky[..]].concat());
+    let b = [
+        "--frames",
+        "5",
+        "--spp",
+        "2",
+        "--max-depth",
+        "1",
+        "--diffuse-bounces",
+        "2",
+    ];
+    agree(&dir, &room, "bounces", &[&b[..], &sky[..]].concat());
+    let lamp_dir = dir.join("lamp");
+    std::fs::create_dir_all(&lamp_dir).unwrap();
+    let lamp = write_scene(&lamp_dir);
+    let c = [
+        "--frames",
+        "2",
+        "--spp",
+        "1",
+        "--max-depth",
+        "0",
+        "--diffuse-bounces",
+        "1",
+    ];
+    agree(&dir, &lamp, "lamp-bounce", &c);
+}
+
+/// A scene outside the subset (alpha below 1) traces on the GPU and shades on the
 /// CPU: its frames are the CPU's to the bit, and the log says why.
 #[test]
 fn outside_the_subset_falls_back_and_says_why() {
@@ -524,14 +573,21 @@ fn outside_the_subset_falls_back_and_says_why() {
         return;
     }
     let dir = temp_dir("gpu-frames-fallback");
-    let scene = write_scene(&dir);
-    let a = ["--frames", "2", "--spp", "1", "--diffuse-bounces", "1"];
+    let mut veiled = subset_scene();
+    veiled.materials.push(Material {
+        name: Some("veil".into()),
+        base_color: Vec4::new(1.0, 1.0, 1.0, 0.5),
+        alpha_mode: subfield::scene::AlphaMode::Blend,
+        ..Material::default()
+    });
+    let scene = write(&dir, &veiled);
+    let a = ["--frames", "2", "--spp", "1"];
     render(&scene, &dir, "cpu", "cpu", &a);
     let log = render(&scene, &dir, "gpu", "gpu", &a);
     assert!(
         log.contains(
             "note: shading on the CPU, tracing on the GPU: the GPU frame path does not take \
-             diffuse bounces (--diffuse-bounces)"
+             material 'veil': alpha below 1 (pass-through)"
         ),
         "stderr: {log}"
     );

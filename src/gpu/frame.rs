@@ -61,8 +61,11 @@ pub struct ChunkOut {
 /// 24..=`LAST` storage).
 const CAMERA: u32 = 23;
 /// The last binding: 24..=26 are the next level's templates, uniforms and totals, 27 the
-/// emitters (area lights).
-const LAST: u32 = 27;
+/// emitters (area lights), 28 the environment map.
+const LAST: u32 = 28;
+/// Next-level ray candidates an item may make: a diffuse bounce, a refraction, a
+/// reflection.
+const NEXT_SLOTS: u64 = 3;
 
 /// The frame path's kernels and the static triangles' surfaces (uploaded once).
 pub struct GpuShading {
@@ -81,7 +84,14 @@ pub struct GpuShading {
     dummy_camera: wgpu::Buffer,
     /// The last chunk's buffers, for the next chunk or frame that fits them.
     room: std::sync::Mutex<Option<Room>>,
+    /// The environment map (shade.wgsl's `env`) and what names it, uploaded once for
+    /// the frames that use it ([`GpuShading::set_environment`]).
+    env: std::sync::Mutex<Option<(String, GpuEnvironment)>>,
 }
+
+/// An environment map on the GPU ([`GpuShading::environment`]).
+#[derive(Clone, Debug)]
+pub struct GpuEnvironment(std::sync::Arc<wgpu::Buffer>);
 
 /// What a chunk's buffers hold: items a level, shadow rays a level, shadow ray
 /// candidates (items × lights), samples, pixels.
@@ -170,8 +180,8 @@ impl Room {
             hits: b("the hits", cap * 16)?,
             local: b("the items' light", cap * 16)?,
             sh_cand: b("the shadow ray candidates", cand * 64)?,
-            nx_cand_r: b("the next rays' candidates", cap * 2 * 48)?,
-            nx_cand_i: b("the next items' candidates", cap * 2 * 32)?,
+            nx_cand_r: b("the next rays' candidates", cap * NEXT_SLOTS * 48)?,
+            nx_cand_i: b("the next items' candidates", cap * NEXT_SLOTS * 32)?,
             sh_scan: LiveScan::new(dev, &plan, &sh_count, &sh_start)?,
             nx_scan: LiveScan::new(dev, &plan, &nx_count, &nx_start)?,
             sh_count,
@@ -268,7 +278,33 @@ impl GpuShading {
             dummies,
             dummy_camera,
             room: std::sync::Mutex::new(None),
+            env: std::sync::Mutex::new(None),
         })
+    }
+
+    /// An environment map for the frames' misses (`table`: shade.wgsl's `env`, a header
+    /// of 8 words then the texels' RGB), named by `key`: uploaded once, and again only
+    /// when the key differs from the last one's.
+    pub fn environment(
+        &self,
+        dev: &GpuDevice,
+        key: &str,
+        table: impl FnOnce() -> Vec<f32>,
+    ) -> Result<GpuEnvironment, GpuError> {
+        let mut g = match self.env.lock() {
+            Ok(g) => g,
+            Err(p) => p.into_inner(),
+        };
+        if let Some((k, e)) = g.as_ref() {
+            if k == key {
+                return Ok(e.clone());
+            }
+        }
+        *g = None;
+        let buf = dev.storage_with("the environment map", bytemuck::cast_slice(&table()))?;
+        let e = GpuEnvironment(std::sync::Arc::new(buf));
+        *g = Some((key.to_string(), e.clone()));
+        Ok(e)
     }
 
     /// A frame's moving triangles' surfaces, uploaded (numbered after the static ones).
@@ -415,7 +451,7 @@ impl GpuShading {
     /// part and the frame's moving part (`moving`, `surfaces`), with `materials`
     /// (indexed by the surfaces' material numbers), `lights` and `emitters` (the area
     /// lights, `shading.light_samples` shadow rays to them at a camera ray's hit, one
-    /// deeper): each pixel's averaged
+    /// deeper), and `env` for the misses (else the background): each pixel's averaged
     /// RGB and coverage, and the camera rays' hits when `want_hits`.
     ///
     /// The levels run without the host: each level's buffers hold `capacity` items (at
@@ -432,6 +468,7 @@ impl GpuShading {
         materials: &[ShadeMaterial],
         lights: &[ShadeLight],
         emitters: &[ShadeEmitter],
+        env: Option<&GpuEnvironment>,
         shading: &ShadeParams,
         camera: &CameraRays,
         npix: u64,
@@ -528,9 +565,15 @@ impl GpuShading {
         );
         // Seeds are made only when a ray reads them (a glossy lobe, area lights), as the CPU's
         // `ShadeContext::random`: their values matter only where they are read.
-        if materials.iter().any(|m| m.reflects == 2) || !emitters.is_empty() {
+        if materials.iter().any(|m| m.reflects == 2)
+            || !emitters.is_empty()
+            || shading.diffuse_bounces > 0
+        {
             p.e[1] = 1.0;
         }
+        // Small integers: exact as f32.
+        p.e[2] = shading.diffuse_bounces as f32;
+        p.e[3] = if env.is_some() { 1.0 } else { 0.0 };
         p.g[1] = cap32;
         p.g[2] = caps32;
         p.g[3] = ne32;
@@ -595,6 +638,7 @@ impl GpuShading {
                 Some(made),
                 Some(&totals),
                 ems.as_ref(),
+                env.map(|e| &*e.0),
             ];
             self.group(dev, &bufs)
         };
@@ -610,10 +654,13 @@ impl GpuShading {
         // no transmission: `shade` then writes no next-level ray, whatever the depth).
         // A level that turns out empty costs the plan and a few passes of no
         // workgroups.
+        // Diffuse bounces go on past `--max-depth` (a bounce is not a secondary ray):
+        // at most that many levels more.
         let makes_rays = materials
             .iter()
             .any(|m| m.reflects != 0 || m.transmission != 0.0);
-        let deepest = if makes_rays { shading.max_depth } else { 0 };
+        let deepest =
+            if makes_rays { shading.max_depth } else { 0 }.saturating_add(shading.diffuse_bounces);
         // Word offsets in `made`: this file's uniform, the closest hits', the any
         // hits', then the workgroups (items, closest, any).
         let (w_f, w_tc, w_ta, w_args) = (0u64, 28u64, 68u64, 108u64);

@@ -23,7 +23,7 @@ mod static_part;
 mod trace;
 
 pub use device::{AdapterPolicy, GpuDevice};
-pub use frame::{packed_on_cpu, ChunkOut, GpuShading, GpuSurfaces};
+pub use frame::{packed_on_cpu, ChunkOut, GpuEnvironment, GpuShading, GpuSurfaces};
 pub use moving::GpuMoving;
 pub use shade_tables::{
     CameraRays, ShadeEmitter, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle,

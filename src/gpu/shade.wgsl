@@ -2,8 +2,9 @@
 // shadow and next-level rays compacted in the CPU's order, its light summed into the
 // samples in the CPU's order, and the pixels averaged. The shading is
 // `render::shade::ShadeContext::shade` restricted to the subset `render::gpu_frame`
-// admits (constant materials, opaque, a mirror, GGX or no reflection ray, punctual lights, a
-// constant background, no diffuse bounces), step for step; what depends on the material
+// admits (constant materials, opaque, a mirror, GGX or no reflection ray, punctual and
+// area lights, a background or environment map, diffuse bounces), step for step; the
+// random numbers are the CPU's (`sampling::Seed`, carried by each item); what depends on the material
 // alone (F0, the Blinn-Phong exponent and its normalisation, 1/ior, the spot's cone
 // cosines) comes computed by the CPU's own code in the tables.
 //
@@ -31,7 +32,9 @@ struct FP {
     c: vec4<f32>,
     // background (RGB), 1 / spp
     d: vec4<f32>,
-    // MIN_WEIGHT, 1 when a material reads random numbers (a glossy lobe)
+    // MIN_WEIGHT, 1 when a ray reads random numbers (a glossy lobe, area lights, diffuse
+    // bounces), the diffuse bounces (--diffuse-bounces, a small integer), 1 when misses
+    // see the environment map (`env`)
     e: vec4<f32>,
     // triangles in all, the items a level holds at most, the shadow rays likewise,
     // the emitters (area lights)
@@ -51,7 +54,8 @@ struct Ray {
 }
 
 struct Item {
-    // weight (RGB)
+    // weight (RGB); the diffuse bounces made, + 256 for a diffuse bounce's own ray
+    // (small integers, exact as f32)
     w: vec4<f32>,
     // sample, depth, the random numbers' seed (`sampling::Seed`, low and high words;
     // made only when a material reads it: F.e.y)
@@ -164,6 +168,10 @@ struct Cam {
 @group(0) @binding(26) var<storage, read_write> totals: array<u32>;
 // The area lights (F.g.w of them).
 @group(0) @binding(27) var<storage, read_write> emitters: array<Emitter>;
+// The environment map (frame.rs `GpuShading::environment`): width and height (u32 bits),
+// the turn's cos and sin, the intensity, three unused words, then the texels' RGB,
+// row-major from the top row.
+@group(0) @binding(28) var<storage, read_write> env: array<f32>;
 
 const NONE: u32 = 0xffffffffu;
 const FRAC_1_PI: f32 = 0.31830988618379067;
@@ -528,6 +536,52 @@ fn sign_of(x: f32) -> f32 {
     return select(1.0, -1.0, (bitcast<u32>(x) & 0x80000000u) != 0u);
 }
 
+// `sampling::sample_cosine`: a direction around unit n with density cos / pi.
+fn sample_cosine(n: vec3<f32>, r: vec2<f32>) -> vec3<f32> {
+    let sign = sign_of(n.z);
+    let t = basis_t(n, sign);
+    let b = basis_b(n, sign);
+    let radius = sqrt(r.y);
+    let phi = 2.0 * 3.14159265358979323846 * r.x;
+    return nz(t * (radius * cos(phi)) + b * (radius * sin(phi)) + n * sqrt(max(1.0 - r.y, 0.0)));
+}
+
+fn env_texel(x: u32, y: u32) -> vec3<f32> {
+    let k = 8u + 3u * (y * bitcast<u32>(env[0]) + x);
+    return vec3<f32>(env[k], env[k + 1u], env[k + 2u]);
+}
+
+// `EnvironmentMap::radiance`: the map turned about +Y, looked up bilinearly
+// (equirectangular; columns wrap, rows clamp).
+fn env_radiance(dir: vec3<f32>) -> vec3<f32> {
+    let w = bitcast<u32>(env[0]);
+    let hh = bitcast<u32>(env[1]);
+    let c = env[2];
+    let sn = env[3];
+    let d = vec3<f32>(c * dir.x - sn * dir.z, dir.y, sn * dir.x + c * dir.z);
+    let u = 0.5 + atan2(d.z, d.x) / 6.283185307179586;
+    let v = 0.5 + atan2(d.y, sqrt(d.x * d.x + d.z * d.z)) / 3.14159265358979323846;
+    if !(finite(u) && finite(v)) {
+        return vec3<f32>(0.0);
+    }
+    let x = u * f32(w) - 0.5;
+    let y = (1.0 - v) * f32(hh) - 0.5;
+    let x0 = floor(x);
+    let y0 = floor(y);
+    let fx = x - x0;
+    let fy = y - y0;
+    let wi = i32(w);
+    let xi = i32(x0);
+    let yi = i32(y0);
+    let xa = u32(((xi % wi) + wi) % wi);
+    let xb = u32((((xi + 1) % wi) + wi) % wi);
+    let ya = u32(clamp(yi, 0, i32(hh) - 1));
+    let yb = u32(clamp(yi + 1, 0, i32(hh) - 1));
+    let top = env_texel(xa, ya) * (1.0 - fx) + env_texel(xb, ya) * fx;
+    let bottom = env_texel(xa, yb) * (1.0 - fx) + env_texel(xb, yb) * fx;
+    return (top * (1.0 - fy) + bottom * fy) * env[4];
+}
+
 // `sampling::smith_g1`: GGX Smith masking for a direction at cosine `c`, width `alpha`.
 fn smith_g1(c: f32, alpha: f32) -> f32 {
     let c2 = max(c * c, 1e-8);
@@ -641,15 +695,23 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     var nsh = 0u;
     var nnx = 0u;
     var cover = 0.0;
+    // `Item::bounces` and `Item::diffuse`.
+    let bounces = u32(it.w.w) & 255u;
+    let diffuse = it.w.w >= 256.0;
     if h.y == NONE {
-        add = weight * F.d.xyz;
+        if F.e.w != 0.0 {
+            add = weight * env_radiance(r.d.xyz);
+        } else {
+            add = weight * F.d.xyz;
+        }
     } else if h.y < F.g.x {
         let s = surface(r, h);
         cover = 1.0;
         let m = mats[s.mat];
         let lb = lobes(m, s);
         var emitted = vec3<f32>(0.0);
-        if s.entering || m.double_sided != 0u {
+        // A diffuse bounce's ray adds no emission (next-event estimation lit it).
+        if (s.entering || m.double_sided != 0u) && !diffuse {
             emitted = m.emission;
         }
         add = weight * (emitted + lb.kd * F.c.xyz);
@@ -791,6 +853,22 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 nsh = nsh + 1u;
             }
         }
+        // `diffuse_bounce`: one cosine-weighted direction (Purpose::Diffuse is 3), made
+        // whatever the depth, before the secondary rays.
+        if bounces < u32(F.e.z) {
+            let wb = weight * lb.kd;
+            if max3(wb) > F.e.x {
+                let dir = sample_cosine(s.ns, seed_get(it.m.zw, 3u, 0u));
+                if dot(dir, s.ng) > 0.0 {
+                    var b: Item;
+                    b.w = vec4<f32>(wb, f32(bounces + 1u + 256u));
+                    b.m = vec4<u32>(it.m.x, it.m.y + 1u, seed_child(it.m.zw, 3u));
+                    nx_cand_r[i * 3u + nnx] = make_ray(origin, dir, 0.0, inf());
+                    nx_cand_i[i * 3u + nnx] = b;
+                    nnx = nnx + 1u;
+                }
+            }
+        }
         // `secondary`: refraction, then the mirror or GGX reflection.
         if it.m.y < F.a.w {
             var kr = lb.kr;
@@ -807,9 +885,9 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                     t = refract_(s.dir, s.ng, lb.eta);
                 }
                 if t.w != 0.0 && dot(t.xyz, s.ng) < 0.0 {
-                    next.w = vec4<f32>(kt_w, 0.0);
-                    nx_cand_r[i * 2u + nnx] = make_ray(s.point - s.ng * eps, t.xyz, 0.0, inf());
-                    nx_cand_i[i * 2u + nnx] = next;
+                    next.w = vec4<f32>(kt_w, f32(bounces));
+                    nx_cand_r[i * 3u + nnx] = make_ray(s.point - s.ng * eps, t.xyz, 0.0, inf());
+                    nx_cand_i[i * 3u + nnx] = next;
                     nnx = nnx + 1u;
                 } else {
                     kr = kr + lb.kt;
@@ -824,9 +902,9 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if dot(rd, s.ng) <= 0.0 {
                     rd = reflect_(s.dir, s.ng);
                 }
-                next.w = vec4<f32>(kr_w, 0.0);
-                nx_cand_r[i * 2u + nnx] = make_ray(origin, rd, 0.0, inf());
-                nx_cand_i[i * 2u + nnx] = next;
+                next.w = vec4<f32>(kr_w, f32(bounces));
+                nx_cand_r[i * 3u + nnx] = make_ray(origin, rd, 0.0, inf());
+                nx_cand_i[i * 3u + nnx] = next;
                 nnx = nnx + 1u;
             } else if max3(kr_w) > F.e.x && m.reflects == 2u {
                 // One direction from the visible normals: the weight is F · G1(l)
@@ -838,9 +916,9 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if cos_l > 0.0 && dot(rd, s.ng) > 0.0 {
                     let w = kr_w * smith_g1(cos_l, alpha);
                     if max3(w) > F.e.x {
-                        next.w = vec4<f32>(w, 0.0);
-                        nx_cand_r[i * 2u + nnx] = make_ray(origin, rd, 0.0, inf());
-                        nx_cand_i[i * 2u + nnx] = next;
+                        next.w = vec4<f32>(w, f32(bounces));
+                        nx_cand_r[i * 3u + nnx] = make_ray(origin, rd, 0.0, inf());
+                        nx_cand_i[i * 3u + nnx] = next;
                         nnx = nnx + 1u;
                     }
                 }
@@ -881,8 +959,8 @@ fn compact(@builtin(global_invocation_id) gid: vec3<u32>) {
     let b = nx_start[i];
     for (var k = 0u; k < nx_count[i]; k = k + 1u) {
         if b + k < F.g.y {
-            nx_rays[b + k] = nx_cand_r[i * 2u + k];
-            nx_items[b + k] = nx_cand_i[i * 2u + k];
+            nx_rays[b + k] = nx_cand_r[i * 3u + k];
+            nx_items[b + k] = nx_cand_i[i * 3u + k];
         }
     }
 }

@@ -162,4 +162,6 @@ pub struct ShadeParams {
     /// Shadow rays to the area lights at a camera ray's hit (`ceil(LIGHT_SAMPLES /
     /// spp)`; one at deeper hits); read only when there are emitters.
     pub light_samples: u32,
+    /// `--diffuse-bounces`.
+    pub diffuse_bounces: u32,
 }

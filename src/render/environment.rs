@@ -163,6 +163,30 @@ impl EnvironmentMap {
         (top * (1.0 - fy) + bottom * fy) * self.intensity
     }
 
+    /// The map as the GPU frame path reads it (shade.wgsl's `env`): a header (width and
+    /// height as u32 bits, the turn's cos and sin, the intensity, three zeros) and the
+    /// texels' RGB, row-major from the top row.
+    pub(in crate::render) fn gpu_table(&self) -> Vec<f32> {
+        let mut t = Vec::with_capacity(8 + 3 * self.texels.len());
+        t.extend_from_slice(&[
+            f32::from_bits(self.width as u32),
+            f32::from_bits(self.height as u32),
+            self.cos,
+            self.sin,
+            self.intensity,
+            0.0,
+            0.0,
+            0.0,
+        ]);
+        t.extend(self.texels.iter().flat_map(|c| c.to_array()));
+        t
+    }
+
+    /// Texels in all.
+    pub(in crate::render) fn texel_count(&self) -> usize {
+        self.texels.len()
+    }
+
     /// How the options string names the map: its bytes' hash, turn and scale.
     pub fn describe(&self) -> String {
         format!(

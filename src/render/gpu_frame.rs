@@ -10,8 +10,9 @@
 //! double-sided); the mirror reflection (GGX width under `MIRROR_ALPHA`), one reflection
 //! ray drawn from the GGX lobe (the random numbers made from the CPU's seeds, to the
 //! bit) or none (roughness from `GLOSSY_LIMIT` on); refraction
-//! with exact dielectric Fresnel; punctual lights (the default light too); the options'
-//! or the scene's ambient light; a constant background. Anything else keeps shading on
+//! with exact dielectric Fresnel; punctual lights (the default light too) and area lights
+//! (emissive triangles); the options' or the scene's ambient light; a constant
+//! background or an environment map; diffuse bounces. Anything else keeps shading on
 //! the CPU, traced on the GPU as before, and the log says which feature did.
 
 use std::time::Instant;
@@ -57,11 +58,13 @@ pub(super) fn outside_subset(
     if opts.aovs.any_light_path() {
         return Some("the light-path AOVs (--aov diffuse,specular,transmission,emission)".into());
     }
-    if opts.shading.environment.is_some() {
-        return Some("an environment map (--environment)".into());
-    }
-    if opts.shading.diffuse_bounces > 0 {
-        return Some("diffuse bounces (--diffuse-bounces)".into());
+    if let Some(env) = &opts.shading.environment {
+        let bytes = (8 + 3 * env.texel_count() as u64) * 4;
+        if bytes > max_binding {
+            return Some(format!(
+                "an environment map of {bytes} bytes (more than one GPU storage binding, {max_binding} bytes)"
+            ));
+        }
     }
     // The area lights' strata are numbered in 32 bits (`cell · 7919` a camera ray's
     // hit, up to `spp + 7` cells).
@@ -307,6 +310,15 @@ pub(super) fn render_frame_gpu(
         max_depth,
         min_weight: MIN_WEIGHT,
         light_samples: LIGHT_SAMPLES.div_ceil(spp.max(1) as u32),
+        diffuse_bounces: ctx.options.diffuse_bounces,
+    };
+    // Uploaded once a render (the key names the file's bytes, turn and scale).
+    let env = match &ctx.options.environment {
+        Some(map) => Some(
+            gpu.shading
+                .environment(gpu.dev, &map.describe(), || map.gpu_table())?,
+        ),
+        None => None,
     };
     let moving_surf = surfaces(ctx.dynamic_soup, ctx.scene.materials.len());
     work.shade += clock.elapsed();
@@ -360,6 +372,7 @@ pub(super) fn render_frame_gpu(
             &mats,
             &lts,
             &ems,
+            env.as_ref(),
             &params,
             &chunk_camera,
             npix as u64,
@@ -520,6 +533,7 @@ mod tests {
             max_depth: 4,
             min_weight: MIN_WEIGHT,
             light_samples: 8,
+            diffuse_bounces: 0,
         };
         // Every pixel on the cube's front face.
         let camera = CameraModel {
@@ -542,6 +556,7 @@ mod tests {
                     &mats,
                     &lts,
                     &[],
+                    None,
                     &params,
                     &cam,
                     256,
@@ -734,7 +749,8 @@ mod tests {
         assert!(why(&plain, &paths).unwrap().contains("light-path"));
         let mut bounces = RenderOptions::default();
         bounces.shading.diffuse_bounces = 1;
-        assert!(why(&plain, &bounces).unwrap().contains("diffuse bounces"));
+        // Diffuse bounces are inside.
+        assert_eq!(why(&plain, &bounces), None);
         let big = outside_subset(&plain, &RenderOptions::default(), 1 << 20, 0, 1 << 20);
         assert!(big.unwrap().contains("static triangles' surfaces"));
     }
