@@ -20,7 +20,9 @@ use rayon::prelude::*;
 use super::device::{storage_entry, uniform_entry};
 use super::moving::entry;
 use super::scan::{LiveScan, ScanPlan};
-use super::shade_tables::{CameraRays, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle};
+use super::shade_tables::{
+    CameraRays, GpuTextures, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle,
+};
 use super::trace::pack_ray;
 use super::{GpuDevice, GpuError, GpuMoving, GpuStatic, GpuTracer};
 use crate::geometry::{Hit, Ray};
@@ -58,8 +60,9 @@ pub struct ChunkOut {
 /// The camera's uniform (shade.wgsl's bindings: 0 and this uniforms, 1..=22 and
 /// 24..=`LAST` storage).
 const CAMERA: u32 = 23;
-/// The last binding: 24..=26 are the next level's templates, uniforms and totals.
-const LAST: u32 = 26;
+/// The last binding: 24..=26 are the next level's templates, uniforms and totals, 27
+/// and 28 the textures' tables and texels ([`GpuTextures`]).
+const LAST: u32 = 28;
 
 /// The frame path's kernels and the static triangles' surfaces (uploaded once).
 pub struct GpuShading {
@@ -73,6 +76,8 @@ pub struct GpuShading {
     next_pipe: wgpu::ComputePipeline,
     static_surf: wgpu::Buffer,
     static_count: u32,
+    /// The render's textures (`None`: the scene has none, the bindings get dummies).
+    textures: Option<(wgpu::Buffer, wgpu::Buffer)>,
     /// A small buffer for each storage binding a kernel does not read, and a camera.
     dummies: Vec<wgpu::Buffer>,
     dummy_camera: wgpu::Buffer,
@@ -199,8 +204,19 @@ const USAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
 
 impl GpuShading {
     /// Compiles the kernels and uploads the static triangles' surfaces (numbered as
-    /// the tracer numbers them).
+    /// the tracer numbers them); no textures.
     pub fn new(dev: &GpuDevice, static_surf: &[SurfaceTriangle]) -> Result<GpuShading, GpuError> {
+        Self::new_textured(dev, static_surf, &GpuTextures::default())
+    }
+
+    /// [`new`](Self::new) with the render's textures (their tables and every mip
+    /// level), uploaded once; each of the two arrays must fit one storage binding
+    /// (`TooLarge` else).
+    pub fn new_textured(
+        dev: &GpuDevice,
+        static_surf: &[SurfaceTriangle],
+        textures: &GpuTextures,
+    ) -> Result<GpuShading, GpuError> {
         let device = &dev.device;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("shade.wgsl"),
@@ -247,9 +263,20 @@ impl GpuShading {
             .map(|_| dev.buffer("an unused binding", 512, USAGE))
             .collect::<Result<Vec<_>, _>>()?;
         let static_count = u32::try_from(static_surf.len())
-            .map_err(|_| dev.too_large("the static surfaces", static_surf.len() as u64 * 96))?;
+            .map_err(|_| dev.too_large("the static surfaces", static_surf.len() as u64 * 128))?;
         let static_surf =
             dev.storage_with("the static surfaces", bytemuck::cast_slice(static_surf))?;
+        let textures = if textures.meta.is_empty() {
+            None
+        } else {
+            Some((
+                dev.storage_with("the textures' tables", bytemuck::cast_slice(&textures.meta))?,
+                dev.storage_with(
+                    "the textures' texels",
+                    bytemuck::cast_slice(&textures.texels),
+                )?,
+            ))
+        };
         dev.wait()?;
         Ok(GpuShading {
             layout,
@@ -262,6 +289,7 @@ impl GpuShading {
             next_pipe,
             static_surf,
             static_count,
+            textures,
             dummies,
             dummy_camera,
             room: std::sync::Mutex::new(None),
@@ -275,7 +303,7 @@ impl GpuShading {
         surf: &[SurfaceTriangle],
     ) -> Result<GpuSurfaces, GpuError> {
         let count = u32::try_from(surf.len())
-            .map_err(|_| dev.too_large("the moving surfaces", surf.len() as u64 * 96))?;
+            .map_err(|_| dev.too_large("the moving surfaces", surf.len() as u64 * 128))?;
         Ok(GpuSurfaces {
             buf: dev.storage_with("the moving surfaces", bytemuck::cast_slice(surf))?,
             count,
@@ -565,6 +593,8 @@ impl GpuShading {
                 Some(templates),
                 Some(made),
                 Some(&totals),
+                self.textures.as_ref().map(|t| &t.0),
+                self.textures.as_ref().map(|t| &t.1),
             ];
             self.group(dev, &bufs)
         };
@@ -681,16 +711,23 @@ fn params(
     spp: u32,
     shading: Option<(&ShadeParams, u32)>,
 ) -> Params {
-    let (amb, bg, extent, min_w, total) = match shading {
-        Some((s, total)) => (s.ambient, s.background, s.extent, s.min_weight, total),
-        None => ([0.0; 3], [0.0; 3], 1.0, 0.0, 0),
+    let (amb, bg, extent, min_w, cone, total) = match shading {
+        Some((s, total)) => (
+            s.ambient,
+            s.background,
+            s.extent,
+            s.min_weight,
+            s.cone,
+            total,
+        ),
+        None => ([0.0; 3], [0.0; 3], 1.0, 0.0, [0.0; 2], 0),
     };
     Params {
         a: [n as u32, lights, u32::from(first), max_depth],
         b: [static_tris, stride, npix as u32, spp],
         c: [amb[0], amb[1], amb[2], extent],
         d: [bg[0], bg[1], bg[2], 1.0 / spp.max(1) as f32],
-        e: [min_w, 0.0, 0.0, 0.0],
+        e: [min_w, cone[0], cone[1], 0.0],
         g: [total, 0, 0, 0],
         h: [0; 4],
     }

@@ -25,7 +25,10 @@ mod trace;
 pub use device::{AdapterPolicy, GpuDevice};
 pub use frame::{packed_on_cpu, ChunkOut, GpuShading, GpuSurfaces};
 pub use moving::GpuMoving;
-pub use shade_tables::{CameraRays, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle};
+pub use shade_tables::{
+    CameraRays, GpuTextures, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle,
+    TEXTURE_VIEW_WORDS,
+};
 pub use static_part::GpuStatic;
 pub use trace::GpuTracer;
 
