@@ -2,10 +2,11 @@
 // shadow and next-level rays compacted in the CPU's order, its light summed into the
 // samples in the CPU's order, and the pixels averaged. The shading is
 // `render::shade::ShadeContext::shade` restricted to the subset `render::gpu_frame`
-// admits (constant materials, opaque, mirror or no reflection ray, punctual lights, a
-// constant background, no diffuse bounces), step for step; what depends on the material
-// alone (F0, the Blinn-Phong exponent and its normalisation, 1/ior, the spot's cone
-// cosines) comes computed by the CPU's own code in the tables.
+// admits (opaque materials, textured or not, mirror or no reflection ray, punctual
+// lights, a constant background, no diffuse bounces), step for step; what depends on the
+// material alone (F0, the Blinn-Phong exponent and its normalisation, 1/ior, the spot's
+// cone cosines) comes computed by the CPU's own code in the tables, and `textured`
+// recomputes per hit what a texture changes.
 //
 // Determinism: every kernel writes only slots it owns (an item's candidates, a sample's
 // run, a pixel); compaction is by prefix sums (scan.wgsl) of per-item counts, so the

@@ -5,9 +5,10 @@
 //! whole wavefront on the GPU (`gpu::GpuShading`, shade.wgsl): camera rays made here,
 //! pixels and (for the AOVs and Cryptomatte) the camera rays' hits read back.
 //!
-//! The subset is what `ShadeContext::shade` does without random numbers and without
-//! textures: constant, opaque materials (base colour, metallic, roughness, emission,
-//! transmission, IOR, double-sided); the mirror reflection (GGX width under
+//! The subset is what `ShadeContext::shade` does without random numbers: opaque
+//! materials (base colour, metallic, roughness, emission, transmission, IOR,
+//! double-sided), textured or not (the textures uploaded once a render, [`textures`],
+//! and filtered in the kernel as `render::mips` filters them); the mirror reflection (GGX width under
 //! `MIRROR_ALPHA`) or no reflection ray (roughness from `GLOSSY_LIMIT` on); refraction
 //! with exact dielectric Fresnel; punctual lights (the default light too); the options'
 //! or the scene's ambient light; a constant background. Anything else keeps shading on
