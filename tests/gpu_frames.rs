@@ -25,9 +25,13 @@ use common::build::{diffuse, mesh, perspective, placed, SceneBuilder};
 use common::exr_read::read_exr;
 use common::farm::{ok, s, stderr};
 use common::render_scene::{cube, files_under, quad, temp_dir, tumbling, write_scene};
+use glam::Vec2;
 use glam::{Quat, Vec3, Vec4};
 use subfield::geometry::Ray;
 use subfield::gpu::{packed_on_cpu, GpuShading};
+use subfield::scene::{
+    AlphaMode, CameraDef, Image, Projection, Texture, TextureRef, UvTransform, Wrap,
+};
 use subfield::scene::{Animation, Falloff, LightDef, LightKind, Material, Node, Scene};
 
 /// Largest difference a pixel's channel may have outside the Z edges' band (relative to
@@ -173,6 +177,18 @@ fn subset_scene() -> Scene {
 
 /// Renders `scene` on `device` into `dir/folder` with `extra` flags; the run's stderr.
 fn render(scene: &Path, dir: &Path, device: &str, folder: &str, extra: &[&str]) -> String {
+    render_at("64x48", scene, dir, device, folder, extra)
+}
+
+/// [`render`] at image size `size`.
+fn render_at(
+    size: &str,
+    scene: &Path,
+    dir: &Path,
+    device: &str,
+    folder: &str,
+    extra: &[&str],
+) -> String {
     let out = dir.join(format!("{folder}/f.##.exr"));
     let mut args = vec![
         "render",
@@ -180,7 +196,7 @@ fn render(scene: &Path, dir: &Path, device: &str, folder: &str, extra: &[&str]) 
         "-o",
         s(&out),
         "--size",
-        "64x48",
+        size,
         "--aov",
         "depth,normal,albedo,position,motion,cryptomatte",
         "--float",
@@ -563,6 +579,327 @@ fn environment_and_bounces_agree_with_the_cpu() {
         "1",
     ];
     agree(&dir, &lamp, "lamp-bounce", &c);
+}
+
+/// An image made in code: `f(x, y)` its texel's RGBA.
+fn image(w: u32, h: u32, f: impl Fn(u32, u32) -> [u8; 4]) -> Image {
+    let mut rgba8 = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            rgba8.extend(f(x, y));
+        }
+    }
+    Image {
+        name: None,
+        width: w,
+        height: h,
+        rgba8,
+    }
+}
+
+fn slot(texture: u32, transform: Option<UvTransform>) -> Option<TextureRef> {
+    Some(TextureRef {
+        texture,
+        tex_coord: 0,
+        transform,
+    })
+}
+
+/// A room of textures inside the frame path's subset: a floor of coloured tiles (sRGB,
+/// repeated six times by `KHR_texture_transform`: minified, many mip levels), a back
+/// wall with a normal map of bumps (linear, turned and shifted) and a magnified 4×4
+/// base colour (clamped, nearest), a cube whose metallic-roughness texture (linear)
+/// varies the metal and keeps the roughness from 0.6 up, a mirror whose
+/// metallic-roughness texture keeps it a mirror but varies its metal (base colour
+/// mirrored-repeat, magnified, bilinear), a glass cube in front of the wall, a `MASK`
+/// quad whose texture is opaque, and an emissive texture on a material that does not
+/// emit (the only emissive texture inside the subset). The mirror and the glass make
+/// deeper levels read the textures with wider cones. A perspective and an orthographic
+/// camera.
+fn textured_scene() -> Scene {
+    let mut b = SceneBuilder::new();
+    let tiles = b.add_image(image(64, 64, |x, y| {
+        let c = ((x / 8) + (y / 8)) % 2 == 0;
+        [(x * 4) as u8, (y * 4) as u8, if c { 230 } else { 40 }, 255]
+    }));
+    let bumps = b.add_image(image(32, 32, |x, y| {
+        let (u, v) = (x as f32 / 32.0, y as f32 / 32.0);
+        let n = Vec3::new(0.6 * (u * 12.0).sin(), 0.6 * (v * 9.0).cos(), 1.0).normalize();
+        let e = |c: f32| ((c * 0.5 + 0.5) * 255.0).round() as u8;
+        [e(n.x), e(n.y), e(n.z), 255]
+    }));
+    let small = b.add_image(image(4, 4, |x, y| {
+        [
+            (60 * x + 20) as u8,
+            (60 * y + 20) as u8,
+            200 - (30 * x) as u8,
+            255,
+        ]
+    }));
+    let rough = b.add_image(image(16, 16, |x, y| {
+        [0, 153 + (6 * y) as u8, (x * 17) as u8, 255]
+    }));
+    let shiny = b.add_image(image(8, 8, |x, y| {
+        [0, (x * 30) as u8, 128 + (y * 18) as u8, 255]
+    }));
+    let glow = b.add_image(image(2, 2, |x, _| [255, (x * 255) as u8, 0, 255]));
+    let tex = |b: &mut SceneBuilder, image: u32, wrap: Wrap, nearest: bool| {
+        b.add_texture(Texture {
+            image,
+            wrap_s: wrap,
+            wrap_t: wrap,
+            nearest,
+        })
+    };
+    let t_tiles = tex(&mut b, tiles, Wrap::Repeat, false);
+    let t_bumps = tex(&mut b, bumps, Wrap::Repeat, false);
+    let t_small = tex(&mut b, small, Wrap::ClampToEdge, true);
+    let t_small_mirrored = tex(&mut b, small, Wrap::MirroredRepeat, false);
+    let t_rough = tex(&mut b, rough, Wrap::Repeat, false);
+    let t_shiny = tex(&mut b, shiny, Wrap::Repeat, false);
+    let t_glow = tex(&mut b, glow, Wrap::Repeat, false);
+    let floor = b.add_material(Material {
+        base_color_texture: slot(
+            t_tiles,
+            Some(UvTransform {
+                offset: Vec2::new(0.1, 0.2),
+                rotation: 0.0,
+                scale: Vec2::splat(6.0),
+            }),
+        ),
+        ..diffuse("floor", Vec4::new(0.9, 0.9, 0.9, 1.0), 0.8)
+    });
+    let wall = b.add_material(Material {
+        base_color_texture: slot(t_small, None),
+        normal_texture: slot(
+            t_bumps,
+            Some(UvTransform {
+                offset: Vec2::new(0.3, -0.1),
+                rotation: 0.4,
+                scale: Vec2::new(2.0, 1.5),
+            }),
+        ),
+        normal_scale: 0.8,
+        ..diffuse("wall", Vec4::ONE, 0.5)
+    });
+    let metal = b.add_material(Material {
+        metallic: 1.0,
+        metallic_roughness_texture: slot(t_rough, None),
+        normal_texture: slot(t_bumps, None),
+        ..diffuse("patchy metal", Vec4::new(0.9, 0.7, 0.4, 1.0), 1.0)
+    });
+    let mirror = b.add_material(Material {
+        metallic: 1.0,
+        metallic_roughness_texture: slot(t_shiny, None),
+        base_color_texture: slot(
+            t_small_mirrored,
+            Some(UvTransform {
+                offset: Vec2::ZERO,
+                rotation: 0.0,
+                scale: Vec2::splat(3.0),
+            }),
+        ),
+        ..diffuse("mirror", Vec4::new(0.95, 0.95, 0.95, 1.0), 0.02)
+    });
+    let glass = b.add_material(Material {
+        transmission: 1.0,
+        ior: 1.5,
+        double_sided: true,
+        ..diffuse("glass", Vec4::ONE, 0.0)
+    });
+    let masked = b.add_material(Material {
+        alpha_mode: AlphaMode::Mask { cutoff: 0.5 },
+        base_color_texture: slot(t_tiles, None),
+        emissive_texture: slot(t_glow, None),
+        ..diffuse("masked", Vec4::new(0.8, 1.0, 0.8, 1.0), 0.9)
+    });
+    let statics = b.add_mesh(mesh(
+        "room",
+        vec![
+            quad(Vec3::ZERO, Vec3::Z * 5.0, Vec3::X * 5.0, floor),
+            quad(
+                Vec3::new(0.0, 1.5, -3.0),
+                Vec3::X * 3.0,
+                Vec3::Y * 1.5,
+                wall,
+            ),
+            quad(
+                Vec3::new(2.2, 1.0, -1.0),
+                Vec3::new(0.6, 0.0, 0.8),
+                Vec3::Y * 1.0,
+                mirror,
+            ),
+            quad(
+                Vec3::new(-2.6, 0.8, 0.5),
+                Vec3::Z * -0.8,
+                Vec3::Y * 0.8,
+                masked,
+            ),
+        ],
+    ));
+    let glass_cube = b.add_mesh(mesh("glass", vec![cube(Vec3::splat(0.45), glass)]));
+    let metal_cube = b.add_mesh(mesh("metal", vec![cube(Vec3::splat(0.4), metal)]));
+    let cam = b.add_camera(perspective("main", 0.8, None, 0.1, None));
+    let ortho = b.add_camera(CameraDef {
+        name: Some("ortho".into()),
+        projection: Projection::Orthographic {
+            xmag: 3.2,
+            ymag: 2.4,
+            znear: 0.1,
+            zfar: 100.0,
+        },
+    });
+    let point = b.add_light(LightDef {
+        name: Some("bulb".into()),
+        kind: LightKind::Point,
+        color: Vec3::new(1.0, 0.95, 0.9),
+        intensity: 40.0,
+        range: None,
+        falloff: Falloff::InverseSquare,
+    });
+    let sun = b.add_light(LightDef {
+        name: Some("sun".into()),
+        kind: LightKind::Directional,
+        color: Vec3::ONE,
+        intensity: 1.5,
+        range: None,
+        falloff: Falloff::InverseSquare,
+    });
+    let mut nodes = Vec::new();
+    let mut node = |b: &mut SceneBuilder, n: Node| {
+        let i = b.add_node(n);
+        nodes.push(i);
+    };
+    node(
+        &mut b,
+        Node {
+            name: Some("room".into()),
+            mesh: Some(statics),
+            ..Default::default()
+        },
+    );
+    node(
+        &mut b,
+        Node {
+            name: Some("glass".into()),
+            mesh: Some(glass_cube),
+            transform: placed(Vec3::new(-0.8, 0.45, -1.6), Quat::from_rotation_y(0.5)),
+            ..Default::default()
+        },
+    );
+    node(
+        &mut b,
+        Node {
+            name: Some("metal".into()),
+            mesh: Some(metal_cube),
+            transform: placed(Vec3::new(0.9, 0.4, 0.3), Quat::from_rotation_y(-0.4)),
+            ..Default::default()
+        },
+    );
+    node(
+        &mut b,
+        Node {
+            name: Some("camera".into()),
+            camera: Some(cam),
+            transform: placed(
+                Vec3::new(0.0, 2.0, 6.0),
+                Quat::from_rotation_x(-(2.0f32 / 6.0).atan()),
+            ),
+            ..Default::default()
+        },
+    );
+    node(
+        &mut b,
+        Node {
+            name: Some("ortho camera".into()),
+            camera: Some(ortho),
+            transform: placed(
+                Vec3::new(1.0, 4.0, 6.0),
+                Quat::from_rotation_y(0.15) * Quat::from_rotation_x(-0.6),
+            ),
+            ..Default::default()
+        },
+    );
+    node(
+        &mut b,
+        Node {
+            name: Some("bulb".into()),
+            light: Some(point),
+            transform: placed(Vec3::new(2.0, 4.0, 3.0), Quat::IDENTITY),
+            ..Default::default()
+        },
+    );
+    node(
+        &mut b,
+        Node {
+            name: Some("sun".into()),
+            light: Some(sun),
+            transform: placed(
+                Vec3::ZERO,
+                Quat::from_rotation_x(-1.0) * Quat::from_rotation_y(0.5),
+            ),
+            ..Default::default()
+        },
+    );
+    for n in nodes {
+        b.add_root(n);
+    }
+    b.finish()
+}
+
+/// The textured room against the CPU (RGB within the bound, alpha and the AOVs to the
+/// bit): one sample at depth 3 (the mirror and the glass read textures at deeper
+/// levels), two samples at depth 2 with an overscan border, and the orthographic
+/// camera (a cone of constant width); the first again on the GPU gives the same bytes.
+#[test]
+fn gpu_frames_with_textures_agree_with_the_cpu() {
+    if common::gpu::device().is_none() {
+        return;
+    }
+    let dir = temp_dir("gpu-frames-textures");
+    let scene = write(&dir, &textured_scene());
+    let runs: [(&str, &[&str]); 3] = [
+        ("t1", &["--spp", "1", "--max-depth", "3"]),
+        ("t2", &["--spp", "2", "--max-depth", "2", "--overscan", "2"]),
+        (
+            "t3",
+            &["--spp", "1", "--max-depth", "3", "--camera", "ortho"],
+        ),
+    ];
+    for (name, args) in runs {
+        let cpu = format!("cpu-{name}");
+        let gpu = format!("gpu-{name}");
+        render_at("96x72", &scene, &dir, "cpu", &cpu, args);
+        let log = render_at("96x72", &scene, &dir, "gpu", &gpu, args);
+        assert!(
+            !log.contains("shading on the CPU"),
+            "the textured scene fell back: {log}"
+        );
+        check_close(&dir, &cpu, &gpu);
+    }
+    render_at("96x72", &scene, &dir, "gpu", "gpu-t1again", runs[0].1);
+    for f in files_under(&dir.join("gpu-t1")) {
+        assert_eq!(
+            std::fs::read(dir.join("gpu-t1").join(&f)).unwrap(),
+            std::fs::read(dir.join("gpu-t1again").join(&f)).unwrap(),
+            "{}: a second GPU run differs",
+            f.display()
+        );
+    }
+    // The patchy metal's roughness factor halved: its texture makes some hits glossy
+    // (a GGX ray, which widens the cone the textures seen in it are read with) and
+    // others too rough to reflect, hit by hit.
+    let mut glossy = textured_scene();
+    for m in &mut glossy.materials {
+        if m.name.as_deref() == Some("patchy metal") {
+            m.roughness = 0.5;
+        }
+    }
+    let glossy_dir = dir.join("glossy");
+    std::fs::create_dir_all(&glossy_dir).unwrap();
+    let glossy = write(&glossy_dir, &glossy);
+    let a = ["--frames", "0", "--spp", "2", "--max-depth", "2"];
+    agree(&dir, &glossy, "textured-glossy", &a);
 }
 
 /// A scene outside the subset (alpha below 1) traces on the GPU and shades on the

@@ -11,6 +11,9 @@ use super::GpuError;
 /// The trace kernel's storage bindings (trace.wgsl: 12, and 3 more parts of each of the
 /// static part's 5 split arrays).
 const TRACE_BINDINGS: u32 = 27;
+/// The frame path's storage bindings (shade.wgsl: 0..=30 but the two uniforms; a test in
+/// `gpu::frame` holds it to the layout).
+pub(super) const FRAME_BINDINGS: u32 = 29;
 
 /// Which adapters may be taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -135,11 +138,12 @@ impl GpuDevice {
         }
         // The adapter's own limits: as many storage buffers and as large ones as it has.
         let limits = adapter.limits();
-        if limits.max_storage_buffers_per_shader_stage < TRACE_BINDINGS {
+        if limits.max_storage_buffers_per_shader_stage < TRACE_BINDINGS.max(FRAME_BINDINGS) {
             return Err(GpuError::MissingFeature {
                 adapter: info.name.clone(),
-                feature: "27 storage buffers a shader stage",
-                why: "the trace kernel binds the static part's arrays in up to 4 parts each",
+                feature: "29 storage buffers a shader stage",
+                why: "the trace kernel binds the static part's arrays in up to 4 parts each, \
+                      and the frame path its rays, items, tables and textures",
             });
         }
         let max_binding = limits

@@ -21,7 +21,7 @@ use super::device::{storage_entry, uniform_entry};
 use super::moving::entry;
 use super::scan::{LiveScan, ScanPlan};
 use super::shade_tables::{
-    CameraRays, ShadeEmitter, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle,
+    CameraRays, GpuTextures, ShadeEmitter, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle,
 };
 use super::trace::pack_ray;
 use super::{GpuDevice, GpuError, GpuMoving, GpuStatic, GpuTracer};
@@ -61,8 +61,11 @@ pub struct ChunkOut {
 /// 24..=`LAST` storage).
 const CAMERA: u32 = 23;
 /// The last binding: 24..=26 are the next level's templates, uniforms and totals, 27 the
-/// emitters (area lights), 28 the environment map.
-const LAST: u32 = 28;
+/// emitters (area lights), 28 the environment map, 29 and 30 the textures' tables and
+/// texels ([`GpuTextures`]).
+const LAST: u32 = 30;
+// Every binding but the two uniforms is storage: what the device is opened for.
+const _: () = assert!(LAST + 1 - 2 == super::device::FRAME_BINDINGS);
 /// Next-level ray candidates an item may make: a diffuse bounce, a refraction, a
 /// reflection.
 const NEXT_SLOTS: u64 = 3;
@@ -79,6 +82,8 @@ pub struct GpuShading {
     next_pipe: wgpu::ComputePipeline,
     static_surf: wgpu::Buffer,
     static_count: u32,
+    /// The render's textures (`None`: the scene has none, the bindings get dummies).
+    textures: Option<(wgpu::Buffer, wgpu::Buffer)>,
     /// A small buffer for each storage binding a kernel does not read, and a camera.
     dummies: Vec<wgpu::Buffer>,
     dummy_camera: wgpu::Buffer,
@@ -175,13 +180,13 @@ impl Room {
         Ok(Room {
             size,
             rays: [b("the rays", cap * 48)?, b("the next rays", cap * 48)?],
-            items: [b("the items", cap * 32)?, b("the next items", cap * 32)?],
+            items: [b("the items", cap * 48)?, b("the next items", cap * 48)?],
             radiance: b("the samples' radiance", nsamples * 16)?,
             hits: b("the hits", cap * 16)?,
             local: b("the items' light", cap * 16)?,
             sh_cand: b("the shadow ray candidates", cand * 64)?,
             nx_cand_r: b("the next rays' candidates", cap * NEXT_SLOTS * 48)?,
-            nx_cand_i: b("the next items' candidates", cap * NEXT_SLOTS * 32)?,
+            nx_cand_i: b("the next items' candidates", cap * NEXT_SLOTS * 48)?,
             sh_scan: LiveScan::new(dev, &plan, &sh_count, &sh_start)?,
             nx_scan: LiveScan::new(dev, &plan, &nx_count, &nx_start)?,
             sh_count,
@@ -212,8 +217,19 @@ const USAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
 
 impl GpuShading {
     /// Compiles the kernels and uploads the static triangles' surfaces (numbered as
-    /// the tracer numbers them).
+    /// the tracer numbers them); no textures.
     pub fn new(dev: &GpuDevice, static_surf: &[SurfaceTriangle]) -> Result<GpuShading, GpuError> {
+        Self::new_textured(dev, static_surf, &GpuTextures::default())
+    }
+
+    /// [`new`](Self::new) with the render's textures (their tables and every mip
+    /// level), uploaded once; each of the two arrays must fit one storage binding
+    /// (`TooLarge` else).
+    pub fn new_textured(
+        dev: &GpuDevice,
+        static_surf: &[SurfaceTriangle],
+        textures: &GpuTextures,
+    ) -> Result<GpuShading, GpuError> {
         let device = &dev.device;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("shade.wgsl"),
@@ -260,9 +276,20 @@ impl GpuShading {
             .map(|_| dev.buffer("an unused binding", 512, USAGE))
             .collect::<Result<Vec<_>, _>>()?;
         let static_count = u32::try_from(static_surf.len())
-            .map_err(|_| dev.too_large("the static surfaces", static_surf.len() as u64 * 96))?;
+            .map_err(|_| dev.too_large("the static surfaces", static_surf.len() as u64 * 128))?;
         let static_surf =
             dev.storage_with("the static surfaces", bytemuck::cast_slice(static_surf))?;
+        let textures = if textures.meta.is_empty() {
+            None
+        } else {
+            Some((
+                dev.storage_with("the textures' tables", bytemuck::cast_slice(&textures.meta))?,
+                dev.storage_with(
+                    "the textures' texels",
+                    bytemuck::cast_slice(&textures.texels),
+                )?,
+            ))
+        };
         dev.wait()?;
         Ok(GpuShading {
             layout,
@@ -275,6 +302,7 @@ impl GpuShading {
             next_pipe,
             static_surf,
             static_count,
+            textures,
             dummies,
             dummy_camera,
             room: std::sync::Mutex::new(None),
@@ -314,7 +342,7 @@ impl GpuShading {
         surf: &[SurfaceTriangle],
     ) -> Result<GpuSurfaces, GpuError> {
         let count = u32::try_from(surf.len())
-            .map_err(|_| dev.too_large("the moving surfaces", surf.len() as u64 * 96))?;
+            .map_err(|_| dev.too_large("the moving surfaces", surf.len() as u64 * 128))?;
         Ok(GpuSurfaces {
             buf: dev.storage_with("the moving surfaces", bytemuck::cast_slice(surf))?,
             count,
@@ -437,12 +465,12 @@ impl GpuShading {
 
     /// The most items a level can hold with `lights` lights: what one binding and a
     /// budget of 256 MiB for a chunk's buffers allow (the frame path's buffers take
-    /// some 368 + 144 · slots bytes an item, `slots` the shadow rays an item may make:
+    /// some 560 + 144 · slots bytes an item, `slots` the shadow rays an item may make:
     /// the punctual lights, and the area-light samples at a camera ray's hit).
     pub fn max_capacity(dev: &GpuDevice, slots: usize) -> u64 {
         let l = slots as u64;
         let per_binding = dev.max_binding() / (64 * l).max(96);
-        let budget = (256u64 << 20) / (368 + 144 * l);
+        let budget = (256u64 << 20) / (560 + 144 * l);
         per_binding.min(budget).clamp(1024, 1 << 22)
     }
 
@@ -507,7 +535,10 @@ impl GpuShading {
             true => None,
             false => Some(dev.storage_with("the emitters", bytemuck::cast_slice(emitters))?),
         };
-        let cam = dev.uniform(bytemuck::bytes_of(camera));
+        let cam = dev.uniform(bytemuck::bytes_of(&CameraRays {
+            cone: shading.cone,
+            ..*camera
+        }));
         // The buffers of the last chunk when they are large enough (every one is written
         // before it is read), else new ones.
         let size = RoomSize {
@@ -639,6 +670,8 @@ impl GpuShading {
                 Some(&totals),
                 ems.as_ref(),
                 env.map(|e| &*e.0),
+                self.textures.as_ref().map(|t| &t.0),
+                self.textures.as_ref().map(|t| &t.1),
             ];
             self.group(dev, &bufs)
         };

@@ -26,7 +26,8 @@ pub use device::{AdapterPolicy, GpuDevice};
 pub use frame::{packed_on_cpu, ChunkOut, GpuEnvironment, GpuShading, GpuSurfaces};
 pub use moving::GpuMoving;
 pub use shade_tables::{
-    CameraRays, ShadeEmitter, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle,
+    CameraRays, GpuTextures, ShadeEmitter, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle,
+    TEXTURE_VIEW_WORDS,
 };
 pub use static_part::GpuStatic;
 pub use trace::GpuTracer;

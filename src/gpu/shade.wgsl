@@ -2,11 +2,12 @@
 // shadow and next-level rays compacted in the CPU's order, its light summed into the
 // samples in the CPU's order, and the pixels averaged. The shading is
 // `render::shade::ShadeContext::shade` restricted to the subset `render::gpu_frame`
-// admits (constant materials, opaque, a mirror, GGX or no reflection ray, punctual and
-// area lights, a background or environment map, diffuse bounces), step for step; the
-// random numbers are the CPU's (`sampling::Seed`, carried by each item); what depends on the material
-// alone (F0, the Blinn-Phong exponent and its normalisation, 1/ior, the spot's cone
-// cosines) comes computed by the CPU's own code in the tables.
+// admits (opaque materials, textured or not; a mirror, GGX or no reflection ray;
+// punctual and area lights; a background or environment map; diffuse bounces), step
+// for step; the random numbers are the CPU's (`sampling::Seed`, carried by each item);
+// what depends on the material alone (F0, the Blinn-Phong exponent and its
+// normalisation, 1/ior, the spot's cone cosines) comes computed by the CPU's own code in
+// the tables, and `textured` recomputes per hit what a texture changes.
 //
 // Determinism: every kernel writes only slots it owns (an item's candidates, a sample's
 // run, a pixel); compaction is by prefix sums (scan.wgsl) of per-item counts, so the
@@ -58,8 +59,11 @@ struct Item {
     // (small integers, exact as f32)
     w: vec4<f32>,
     // sample, depth, the random numbers' seed (`sampling::Seed`, low and high words;
-    // made only when a material reads it: F.e.y)
+    // made only when a ray reads it: F.e.y)
     m: vec4<u32>,
+    // the ray cone's width where the ray starts and its spread (the texture level of
+    // detail)
+    c: vec4<f32>,
 }
 
 struct Shadow {
@@ -84,6 +88,12 @@ struct Mat {
     reflects: u32,
     glint_norm: f32,
     glint_scale: f32,
+    // The texture slots' views (base colour, metallic-roughness, emissive, normal; NONE:
+    // none), the factors the textures multiply (metallic, roughness, transmission clamped,
+    // the normal map's scale), each slot's transform (scale, sin, cos; offset, 1 if any).
+    tex: vec4<u32>,
+    factors: vec4<f32>,
+    xf: array<vec4<f32>, 8>,
 }
 
 // frame.rs `ShadeLight`.
@@ -154,6 +164,8 @@ struct Cam {
     b: vec4<u32>,
     // the chunk's first pixel, 1 for orthographic, the zero of `nc`
     c: vec4<u32>,
+    // the camera rays' cone: width, spread (`wavefront::primary_cone`)
+    d: vec4<f32>,
 }
 
 @group(0) @binding(23) var<uniform> C: Cam;
@@ -173,8 +185,18 @@ struct Cam {
 // row-major from the top row.
 @group(0) @binding(28) var<storage, read_write> env: array<f32>;
 
+// The textures (frame.rs `GpuTextures`): the decoding tables, views and levels; the
+// texels (RGBA8, R in the low byte).
+@group(0) @binding(29) var<storage, read_write> tex_meta: array<u32>;
+@group(0) @binding(30) var<storage, read_write> texels: array<u32>;
+
 const NONE: u32 = 0xffffffffu;
+// `render::shade`'s constants (a test in `render::gpu_frame` holds them to the CPU's).
+const GLOSSY_LIMIT: f32 = 0.4;
+const MIRROR_ALPHA: f32 = 0.001;
+const MAX_SHININESS: f32 = 256.0;
 const FRAC_1_PI: f32 = 0.31830988618379067;
+const PI: f32 = 3.14159265358979323846;
 
 fn inf() -> f32 {
     return bitcast<f32>(0x7f800000u);
@@ -436,9 +458,9 @@ fn sample_of(i: u32) -> u32 {
 
 fn tri_vec(t: u32, k: u32) -> vec4<f32> {
     if t < F.b.x {
-        return surf_s[t * 6u + k];
+        return surf_s[t * 8u + k];
     }
-    return surf_m[(t - F.b.x) * 6u + k];
+    return surf_m[(t - F.b.x) * 8u + k];
 }
 
 struct Surf {
@@ -448,10 +470,13 @@ struct Surf {
     dir: vec3<f32>,
     entering: bool,
     mat: u32,
+    uv: vec2<f32>,
+    // texture level of detail for a unit texture (`Surface::lod`)
+    lod: f32,
 }
 
-// `ShadeContext::surface` without textures.
-fn surface(r: Ray, h: vec4<u32>) -> Surf {
+// `ShadeContext::surface`; `width`: the ray cone's width at the hit.
+fn surface(r: Ray, h: vec4<u32>, width: f32) -> Surf {
     let t = h.y;
     let u = bitcast<f32>(h.z);
     let v = bitcast<f32>(h.w);
@@ -486,13 +511,236 @@ fn surface(r: Ray, h: vec4<u32>) -> Surf {
     if is_zero3(ns) || !finite3(ns) {
         ns = front;
     }
+    // Texture coordinates, level of detail and the normal map (the textures' part below).
+    let mi = bitcast<u32>(a0.w);
+    let a7 = tri_vec(t, 7u);
+    let has_uvs = bitcast<u32>(a7.w) != 0u;
+    var t0 = vec2<f32>(0.0);
+    var t1 = vec2<f32>(0.0);
+    var t2 = vec2<f32>(0.0);
+    s.uv = vec2<f32>(0.0);
+    if has_uvs {
+        let a6 = tri_vec(t, 6u);
+        t0 = a6.xy;
+        t1 = a6.zw;
+        t2 = a7.xy;
+        s.uv = t0 * w + t1 * u + t2 * v;
+    }
+    s.lod = -inf();
+    let tx = mats[mi].tex;
+    let textured = any(tx != vec4<u32>(NONE));
+    if has_uvs && textured && width > 0.0 {
+        let d1 = t1 - t0;
+        let d2 = t2 - t0;
+        let uv_area = abs(d1.x * d2.y - d1.y * d2.x);
+        let world_area = length(cross(e1, e2));
+        let cos_v = max(abs(dot(ng, s.dir)), 1e-4);
+        if uv_area > 0.0 && world_area > 0.0 {
+            s.lod = log2(width / cos_v) + 0.5 * log2(uv_area / world_area);
+        }
+    }
+    if has_uvs && tx.w != NONE {
+        ns = normal_mapped(mi, ns, e1, e2, t0, t1, t2, s.uv, s.lod);
+    }
     if dot(ns, ng) < 0.0 {
         ns = -ns;
     }
     s.ng = ng;
     s.ns = ns;
-    s.mat = bitcast<u32>(a0.w);
+    s.mat = mi;
     return s;
+}
+
+// ---- Textures: `ShadeContext::texture` and `TextureMips::lookup` (render/mips.rs),
+// filtered by hand from the texels (no samplers), in the CPU's arithmetic: texel
+// coordinates in f64 (exact: a uv times a side), the fractions rounded to f32 as the CPU
+// rounds them, the bytes decoded by the CPU's own tables (in `tex_meta`), glam's lerps.
+
+// Where the views begin in `tex_meta` (after the sRGB and the linear tables).
+const VIEWS: u32 = 512u;
+
+// `mips::wrap` of the whole number `i` on a side of `n` texels (0 repeat, 1 clamp to
+// edge, 2 mirrored repeat).
+fn tex_wrap(i: f64, n: f64, mode: u32) -> u32 {
+    var m: f64;
+    if mode == 1u {
+        m = i;
+    } else {
+        var p = n;
+        if mode == 2u {
+            p = 2.0lf * n;
+        }
+        m = i - p * floor(i / p);
+        if m >= p {
+            m = m - p;
+        }
+        if m < 0.0lf {
+            m = m + p;
+        }
+        if mode == 2u && m >= n {
+            m = p - 1.0lf - m;
+        }
+    }
+    return u32(clamp(m, 0.0lf, n - 1.0lf));
+}
+
+// The texel at (x, y) of the level whose record is at word `lv`, decoded: RGB by the
+// table at word `table` (0 sRGB, 256 linear), alpha by the linear one.
+fn texel(lv: u32, x: f64, y: f64, wrap_s: u32, wrap_t: u32, table: u32) -> vec4<f32> {
+    let w = tex_meta[lv + 1u];
+    let h = tex_meta[lv + 2u];
+    let p = texels[tex_meta[lv] + tex_wrap(y, f64(h), wrap_t) * w + tex_wrap(x, f64(w), wrap_s)];
+    return vec4<f32>(
+        bitcast<f32>(tex_meta[table + (p & 255u)]),
+        bitcast<f32>(tex_meta[table + ((p >> 8u) & 255u)]),
+        bitcast<f32>(tex_meta[table + ((p >> 16u) & 255u)]),
+        bitcast<f32>(tex_meta[256u + (p >> 24u)]),
+    );
+}
+
+// glam's `lerp`.
+fn lerp4(a: vec4<f32>, b: vec4<f32>, f: f32) -> vec4<f32> {
+    return a * (1.0 - f) + b * f;
+}
+
+// `TextureMips::bilinear` of view `vw` (its word) on the level at word `lv`.
+fn bilinear(vw: u32, lv: u32, uv: vec2<f32>, nearest: bool) -> vec4<f32> {
+    let ws = tex_meta[vw + 1u];
+    let wt = tex_meta[vw + 2u];
+    let table = select(256u, 0u, tex_meta[vw + 6u] != 0u);
+    var x = f64(uv.x) * f64(tex_meta[lv + 1u]);
+    var y = f64(uv.y) * f64(tex_meta[lv + 2u]);
+    if nearest {
+        return texel(lv, floor(x), floor(y), ws, wt, table);
+    }
+    x = x - 0.5lf;
+    y = y - 0.5lf;
+    let x0 = floor(x);
+    let y0 = floor(y);
+    let fx = f32(x - x0);
+    let fy = f32(y - y0);
+    let x1 = x0 + 1.0lf;
+    let y1 = y0 + 1.0lf;
+    let top = lerp4(texel(lv, x0, y0, ws, wt, table), texel(lv, x1, y0, ws, wt, table), fx);
+    let bottom = lerp4(texel(lv, x0, y1, ws, wt, table), texel(lv, x1, y1, ws, wt, table), fx);
+    return lerp4(top, bottom, fy);
+}
+
+// `ShadeContext::texture` of slot `k` (0 base colour, 1 metallic-roughness, 2 emissive,
+// 3 normal) of material `mi`, which has a texture there, at `uv_in`, for a footprint of
+// level `lod_in` (a unit texture's).
+fn tex_at(mi: u32, k: u32, uv_in: vec2<f32>, lod_in: f32) -> vec4<f32> {
+    let vw = VIEWS + mats[mi].tex[k] * 8u;
+    var uv = uv_in;
+    let xa = mats[mi].xf[2u * k];
+    let xb = mats[mi].xf[2u * k + 1u];
+    if xb.z != 0.0 {
+        // `UvTransform::apply`.
+        let sc = uv * xa.xy;
+        uv = vec2<f32>(xa.w * sc.x + xa.z * sc.y, xa.w * sc.y - xa.z * sc.x) + xb.xy;
+    }
+    if !finite(uv.x) || !finite(uv.y) {
+        uv = vec2<f32>(0.0);
+    }
+    var lod = lod_in + bitcast<f32>(tex_meta[vw + 5u]);
+    let top = tex_meta[vw];
+    let lw = tex_meta[vw + 4u];
+    if !finite(lod) {
+        lod = 0.0;
+    }
+    if lod <= 0.0 || top == 0u {
+        return bilinear(vw, lw, uv, tex_meta[vw + 3u] != 0u && lod <= 0.0);
+    }
+    lod = min(lod, f32(top));
+    let l0 = floor(lod);
+    let f = lod - l0;
+    let li = u32(l0);
+    let a = bilinear(vw, lw + 4u * li, uv, false);
+    if f <= 0.0 || li >= top {
+        return a;
+    }
+    return lerp4(a, bilinear(vw, lw + 4u * (li + 1u), uv, false), f);
+}
+
+// glam's `try_normalize`: w = 0 for none.
+fn try_nz(v: vec3<f32>) -> vec4<f32> {
+    let r = 1.0 / sqrt(dot(v, v));
+    if finite(r) && r > 0.0 {
+        return vec4<f32>(v * r, 1.0);
+    }
+    return vec4<f32>(0.0);
+}
+
+// `ShadeContext::normal_mapped`, `n` where the CPU's gives `None`. `e1`, `e2`: the
+// triangle's edges; `t0..t2` its uvs.
+fn normal_mapped(mi: u32, n: vec3<f32>, e1: vec3<f32>, e2: vec3<f32>, t0: vec2<f32>, t1: vec2<f32>, t2: vec2<f32>, uv: vec2<f32>, lod: f32) -> vec3<f32> {
+    let c = tex_at(mi, 3u, uv, lod);
+    let d1 = t1 - t0;
+    let d2 = t2 - t0;
+    let det = d1.x * d2.y - d1.y * d2.x;
+    if abs(det) < 1e-12 {
+        return n;
+    }
+    let dpdu = (e1 * d2.y - e2 * d1.y) / det;
+    let dpdv = (e2 * d1.x - e1 * d2.x) / det;
+    let tg = try_nz(dpdu - n * dot(n, dpdu));
+    if tg.w == 0.0 {
+        return n;
+    }
+    var bt = cross(n, tg.xyz);
+    if dot(bt, dpdv) > 0.0 {
+        bt = -bt;
+    }
+    let sc = mats[mi].factors.w;
+    let l = vec3<f32>((2.0 * c.x - 1.0) * sc, (2.0 * c.y - 1.0) * sc, 2.0 * c.z - 1.0);
+    let bent = try_nz(tg.xyz * l.x + bt * l.y + n * l.z);
+    if bent.w == 0.0 || dot(bent.xyz, n) <= 0.0 {
+        return n;
+    }
+    return bent.xyz;
+}
+
+// `ShadeContext::shininess`.
+fn shininess(r: f32) -> f32 {
+    if r < 0.9 {
+        let r2 = r * r;
+        return min(2.0 / max(r2 * r2, 1e-4) - 2.0, MAX_SHININESS);
+    }
+    return 0.0;
+}
+
+// Material `mi` at `s` with what its textures change there, as the CPU computes it
+// (`base_color`; `lobes`' metallic and roughness and what follows from them; `emission`;
+// the glint's exponent and factors): the table's entry for a material without textures.
+fn textured(mi: u32, s: Surf) -> Mat {
+    var m = mats[mi];
+    if all(m.tex == vec4<u32>(NONE)) {
+        return m;
+    }
+    if m.tex.x != NONE {
+        m.albedo = m.albedo * tex_at(mi, 0u, s.uv, s.lod).xyz;
+    }
+    if m.tex.y != NONE {
+        let t = tex_at(mi, 1u, s.uv, s.lod);
+        m.metallic = clamp(m.factors.x * t.z, 0.0, 1.0);
+        m.roughness = clamp(m.factors.y * t.y, 0.0, 1.0);
+        m.transmission = m.factors.z * (1.0 - m.metallic);
+        m.gloss = (1.0 - m.roughness) * (1.0 - m.roughness);
+        // `lobes`: no reflection ray from GLOSSY_LIMIT on, a mirror's under MIRROR_ALPHA,
+        // else one drawn from the GGX lobe.
+        m.reflects = 0u;
+        if m.roughness < GLOSSY_LIMIT {
+            m.reflects = select(2u, 1u, m.roughness * m.roughness < MIRROR_ALPHA);
+        }
+        m.shininess = shininess(m.roughness);
+        m.glint_norm = (m.shininess + 8.0) / (8.0 * PI);
+        m.glint_scale = 1.0 - m.gloss * 0.5;
+    }
+    m.f0 = vec3<f32>(0.04) * (1.0 - m.metallic) + m.albedo * m.metallic;
+    if m.tex.z != NONE && !is_zero3(m.emission) {
+        m.emission = m.emission * tex_at(mi, 2u, s.uv, s.lod).xyz;
+    }
+    return m;
 }
 
 fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
@@ -686,6 +934,8 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         if random {
             it.m = vec4<u32>(i, 0u, seed_camera(camera_sample(i)));
         }
+        // The camera ray's cone (`wavefront::primary_cone`).
+        it.c = vec4<f32>(C.d.x, C.d.y, 0.0, 0.0);
     } else {
         it = items[i];
     }
@@ -705,9 +955,11 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             add = weight * F.d.xyz;
         }
     } else if h.y < F.g.x {
-        let s = surface(r, h);
+        // The cone's width at the hit: width + spread × distance.
+        let width = it.c.x + it.c.y * (bitcast<f32>(h.x) * length(r.d.xyz));
+        let s = surface(r, h, width);
         cover = 1.0;
-        let m = mats[s.mat];
+        let m = textured(s.mat, s);
         let lb = lobes(m, s);
         var emitted = vec3<f32>(0.0);
         // A diffuse bounce's ray adds no emission (next-event estimation lit it).
@@ -863,6 +1115,8 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                     var b: Item;
                     b.w = vec4<f32>(wb, f32(bounces + 1u + 256u));
                     b.m = vec4<u32>(it.m.x, it.m.y + 1u, seed_child(it.m.zw, 3u));
+                    // A diffuse lobe spreads over the hemisphere: the coarsest level.
+                    b.c = vec4<f32>(width, 1.0, 0.0, 0.0);
                     nx_cand_r[i * 3u + nnx] = make_ray(origin, dir, 0.0, inf());
                     nx_cand_i[i * 3u + nnx] = b;
                     nnx = nnx + 1u;
@@ -876,6 +1130,8 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             var next: Item;
             let seed = it.m.zw;
             next.m = vec4<u32>(it.m.x, it.m.y + 1u, 0u, 0u);
+            // The cone goes on from its width at the hit, with its spread.
+            next.c = vec4<f32>(width, it.c.y, 0.0, 0.0);
             if max3(kt_w) > F.e.x {
                 if random {
                     next.m = vec4<u32>(it.m.x, it.m.y + 1u, seed_child(seed, 1u));
@@ -917,6 +1173,8 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                     let w = kr_w * smith_g1(cos_l, alpha);
                     if max3(w) > F.e.x {
                         next.w = vec4<f32>(w, f32(bounces));
+                        // The lobe's width widens the cone.
+                        next.c = vec4<f32>(width, it.c.y + alpha, 0.0, 0.0);
                         nx_cand_r[i * 3u + nnx] = make_ray(origin, rd, 0.0, inf());
                         nx_cand_i[i * 3u + nnx] = next;
                         nnx = nnx + 1u;

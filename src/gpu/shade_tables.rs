@@ -4,22 +4,23 @@
 //! (`render::gpu_frame`), so the kernels start from the CPU's very numbers.
 
 use bytemuck::{Pod, Zeroable};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// A triangle as shading reads it: three positions (the first's `w`: the material's
-/// index in the table, the second's: 1 when it has vertex normals), then three
-/// normals. 96 bytes.
+/// index in the table, the second's: 1 when it has vertex normals), three normals, then
+/// the three vertices' texture coordinates (the third's `w`: 1 when it has them). 128
+/// bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct SurfaceTriangle {
-    v: [[f32; 4]; 6],
+    v: [[f32; 4]; 8],
 }
 
 impl SurfaceTriangle {
     /// Positions `p`, vertex normals `n` if any, material `material` (an index into
     /// the material table).
     pub fn new(p: &[Vec3; 3], n: Option<&[Vec3; 3]>, material: u32) -> SurfaceTriangle {
-        let mut v = [[0.0f32; 4]; 6];
+        let mut v = [[0.0f32; 4]; 8];
         for k in 0..3 {
             v[k] = [p[k].x, p[k].y, p[k].z, 0.0];
             if let Some(n) = n {
@@ -29,6 +30,13 @@ impl SurfaceTriangle {
         v[0][3] = f32::from_bits(material);
         v[1][3] = f32::from_bits(u32::from(n.is_some()));
         SurfaceTriangle { v }
+    }
+
+    /// With the vertices' texture coordinates `uv`.
+    pub fn with_uvs(mut self, uv: &[Vec2; 3]) -> SurfaceTriangle {
+        self.v[6] = [uv[0].x, uv[0].y, uv[1].x, uv[1].y];
+        self.v[7] = [uv[2].x, uv[2].y, 0.0, f32::from_bits(1)];
+        self
     }
 }
 
@@ -64,7 +72,35 @@ pub struct ShadeMaterial {
     pub glint_norm: f32,
     /// `1 − gloss / 2`.
     pub glint_scale: f32,
+    /// The texture slots (base colour, metallic-roughness, emissive, normal): each a
+    /// view of [`GpuTextures`] (`u32::MAX`: none). With one, the kernel computes what
+    /// the slot changes per hit, from the factors below, as the CPU does.
+    pub tex: [u32; 4],
+    /// The factors as the material holds them: metallic, roughness, transmission
+    /// (clamped), the normal map's scale (1 where not finite).
+    pub factors: [f32; 4],
+    /// Each slot's `KHR_texture_transform`: scale (x, y), sin and cos of the rotation;
+    /// offset (x, y), 1 when there is one, 0.
+    pub transform: [[f32; 4]; 8],
 }
+
+/// The textures of a frame path's render, uploaded once (`GpuShading::new_textured`):
+/// `meta` holds the decoding tables (the sRGB table, then `b / 255` for the linear
+/// bytes; 256 words each, f32 bits), the views (one a texture and colour space the
+/// materials use: [`TEXTURE_VIEW_WORDS`] words each) and the mip levels (texel offset,
+/// width, height, 0); `texels` every level's RGBA8 texels, one u32 each (R in the low
+/// byte).
+#[derive(Clone, Debug, Default)]
+pub struct GpuTextures {
+    pub meta: Vec<u32>,
+    pub texels: Vec<u32>,
+}
+
+/// Words of a texture view in [`GpuTextures::meta`]: reduced levels (the chain's length
+/// below the image), wrap S and T (0 repeat, 1 clamp to edge, 2 mirrored repeat), 1 for
+/// nearest magnification, the word of its first level, `log2(√(w·h))` (f32 bits), 1 for
+/// sRGB, 0.
+pub const TEXTURE_VIEW_WORDS: usize = 8;
 
 /// A punctual light, as shade.wgsl reads it.
 #[repr(C)]
@@ -147,6 +183,10 @@ pub struct CameraRays {
     /// 0: the zero that keeps products from being fused (`nc`).
     pub zero: u32,
     pub pad: u32,
+    /// The camera rays' cone (width, spread: the texture level of detail), set by
+    /// `GpuShading::render_chunk` from `ShadeParams::cone`.
+    pub cone: [f32; 2],
+    pub pad2: [u32; 2],
 }
 
 /// A frame's shading constants.
@@ -164,4 +204,6 @@ pub struct ShadeParams {
     pub light_samples: u32,
     /// `--diffuse-bounces`.
     pub diffuse_bounces: u32,
+    /// The camera rays' cone (width, spread; the texture level of detail).
+    pub cone: [f32; 2],
 }

@@ -166,6 +166,7 @@ impl EnvironmentMap {
     /// The map as the GPU frame path reads it (shade.wgsl's `env`): a header (width and
     /// height as u32 bits, the turn's cos and sin, the intensity, three zeros) and the
     /// texels' RGB, row-major from the top row.
+    #[cfg(feature = "gpu")]
     pub(in crate::render) fn gpu_table(&self) -> Vec<f32> {
         let mut t = Vec::with_capacity(8 + 3 * self.texels.len());
         t.extend_from_slice(&[
@@ -183,6 +184,7 @@ impl EnvironmentMap {
     }
 
     /// Texels in all.
+    #[cfg(feature = "gpu")]
     pub(in crate::render) fn texel_count(&self) -> usize {
         self.texels.len()
     }

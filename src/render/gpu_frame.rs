@@ -5,14 +5,17 @@
 //! whole wavefront on the GPU (`gpu::GpuShading`, shade.wgsl): camera rays made here,
 //! pixels and (for the AOVs and Cryptomatte) the camera rays' hits read back.
 //!
-//! The subset is what `ShadeContext::shade` does without textures: constant, opaque
-//! materials (base colour, metallic, roughness, emission, transmission, IOR,
-//! double-sided); the mirror reflection (GGX width under `MIRROR_ALPHA`), one reflection
-//! ray drawn from the GGX lobe (the random numbers made from the CPU's seeds, to the
-//! bit) or none (roughness from `GLOSSY_LIMIT` on); refraction
-//! with exact dielectric Fresnel; punctual lights (the default light too) and area lights
-//! (emissive triangles); the options' or the scene's ambient light; a constant
-//! background or an environment map; diffuse bounces. Anything else keeps shading on
+//! The subset is what `ShadeContext::shade` does but for alpha below 1, a material's
+//! own ambient colour, motion blur and the light-path passes: opaque materials (base
+//! colour, metallic, roughness, emission, transmission, IOR, double-sided), textured or
+//! not (the textures uploaded once a render, [`textures`], and filtered in the kernel
+//! as `render::mips` filters them); the mirror reflection (GGX width under
+//! `MIRROR_ALPHA`), one reflection ray drawn from the GGX lobe (the random numbers made
+//! from the CPU's seeds, to the bit) or none (roughness from `GLOSSY_LIMIT` on);
+//! refraction with exact dielectric Fresnel; punctual lights (the default light too) and
+//! area lights (emissive triangles); the options' or the scene's ambient light; a
+//! constant background or an environment map; diffuse bounces. Anything else keeps
+//! shading on
 //! the CPU, traced on the GPU as before, and the log says which feature did.
 
 use std::time::Instant;
@@ -22,17 +25,20 @@ use rayon::prelude::*;
 
 use super::camera::CameraModel;
 use super::lights::emits;
+use super::mips::TextureMips;
 use super::options::RenderOptions;
 use super::shade::{
     FrameBuffers, FrameWork, ShadeContext, GLOSSY_LIMIT, LIGHT_SAMPLES, MIN_WEIGHT, MIRROR_ALPHA,
 };
-use super::wavefront::{sample_offset, write_aovs, write_crypto, CentreInputs, FrameArgs};
+use super::wavefront::{
+    primary_cone, sample_offset, write_aovs, write_crypto, CentreInputs, FrameArgs,
+};
 use crate::geometry::Ray;
 use crate::gpu::{
-    CameraRays, GpuDevice, GpuError, GpuMoving, GpuShading, GpuStatic, GpuTracer, ShadeEmitter,
-    ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle,
+    CameraRays, GpuDevice, GpuError, GpuMoving, GpuShading, GpuStatic, GpuTextures, GpuTracer,
+    ShadeEmitter, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle, TEXTURE_VIEW_WORDS,
 };
-use crate::scene::{AlphaMode, Falloff, LightKind, Material, Scene, TriangleSoup};
+use crate::scene::{AlphaMode, Falloff, Image, LightKind, Material, Scene, TriangleSoup, Wrap};
 
 /// Samples a chunk traces at most (bounds the GPU's buffers: a level's rays at most
 /// double, and its shadow rays are at most one a light an item).
@@ -78,9 +84,15 @@ pub(super) fn outside_subset(
             Some(n) => format!("material '{n}'"),
             None => format!("material {i}"),
         };
-        if let Some(why) = material_outside(m) {
+        if let Some(why) = material_outside(scene, m) {
             return Some(format!("{name}: {why}"));
         }
+    }
+    let texels = texel_count(scene).saturating_mul(4);
+    if texels > max_binding {
+        return Some(format!(
+            "the textures ({texels} bytes with their mip levels) exceed one GPU storage binding ({max_binding} bytes)"
+        ));
     }
     for (what, n) in [("static", static_triangles), ("moving", moving_triangles)] {
         let bytes = n as u64 * std::mem::size_of::<SurfaceTriangle>() as u64;
@@ -93,15 +105,11 @@ pub(super) fn outside_subset(
     None
 }
 
-/// Why material `m` is outside the subset, if it is.
-fn material_outside(m: &Material) -> Option<&'static str> {
-    if m.base_color_texture.is_some()
-        || m.metallic_roughness_texture.is_some()
-        || m.emissive_texture.is_some()
-        || m.normal_texture.is_some()
-    {
-        return Some("a texture");
-    }
+/// Why material `m` of `scene` is outside the subset, if it is. Textures are inside,
+/// except where they could make a hit leave it: a base colour texture whose alpha is
+/// below 1 somewhere (with `MASK` or `BLEND`), a metallic-roughness texture that could
+/// make a roughness of the glossy range.
+fn material_outside(scene: &Scene, m: &Material) -> Option<&'static str> {
     if m.ambient.is_some() {
         return Some("its own ambient colour (AFF)");
     }
@@ -113,13 +121,162 @@ fn material_outside(m: &Material) -> Option<&'static str> {
     if !opaque {
         return Some("alpha below 1 (pass-through)");
     }
+    // Every mip level's byte lies between the image's least and greatest (the box
+    // filter's means), so a texture of alpha 255 throughout reads 1 wherever filtered
+    // (glam's lerp of 1 and 1 is 1), and the factor decides as without it.
+    let texture_alpha = m
+        .base_color_texture
+        .and_then(|r| byte_range(scene, r.texture, 3));
+    if m.alpha_mode != AlphaMode::Opaque && texture_alpha.is_some_and(|(lo, _)| lo < 255) {
+        return Some("alpha below 1 (pass-through) from its base colour texture");
+    }
+    // An area light's own samples read its emission constant (`GpuShading`'s emitter
+    // table): a texture on it stays on the CPU.
+    if emits(m) && m.emissive_texture.is_some() {
+        return Some("an emissive texture on an area light");
+    }
     None
 }
 
+/// Texture `t`'s image where `ShadeContext::texture` reads it (a texture and an image
+/// there, of a size its bytes fill); `None` where the CPU reads no texture.
+fn image_of(scene: &Scene, t: u32) -> Option<&Image> {
+    let tex = scene.textures.get(t as usize)?;
+    let img = scene.images.get(tex.image as usize)?;
+    let (w, h) = (u64::from(img.width), u64::from(img.height));
+    (w > 0 && h > 0 && img.rgba8.len() as u64 == w * h * 4).then_some(img)
+}
+
+/// The least and greatest byte of channel `c` of texture `t`'s image.
+fn byte_range(scene: &Scene, t: u32, c: usize) -> Option<(u8, u8)> {
+    let img = image_of(scene, t)?;
+    Some(
+        img.rgba8
+            .chunks_exact(4)
+            .fold((u8::MAX, 0), |(lo, hi), p| (lo.min(p[c]), hi.max(p[c]))),
+    )
+}
+
+/// The textures as the materials read them, one view a texture and colour space used
+/// (`TextureMips::build`'s chains: base colour and emissive sRGB, the others linear),
+/// in the order of the textures, sRGB first; textures the CPU does not read left out.
+fn texture_views(scene: &Scene) -> Vec<(u32, bool)> {
+    let mut want = vec![(false, false); scene.textures.len()];
+    for m in &scene.materials {
+        for (slot, srgb) in [
+            (m.base_color_texture, true),
+            (m.emissive_texture, true),
+            (m.metallic_roughness_texture, false),
+            (m.normal_texture, false),
+        ] {
+            if let Some(w) = slot.and_then(|t| want.get_mut(t.texture as usize)) {
+                if srgb {
+                    w.0 = true;
+                } else {
+                    w.1 = true;
+                }
+            }
+        }
+    }
+    let mut views = Vec::new();
+    for (t, (s, l)) in want.into_iter().enumerate() {
+        let t = t as u32;
+        if image_of(scene, t).is_none() {
+            continue;
+        }
+        if s {
+            views.push((t, true));
+        }
+        if l {
+            views.push((t, false));
+        }
+    }
+    views
+}
+
+/// The sizes of a mip chain from a `w × h` image on (`TextureMips::build`'s levels).
+fn level_sizes(w: u32, h: u32) -> Vec<(u32, u32)> {
+    let mut sizes = vec![(w, h)];
+    let (mut w, mut h) = (w, h);
+    while w > 1 || h > 1 {
+        (w, h) = ((w / 2).max(1), (h / 2).max(1));
+        sizes.push((w, h));
+    }
+    sizes
+}
+
+/// The texels the frame path uploads: every level of every view.
+fn texel_count(scene: &Scene) -> u64 {
+    texture_views(scene)
+        .iter()
+        .filter_map(|&(t, _)| image_of(scene, t))
+        .flat_map(|img| level_sizes(img.width, img.height))
+        .map(|(w, h)| u64::from(w) * u64::from(h))
+        .sum()
+}
+
+/// The textures for the GPU ([`GpuTextures`]): the decoding tables, the views and
+/// every level of their chains (the image, then `mips`' reduced levels).
+pub(super) fn textures(scene: &Scene, mips: &TextureMips) -> GpuTextures {
+    let views = texture_views(scene);
+    if views.is_empty() {
+        return GpuTextures::default();
+    }
+    let mut meta: Vec<u32> = mips.srgb_table().iter().map(|x| x.to_bits()).collect();
+    meta.resize(256, 0);
+    meta.extend((0..256).map(|b| (b as f32 / 255.0).to_bits()));
+    let levels_at = meta.len() + views.len() * TEXTURE_VIEW_WORDS;
+    let mut levels: Vec<u32> = Vec::new();
+    let mut texels: Vec<u32> = Vec::new();
+    let wrap = |w: Wrap| match w {
+        Wrap::Repeat => 0,
+        Wrap::ClampToEdge => 1,
+        Wrap::MirroredRepeat => 2,
+    };
+    for &(t, srgb) in &views {
+        let (Some(tex), Some(img)) = (scene.textures.get(t as usize), image_of(scene, t)) else {
+            continue;
+        };
+        let (w, h) = (img.width, img.height);
+        let top = mips.levels(t as usize, srgb) - 1;
+        meta.extend([
+            top as u32,
+            wrap(tex.wrap_s),
+            wrap(tex.wrap_t),
+            u32::from(tex.nearest),
+            (levels_at + levels.len()) as u32,
+            (0.5 * ((w as f32) * (h as f32)).log2()).to_bits(),
+            u32::from(srgb),
+            0,
+        ]);
+        for i in 0..=top {
+            let (data, lw, lh) = match i {
+                0 => (&img.rgba8[..], w, h),
+                _ => mips.level(t as usize, srgb, i).unwrap_or((&[], 0, 0)),
+            };
+            levels.extend([texels.len() as u32, lw, lh, 0]);
+            texels.extend(
+                data.chunks_exact(4)
+                    .map(|p| u32::from_le_bytes([p[0], p[1], p[2], p[3]])),
+            );
+        }
+    }
+    meta.extend(levels);
+    GpuTextures { meta, texels }
+}
+
 /// The material table: the scene's materials, then glTF's default material (for
-/// triangles without one), each as `ShadeContext::lobes` and `glint` compute it.
+/// triangles without one), each as `ShadeContext::lobes` and `glint` compute it, with
+/// its textures' views (numbered as [`textures`] numbers them). A material with a
+/// metallic-roughness texture is marked as reflecting and transmitting as its factors
+/// allow (so the levels are encoded; the kernel decides per hit).
 fn materials(scene: &Scene) -> Vec<ShadeMaterial> {
     let default = Material::default();
+    let views = texture_views(scene);
+    let view = |slot: Option<crate::scene::TextureRef>, srgb: bool| {
+        slot.and_then(|r| views.iter().position(|&v| v == (r.texture, srgb)))
+            .map_or(u32::MAX, |i| i as u32)
+    };
     scene
         .materials
         .iter()
@@ -137,19 +294,48 @@ fn materials(scene: &Scene) -> Vec<ShadeMaterial> {
                 1.5
             };
             let shininess = ShadeContext::shininess(roughness);
+            let slots = [
+                m.base_color_texture,
+                m.metallic_roughness_texture,
+                m.emissive_texture,
+                m.normal_texture,
+            ];
+            let tex = [
+                view(slots[0], true),
+                view(slots[1], false),
+                view(slots[2], true),
+                view(slots[3], false),
+            ];
+            let mut transform = [[0.0f32; 4]; 8];
+            for (k, slot) in slots.iter().enumerate() {
+                if let Some(t) = slot.and_then(|s| s.transform) {
+                    let (sin, cos) = t.rotation.sin_cos();
+                    transform[2 * k] = [t.scale.x, t.scale.y, sin, cos];
+                    transform[2 * k + 1] = [t.offset.x, t.offset.y, 1.0, 0.0];
+                }
+            }
+            let rough_texture = tex[1] != u32::MAX;
             ShadeMaterial {
                 albedo: albedo.to_array(),
                 metallic,
                 f0: f0.to_array(),
                 roughness,
                 emission: (m.emissive * m.emissive_strength).to_array(),
-                transmission,
+                transmission: if rough_texture {
+                    m.transmission.clamp(0.0, 1.0)
+                } else {
+                    transmission
+                },
                 gloss,
                 shininess,
                 eta_entering: 1.0 / ior,
                 eta_leaving: ior,
                 double_sided: u32::from(m.double_sided),
-                reflects: if roughness >= GLOSSY_LIMIT {
+                // 0 none, 1 the mirror's, 2 GGX; with a metallic-roughness texture
+                // `textured` decides a hit's own (2 here: seeds are made).
+                reflects: if rough_texture {
+                    2
+                } else if roughness >= GLOSSY_LIMIT {
                     0
                 } else if roughness * roughness < MIRROR_ALPHA {
                     1
@@ -158,6 +344,18 @@ fn materials(scene: &Scene) -> Vec<ShadeMaterial> {
                 },
                 glint_norm: (shininess + 8.0) / (8.0 * std::f32::consts::PI),
                 glint_scale: 1.0 - gloss * 0.5,
+                tex,
+                factors: [
+                    m.metallic,
+                    m.roughness,
+                    m.transmission.clamp(0.0, 1.0),
+                    if m.normal_scale.is_finite() {
+                        m.normal_scale
+                    } else {
+                        1.0
+                    },
+                ],
+                transform,
             }
         })
         .collect()
@@ -230,7 +428,11 @@ pub(super) fn surfaces(soup: &TriangleSoup, materials: usize) -> Vec<SurfaceTria
                 .copied()
                 .filter(|&m| (m as usize) < materials)
                 .unwrap_or(materials as u32);
-            SurfaceTriangle::new(p, soup.normals.get(i), m)
+            let t = SurfaceTriangle::new(p, soup.normals.get(i), m);
+            match soup.uvs.get(i) {
+                Some(uv) => t.with_uvs(uv),
+                None => t,
+            }
         })
         .collect()
 }
@@ -264,6 +466,8 @@ pub(super) fn camera_rays(camera: &CameraModel, frame: u32, spp: u32, overscan: 
         ortho: u32::from(camera.ortho.is_some()),
         zero: 0,
         pad: 0,
+        cone: [0.0; 2],
+        pad2: [0; 2],
     }
 }
 
@@ -303,6 +507,7 @@ pub(super) fn render_frame_gpu(
     let mats = materials(ctx.scene);
     let lts = lights(ctx);
     let ems = emitters(ctx);
+    let cone = primary_cone(camera);
     let params = ShadeParams {
         ambient: ctx.options.ambient.to_array(),
         background: ctx.options.background.to_array(),
@@ -311,6 +516,7 @@ pub(super) fn render_frame_gpu(
         min_weight: MIN_WEIGHT,
         light_samples: LIGHT_SAMPLES.div_ceil(spp.max(1) as u32),
         diffuse_bounces: ctx.options.diffuse_bounces,
+        cone: [cone.width, cone.spread],
     };
     // Uploaded once a render (the key names the file's bytes, turn and scale).
     let env = match &ctx.options.environment {
@@ -534,6 +740,7 @@ mod tests {
             min_weight: MIN_WEIGHT,
             light_samples: 8,
             diffuse_bounces: 0,
+            cone: [0.0; 2],
         };
         // Every pixel on the cube's front face.
         let camera = CameraModel {
@@ -643,12 +850,63 @@ mod tests {
         }
     }
 
+    /// `m` in a scene of two 4×2 textures: 0 opaque, green bytes 100 to 244 (a
+    /// roughness texture that reaches the glossy range), 1 with alpha 128 and green
+    /// bytes 110 to 254 (from 0.43: too rough to reflect).
+    fn textured(m: Material) -> Scene {
+        let img = |alpha: u8, g0: u8| crate::scene::Image {
+            name: None,
+            width: 4,
+            height: 2,
+            rgba8: (0..8u8)
+                .flat_map(|i| [i * 30, g0 + (i % 4) * 48, 200, alpha])
+                .collect(),
+        };
+        let tex = |image| crate::scene::Texture {
+            image,
+            wrap_s: crate::scene::Wrap::Repeat,
+            wrap_t: crate::scene::Wrap::Repeat,
+            nearest: false,
+        };
+        Scene {
+            materials: vec![m],
+            images: vec![img(255, 100), img(128, 110)],
+            textures: vec![tex(0), tex(1)],
+            ..Scene::default()
+        }
+    }
+
     fn why(scene: &Scene, opts: &RenderOptions) -> Option<String> {
         outside_subset(scene, opts, 10, 10, 1 << 20)
     }
 
+    /// The shading constants shade.wgsl writes out are the CPU's.
+    #[test]
+    fn the_kernels_constants_are_the_cpus() {
+        let src = include_str!("../gpu/shade.wgsl");
+        let constant = |name: &str| -> f32 {
+            let line = src
+                .lines()
+                .find(|l| l.starts_with(&format!("const {name}: f32 = ")))
+                .unwrap_or_else(|| panic!("no {name} in shade.wgsl"));
+            line.trim_end_matches(';')
+                .rsplit(' ')
+                .next()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or_else(|| panic!("{line}"))
+        };
+        assert_eq!(constant("GLOSSY_LIMIT"), GLOSSY_LIMIT);
+        assert_eq!(constant("MIRROR_ALPHA"), MIRROR_ALPHA);
+        assert_eq!(
+            constant("MAX_SHININESS"),
+            ShadeContext::shininess(0.0),
+            "the cap"
+        );
+    }
+
     /// Every feature the frame path does not shade sends the scene to the CPU's
-    /// shading, with its name; the subset's own materials do not.
+    /// shading, with its name; the subset's own materials do not, textured ones
+    /// included.
     #[test]
     fn the_subset_and_what_falls_back() {
         let opts = RenderOptions::default();
@@ -674,45 +932,97 @@ mod tests {
         for m in inside {
             assert_eq!(why(&scene_with(m.clone()), &opts), None, "{m:?}");
         }
-        let tex = Some(TextureRef {
-            texture: 0,
-            tex_coord: 0,
-            transform: None,
-        });
+        let tex = |texture| {
+            Some(TextureRef {
+                texture,
+                tex_coord: 0,
+                transform: None,
+            })
+        };
+        let textured_inside = [
+            Material {
+                base_color_texture: tex(0),
+                normal_texture: tex(1),
+                emissive_texture: tex(0),
+                ..Material::default()
+            },
+            // An opaque texture under MASK and BLEND: the factor decides.
+            Material {
+                base_color_texture: tex(0),
+                alpha_mode: AlphaMode::Mask { cutoff: 0.5 },
+                ..Material::default()
+            },
+            Material {
+                base_color_texture: tex(0),
+                alpha_mode: AlphaMode::Blend,
+                ..Material::default()
+            },
+            // Roughness from 0.43 on: no reflection ray anywhere.
+            Material {
+                metallic_roughness_texture: tex(1),
+                ..Material::default()
+            },
+            // A roughness factor that keeps every texel a mirror.
+            Material {
+                roughness: 0.03,
+                metallic_roughness_texture: tex(0),
+                ..Material::default()
+            },
+            // A texture the CPU does not read (no such texture): as without.
+            Material {
+                base_color_texture: tex(7),
+                ..Material::default()
+            },
+            // A roughness that is glossy at some texels (a hit's own reflection ray).
+            Material {
+                metallic_roughness_texture: tex(0),
+                ..Material::default()
+            },
+            // An emissive texture on a material that does not emit.
+            Material {
+                emissive_texture: tex(0),
+                ..Material::default()
+            },
+        ];
+        for m in textured_inside {
+            assert_eq!(why(&textured(m.clone()), &opts), None, "{m:?}");
+        }
         let outside = [
             (
-                Material {
-                    base_color_texture: tex,
+                textured(Material {
+                    base_color_texture: tex(1),
+                    alpha_mode: AlphaMode::Mask { cutoff: 0.5 },
                     ..Material::default()
-                },
-                "a texture",
+                }),
+                "pass-through) from its base colour texture",
             ),
             (
-                Material {
-                    normal_texture: tex,
+                textured(Material {
+                    emissive: Vec3::ONE,
+                    emissive_texture: tex(0),
                     ..Material::default()
-                },
-                "a texture",
+                }),
+                "an emissive texture on an area light",
             ),
             (
-                Material {
+                scene_with(Material {
                     ambient: Some(Vec3::ONE),
                     ..Material::default()
-                },
+                }),
                 "ambient colour",
             ),
             (
-                Material {
+                scene_with(Material {
                     alpha_mode: AlphaMode::Blend,
                     base_color: glam::Vec4::new(1.0, 1.0, 1.0, 0.5),
                     ..Material::default()
-                },
+                }),
                 "pass-through",
             ),
         ];
-        for (m, said) in outside {
-            let w = why(&scene_with(m.clone()), &opts).unwrap_or_default();
-            assert!(w.contains(said) && w.contains("material 0"), "{m:?}: {w}");
+        for (scene, said) in outside {
+            let w = why(&scene, &opts).unwrap_or_default();
+            assert!(w.contains(said) && w.contains("material 0"), "{said}: {w}");
         }
         // Glossy (GGX) reflection is inside: its numbers come from the items' seeds.
         let glossy = Material {
@@ -735,6 +1045,22 @@ mod tests {
             .unwrap()
             .contains("area lights at more than"));
         assert_eq!(why(&scene_with(Material::default()), &many), None);
+        // Textures larger than one binding: the levels of 4×2, 2×1 and 1×1 texels in
+        // each of two views (sRGB and linear), 88 bytes.
+        let both = textured(Material {
+            base_color_texture: tex(0),
+            normal_texture: tex(0),
+            ..Material::default()
+        });
+        assert_eq!(texel_count(&both), 2 * (8 + 2 + 1));
+        let small = outside_subset(&both, &opts, 10, 10, 80);
+        assert!(
+            small
+                .as_deref()
+                .unwrap_or_default()
+                .contains("the textures (88 bytes"),
+            "{small:?}"
+        );
         let plain = scene_with(Material::default());
         let blur = RenderOptions {
             motion_blur: Some(MotionBlur {

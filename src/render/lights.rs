@@ -137,6 +137,7 @@ impl AreaLights {
 
     /// The emitters in drawing order, each with its cumulative probability and the one
     /// below it (what [`AreaLights::sample`] reads), for the GPU's table.
+    #[cfg(feature = "gpu")]
     pub fn table(&self) -> impl Iterator<Item = (&Emitter, f32, f32)> + '_ {
         self.emitters
             .iter()

@@ -174,6 +174,21 @@ impl TextureMips {
         self.chain(t, srgb).map_or(1, |c| c.levels.len() + 1)
     }
 
+    /// Level `i` (1 the first below the image) of texture `t`'s chain in the colour
+    /// space `srgb` picks: its RGBA8 texels, width and height (for the GPU frame path,
+    /// which uploads the chains).
+    #[cfg(feature = "gpu")]
+    pub(super) fn level(&self, t: usize, srgb: bool, i: usize) -> Option<(&[u8], u32, u32)> {
+        let l = self.chain(t, srgb)?.levels.get(i.checked_sub(1)?)?;
+        Some((&l.rgba8, l.width, l.height))
+    }
+
+    /// The sRGB decoding table lookups use (byte to linear value).
+    #[cfg(feature = "gpu")]
+    pub(super) fn srgb_table(&self) -> &[f32] {
+        &self.lut
+    }
+
     fn chain(&self, t: usize, srgb: bool) -> Option<&Chain> {
         let c = self.chains.get(t)?;
         if srgb {

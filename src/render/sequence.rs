@@ -93,13 +93,13 @@ pub fn render_sequence(
         seconds: static_seconds,
     });
 
+    let mips = TextureMips::build(scene);
     let tracing = tracing(
         device,
         &psf,
         plan.split.dynamic_triangles,
-        frame_path.then_some((&static_soup, scene.materials.len())),
+        frame_path.then_some((&static_soup, scene, &mips)),
     )?;
-    let mips = TextureMips::build(scene);
     let frames = Frames {
         scene,
         mips: &mips,
@@ -245,13 +245,13 @@ fn device_words(device: &Option<Device>) -> String {
 }
 
 /// The frame loop's tracer: on the GPU, the static part uploaded once, and with
-/// `frame_path` (the static triangles and the scene's material count) their surfaces
-/// for the GPU frame path.
+/// `frame_path` (the static triangles, the scene and its texture chains) their surfaces
+/// and the textures for the GPU frame path.
 fn tracing(
     device: Option<Device>,
     psf: &Psf,
     moving: usize,
-    frame_path: Option<(&TriangleSoup, usize)>,
+    frame_path: Option<(&TriangleSoup, &Scene, &TextureMips)>,
 ) -> Result<Tracing, RenderError> {
     match device {
         None => Ok(Tracing::Cpu(Box::new(DynamicLayer::for_triangles(moving)))),
@@ -265,9 +265,13 @@ fn tracing(
             let stat = crate::gpu::GpuStatic::upload(&dev, psf).map_err(gpu)?;
             let moving = crate::gpu::GpuMoving::new(&dev).map_err(gpu)?;
             let shading = match frame_path {
-                Some((soup, materials)) => Some(
-                    crate::gpu::GpuShading::new(&dev, &super::gpu_frame::surfaces(soup, materials))
-                        .map_err(gpu)?,
+                Some((soup, scene, mips)) => Some(
+                    crate::gpu::GpuShading::new_textured(
+                        &dev,
+                        &super::gpu_frame::surfaces(soup, scene.materials.len()),
+                        &super::gpu_frame::textures(scene, mips),
+                    )
+                    .map_err(gpu)?,
                 ),
                 None => None,
             };

@@ -172,7 +172,7 @@ impl PixelWalk {
 
 /// The cone of a camera ray: a pixel wide, from a point (perspective: the angle a pixel
 /// spans at the image centre) or a pixel wide and parallel (orthographic).
-fn primary_cone(camera: &CameraModel) -> Cone {
+pub(super) fn primary_cone(camera: &CameraModel) -> Cone {
     let h = camera.height.max(1) as f32;
     match camera.ortho {
         Some((_, ymag)) => Cone {
