@@ -902,6 +902,68 @@ fn gpu_frames_with_textures_agree_with_the_cpu() {
     agree(&dir, &glossy, "textured-glossy", &a);
 }
 
+/// Motion blur on the GPU: each time step traces its own samples (the CPU's choice,
+/// `begin_blurred`), the steps' sums are added and `finish_blurred` averages them; the
+/// AOVs come from the middle step (odd counts) or a pass of their own (even), and the
+/// Cryptomatte ranks every sample whatever step traced it. The room's tumbling cube with
+/// three steps at three samples (depth 2), two steps at four samples with glossy metal
+/// (depth 1; two samples a pixel a step, so a step's coverage passes 1 before the
+/// average), and two steps at one sample (a pixel's only sample in one step).
+#[test]
+fn motion_blur_agrees_with_the_cpu() {
+    if common::gpu::device().is_none() {
+        return;
+    }
+    let dir = temp_dir("gpu-frames-blur");
+    let room = write(&dir, &subset_scene());
+    let three = [
+        "--frames",
+        "4..6",
+        "--spp",
+        "3",
+        "--max-depth",
+        "2",
+        "--shutter",
+        "0.5",
+        "--motion-steps",
+        "3",
+    ];
+    agree(&dir, &room, "blur3", &three);
+    let mut glossy = subset_scene();
+    for m in &mut glossy.materials {
+        if m.name.as_deref() == Some("gold") {
+            m.roughness = 0.3;
+        }
+    }
+    let glossy_dir = dir.join("glossy");
+    std::fs::create_dir_all(&glossy_dir).unwrap();
+    let glossy = write(&glossy_dir, &glossy);
+    let four = [
+        "--frames",
+        "5",
+        "--spp",
+        "4",
+        "--max-depth",
+        "1",
+        "--shutter",
+        "0.8",
+        "--motion-steps",
+        "2",
+    ];
+    agree(&dir, &glossy, "blur4", &four);
+    let one = [
+        "--frames",
+        "6",
+        "--spp",
+        "1",
+        "--shutter",
+        "0.5",
+        "--motion-steps",
+        "2",
+    ];
+    agree(&dir, &room, "blur1", &one);
+}
+
 /// A scene outside the subset (alpha below 1) traces on the GPU and shades on the
 /// CPU: its frames are the CPU's to the bit, and the log says why.
 #[test]

@@ -558,9 +558,13 @@ fn submit_forwards_the_blur_to_its_tasks() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The test scene blurred on the GPU (the frame path: every step traced and shaded
+/// there): the AOVs, Z and Cryptomatte the CPU's to the bit, the colour within 1e-3 in
+/// every pixel (the GPU's shading arithmetic rounds differently in the last bits;
+/// tests/gpu_frames.rs states the bound, docs/GPU.md why).
 #[cfg(feature = "gpu")]
 #[test]
-fn gpu_blurred_frames_equal_cpu_blurred_frames() {
+fn gpu_blurred_frames_match_cpu_blurred_frames() {
     if common::gpu::device().is_none() {
         return;
     }
@@ -585,6 +589,16 @@ fn gpu_blurred_frames_equal_cpu_blurred_frames() {
         assert_eq!(a.len(), b.len());
         for ((na, va), (nb, vb)) in a.iter().zip(&b) {
             assert_eq!(na, nb);
+            if ["R", "G", "B"].contains(&na.as_str()) {
+                for (x, y) in va.iter().zip(vb) {
+                    assert!(
+                        (x - y).abs() <= 1e-3 * x.abs().max(1.0),
+                        "{}: {na} {x} on the CPU, {y} on the GPU",
+                        f.display()
+                    );
+                }
+                continue;
+            }
             let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(va), bits(vb), "{}: channel {na}", f.display());
         }

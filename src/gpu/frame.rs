@@ -500,15 +500,23 @@ impl GpuShading {
         shading: &ShadeParams,
         camera: &CameraRays,
         npix: u64,
+        picked: Option<&[u32]>,
         capacity: u64,
         want_hits: bool,
     ) -> Result<Option<ChunkOut>, GpuError> {
         let spp = camera.spp.max(1);
         let nsamples = npix * u64::from(spp);
-        if nsamples == 0 {
-            return Ok(Some(ChunkOut::default()));
+        // The camera rays traced: every sample, or a blurred frame's step's (`picked`,
+        // ascending chunk numbers, each under `nsamples`; the kernels' reads and writes
+        // stay inside their buffers whatever the numbers, by WGSL's bounds).
+        let traced = picked.map_or(nsamples, |p| p.len() as u64);
+        if nsamples == 0 || traced == 0 {
+            return Ok(Some(ChunkOut {
+                rgba: vec![[0.0; 4]; npix as usize],
+                ..ChunkOut::default()
+            }));
         }
-        let cap = capacity.max(nsamples);
+        let cap = capacity.max(traced);
         let nl = lights.len() as u64;
         // An item's shadow ray slots: one a punctual light, and the area-light samples
         // of a camera ray's hit (deeper hits make one).
@@ -584,7 +592,7 @@ impl GpuShading {
         let (_, _, stride) = GpuDevice::grid_of(cap + 1, 64);
         let total_tris = self.static_count.saturating_add(surfaces.count);
         let mut p = params(
-            nsamples,
+            traced,
             nl32,
             true,
             shading.max_depth,
@@ -613,10 +621,20 @@ impl GpuShading {
         p.h = [x_caps[0], x_caps[1], x_caps[2], area_samples as u32];
         let mut closest = tracer.params_words(cap, false)?;
         let any = tracer.params_words(caps, true)?;
-        let f_uni = dev.uniform(bytemuck::bytes_of(&p));
-        closest[0] = nsamples as u32;
+        closest[0] = traced as u32;
+        if let Some(sel) = picked {
+            // A step's first level: item i is sample `sel[i]` (the camera kernel and
+            // `shade` read it from the item), and the samples not traced stay 0.
+            p.a[2] = 2;
+            let mut words = vec![0u32; sel.len() * 12];
+            for (w, &s) in words.chunks_exact_mut(12).zip(sel) {
+                w[4] = s;
+            }
+            dev.write(&items[0], 0, bytemuck::cast_slice(&words));
+        }
         let tc_uni = dev.uniform(bytemuck::bytes_of(&closest));
         let ta_uni = dev.uniform(bytemuck::bytes_of(&any));
+        let f_uni = dev.uniform(bytemuck::bytes_of(&p));
         let mut words: Vec<u32> = bytemuck::cast_slice(bytemuck::bytes_of(&p)).to_vec();
         words.extend_from_slice(&closest);
         words.extend_from_slice(&any);
@@ -630,8 +648,8 @@ impl GpuShading {
         };
         let args = dev.buffer("the dispatches' workgroups", 9 * 4, indirect)?;
         let first_args: Vec<u32> = [
-            groups(nsamples, x_caps[0]),
-            groups(nsamples, x_caps[1]),
+            groups(traced, x_caps[0]),
+            groups(traced, x_caps[1]),
             [0, 0, 1],
         ]
         .concat();
@@ -700,11 +718,14 @@ impl GpuShading {
         for level in 0..=deepest as usize {
             let (g, k) = (&bind[level % 2], level % 2);
             if level == 0 {
-                Self::dispatch(&mut enc, &self.camera_pipe, g, nsamples);
+                if picked.is_some() {
+                    enc.clear_buffer(radiance, 0, Some(nsamples * 16));
+                }
+                Self::dispatch(&mut enc, &self.camera_pipe, g, traced);
             }
             tracer.encode_group_indirect(&mut enc, &trace_closest[k], &args, 12);
             if level == 0 && want_hits {
-                enc.copy_buffer_to_buffer(hits, 0, cam_hits, 0, nsamples * 16);
+                enc.copy_buffer_to_buffer(hits, 0, cam_hits, 0, traced * 16);
             }
             Self::dispatch_indirect(&mut enc, &self.shade_pipe, g, &args, 0);
             // The scans over the level's items and one more (the totals), their count
@@ -724,7 +745,12 @@ impl GpuShading {
             enc.copy_buffer_to_buffer(made, w_args * 4, &args, 0, 24);
         }
         let (_, _, stride) = GpuDevice::grid_of(npix, 64);
-        let p = params(0, 0, false, 0, 0, stride, npix, spp, None);
+        let mut p = params(0, 0, false, 0, 0, stride, npix, spp, None);
+        if picked.is_some() {
+            // A step's pixels: their samples' sums (`finish_blurred` divides and clamps).
+            p.a[2] = 1;
+            p.d[3] = 1.0;
+        }
         let uni = dev.uniform(bytemuck::bytes_of(&p));
         let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; LAST as usize + 1];
         bufs[0] = Some(&uni);
@@ -741,7 +767,7 @@ impl GpuShading {
         let t: Vec<u32> = bytemuck::pod_collect_to_vec(&t[..16]);
         let hits_back = if want_hits && t[0] == 0 {
             let enc = dev.device.create_command_encoder(&Default::default());
-            Some(dev.read_back(enc, cam_hits, nsamples * 16)?)
+            Some(dev.read_back(enc, cam_hits, traced * 16)?)
         } else {
             None
         };
@@ -759,7 +785,7 @@ impl GpuShading {
             secondary_rays: u64::from(t[2]),
         };
         if let Some(b) = hits_back {
-            let raw: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(&b[..nsamples as usize * 16]);
+            let raw: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(&b[..traced as usize * 16]);
             out.camera_hits = Some(
                 raw.par_iter()
                     .with_min_len(4096)

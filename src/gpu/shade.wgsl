@@ -448,9 +448,10 @@ fn grid_index(gid: vec3<u32>) -> u32 {
     return gid.y * F.b.y + gid.x;
 }
 
-// The sample item `i` adds to: at the camera rays' level, item i is sample i.
+// The sample item `i` adds to: at the camera rays' level item i is sample i, but for a
+// blurred frame's step (F.a.z 2), whose first items the host wrote with their samples.
 fn sample_of(i: u32) -> u32 {
-    if F.a.z != 0u {
+    if F.a.z == 1u {
         return i;
     }
     return items[i].m.x;
@@ -928,11 +929,12 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     let r = rays[i];
     var it: Item;
     let random = F.e.y != 0.0;
+    let smp = sample_of(i);
     if first {
         it.w = vec4<f32>(1.0, 1.0, 1.0, 0.0);
-        it.m = vec4<u32>(i, 0u, 0u, 0u);
+        it.m = vec4<u32>(smp, 0u, 0u, 0u);
         if random {
-            it.m = vec4<u32>(i, 0u, seed_camera(camera_sample(i)));
+            it.m = vec4<u32>(smp, 0u, seed_camera(camera_sample(smp)));
         }
         // The camera ray's cone (`wavefront::primary_cone`).
         it.c = vec4<f32>(C.d.x, C.d.y, 0.0, 0.0);
@@ -1190,7 +1192,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     local[i] = vec4<f32>(add, 0.0);
     if first {
         // Each sample's coverage (a camera ray that met an opaque surface).
-        radiance[i] = vec4<f32>(0.0, 0.0, 0.0, cover);
+        radiance[smp] = vec4<f32>(0.0, 0.0, 0.0, cover);
     }
     sh_count[i] = nsh;
     nx_count[i] = nnx;
@@ -1319,7 +1321,12 @@ fn pixels(@builtin(global_invocation_id) gid: vec3<u32>) {
         a = a + r.w;
     }
     let inv = F.d.w;
-    rgba[p] = vec4<f32>(c * inv, min(a * inv, 1.0));
+    if F.a.z != 0u {
+        // A blurred frame's step: the sums (1 / spp applied later, and the clamp).
+        rgba[p] = vec4<f32>(c * inv, a * inv);
+    } else {
+        rgba[p] = vec4<f32>(c * inv, min(a * inv, 1.0));
+    }
 }
 
 // Sample s of the chunk: its camera pixel (x, y, wrapping in the overscan border as the
@@ -1341,7 +1348,7 @@ fn camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     if s >= F.a.x {
         return;
     }
-    let p = camera_sample(s);
+    let p = camera_sample(sample_of(s));
     let off = sample_offset(p.x, p.y, p.z);
     rays[s] = camera_ray(f32(bitcast<i32>(p.x)) + off.x, f32(bitcast<i32>(p.y)) + off.y);
 }

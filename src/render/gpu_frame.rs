@@ -6,7 +6,8 @@
 //! pixels and (for the AOVs and Cryptomatte) the camera rays' hits read back.
 //!
 //! The subset is what `ShadeContext::shade` does but for alpha below 1, a material's
-//! own ambient colour, motion blur and the light-path passes: opaque materials (base
+//! own ambient colour and the light-path passes, with or without motion blur (a
+//! blurred frame's time steps each a pass of their samples): opaque materials (base
 //! colour, metallic, roughness, emission, transmission, IOR, double-sided), textured or
 //! not (the textures uploaded once a render, [`textures`], and filtered in the kernel
 //! as `render::mips` filters them); the mirror reflection (GGX width under
@@ -31,7 +32,8 @@ use super::shade::{
     FrameBuffers, FrameWork, ShadeContext, GLOSSY_LIMIT, LIGHT_SAMPLES, MIN_WEIGHT, MIRROR_ALPHA,
 };
 use super::wavefront::{
-    primary_cone, sample_offset, write_aovs, write_crypto, CentreInputs, FrameArgs,
+    primary_cone, sample_offset, write_aovs, write_crypto, CentreInputs, FrameArgs, FrameScratch,
+    StepPass,
 };
 use crate::geometry::Ray;
 use crate::gpu::{
@@ -58,9 +60,6 @@ pub(super) fn outside_subset(
     moving_triangles: usize,
     max_binding: u64,
 ) -> Option<String> {
-    if opts.blur().is_some() {
-        return Some("motion blur (--motion-blur)".into());
-    }
     if opts.aovs.any_light_path() {
         return Some("the light-path AOVs (--aov diffuse,specular,transmission,emission)".into());
     }
@@ -479,13 +478,18 @@ pub(super) struct GpuParts<'a> {
     pub shading: &'a GpuShading,
 }
 
-/// One frame (no motion blur) traced and shaded on the GPU into `fb` (from
-/// `wavefront::new_frame`): the same pixels `render_frame_with` makes on the CPU, to
-/// the rounding of the GPU's shading arithmetic (docs/GPU.md), and the same AOVs.
+/// One frame traced and shaded on the GPU into `fb` (from `wavefront::new_frame`), or
+/// with `pass` one time step of a blurred frame (from `wavefront::begin_blurred`: its
+/// samples' sums added to the steps' before, `finish_blurred` averaging them): the same
+/// pixels `render_pass_with` makes on the CPU, to the rounding of the GPU's shading
+/// arithmetic (docs/GPU.md), and the same AOVs.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn render_frame_gpu(
     gpu: &GpuParts<'_>,
+    scratch: &mut FrameScratch,
     ctx: &ShadeContext<'_>,
     args: &FrameArgs<'_>,
+    pass: Option<StepPass>,
     fb: &mut FrameBuffers,
     work: &mut FrameWork,
 ) -> Result<(), GpuError> {
@@ -532,8 +536,11 @@ pub(super) fn render_frame_gpu(
     let surf = gpu.shading.moving(gpu.dev, &moving_surf)?;
     work.trace += clock.elapsed();
     let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
-    let any_aov = aovs.any_centre();
-    let centre_batch = spp > 1;
+    // As `trace_pass`: the centre-ray AOVs every frame's, or the one pass of a blurred
+    // frame that has them, from rays of their own unless one sample a pixel unblurred.
+    let any_aov = aovs.any_centre() && pass.is_none_or(|p| p.aovs);
+    let centre_batch = spp > 1 || pass.is_some();
+    let step = pass.map(|p| p.samples);
     let want_hits = (any_aov && !centre_batch) || (crypto.is_some() && fb.crypto.is_some());
     let centre_inputs = CentreInputs {
         camera,
@@ -570,26 +577,38 @@ pub(super) fn render_frame_gpu(
             })?,
             ..cam
         };
-        let out = gpu.shading.render_chunk(
-            gpu.dev,
-            gpu.stat,
-            gpu.moving,
-            &surf,
-            &mats,
-            &lts,
-            &ems,
-            env.as_ref(),
-            &params,
-            &chunk_camera,
-            npix as u64,
-            capacity.max(2 * npix * spp).min(max_capacity) as u64,
-            want_hits,
-        );
+        // A blurred frame's step: the chunk's samples of the step (chunk numbers); the
+        // pass with the AOVs alone traces none.
+        let picked = step.map(|k| match k {
+            Some(k) => scratch.step_samples(px0 * spp, npix * spp, k),
+            None => Vec::new(),
+        });
+        let traced = picked.as_ref().map_or(npix * spp, Vec::len);
+        let out = if traced == 0 {
+            Ok(Some(crate::gpu::ChunkOut::default()))
+        } else {
+            gpu.shading.render_chunk(
+                gpu.dev,
+                gpu.stat,
+                gpu.moving,
+                &surf,
+                &mats,
+                &lts,
+                &ems,
+                env.as_ref(),
+                &params,
+                &chunk_camera,
+                npix as u64,
+                picked.as_deref(),
+                capacity.max(2 * traced).min(max_capacity) as u64,
+                want_hits,
+            )
+        };
         work.trace += clock.elapsed();
         let out = match out {
             Ok(Some(out)) => out,
             Ok(None) if capacity < max_capacity => {
-                capacity = capacity.max(2 * npix * spp).saturating_mul(2);
+                capacity = capacity.max(2 * traced).saturating_mul(2);
                 continue;
             }
             Ok(None) | Err(GpuError::TooLarge { .. }) if y1 - y0 > 1 => {
@@ -608,12 +627,26 @@ pub(super) fn render_frame_gpu(
             Err(e) => return Err(e),
         };
         capacity = 0;
-        work.rays.primary += (npix * spp) as u64;
+        work.rays.primary += traced as u64;
         work.rays.shadow += out.shadow_rays;
         work.rays.secondary += out.secondary_rays;
         let clock = Instant::now();
-        fb.rgba[px0..px0 + npix].copy_from_slice(&out.rgba);
-        if let Some(hits) = &out.camera_hits {
+        match &picked {
+            None => fb.rgba[px0..px0 + npix].copy_from_slice(&out.rgba),
+            // A step's sums added to the steps' before (`finish_blurred` averages).
+            Some(sel) if !sel.is_empty() => {
+                for (px, c) in fb.rgba[px0..px0 + npix].iter_mut().zip(&out.rgba) {
+                    *px = [px[0] + c[0], px[1] + c[1], px[2] + c[2], px[3] + c[3]];
+                }
+            }
+            Some(_) => {}
+        }
+        if let (Some(hits), Some(sel), Some(names)) = (&out.camera_hits, &picked, crypto) {
+            // A step's samples: their ids kept until every step has traced.
+            if fb.crypto.is_some() {
+                scratch.keep_step_crypto(ctx, names, px0 * spp, sel, hits);
+            }
+        } else if let Some(hits) = &out.camera_hits {
             if any_aov && !centre_batch {
                 // One sample a pixel: the camera rays are the centre rays, made again
                 // here (the same bits: `camera_rays_are_the_cpus`).
@@ -767,6 +800,7 @@ mod tests {
                     &params,
                     &cam,
                     256,
+                    None,
                     capacity,
                     true,
                 )
@@ -1069,7 +1103,8 @@ mod tests {
             }),
             ..RenderOptions::default()
         };
-        assert!(why(&plain, &blur).unwrap().contains("motion blur"));
+        // Motion blur is inside: each time step a pass of its own samples.
+        assert_eq!(why(&plain, &blur), None);
         let mut paths = RenderOptions::default();
         paths.aovs.specular = true;
         assert!(why(&plain, &paths).unwrap().contains("light-path"));

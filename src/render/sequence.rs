@@ -648,20 +648,22 @@ impl Frames<'_> {
             }
             #[cfg(feature = "gpu")]
             Tracing::Gpu(g) => {
-                if let (Some(shading), None) = (&g.shading, pass) {
-                    // The whole frame on the GPU (`gpu_frame`).
+                if let Some(shading) = &g.shading {
+                    // The whole frame (or a blurred frame's step) on the GPU (`gpu_frame`).
                     let parts = super::gpu_frame::GpuParts {
                         dev: &g.dev,
                         stat: &g.stat,
                         moving: &g.moving,
                         shading,
                     };
-                    return super::gpu_frame::render_frame_gpu(&parts, ctx, args, fb, work)
-                        .map_err(|source| RenderError::Gpu {
-                            device: "gpu",
-                            frame: None,
-                            source,
-                        });
+                    return super::gpu_frame::render_frame_gpu(
+                        &parts, scratch, ctx, args, pass, fb, work,
+                    )
+                    .map_err(|source| RenderError::Gpu {
+                        device: "gpu",
+                        frame: None,
+                        source,
+                    });
                 }
                 let tracer = crate::gpu::GpuTracer::new(&g.dev, &g.stat, &g.moving);
                 render_pass_with(scratch, fb, work, ctx, &tracer, args, pass);

@@ -83,6 +83,33 @@ impl FrameScratch {
     pub fn recycle(&mut self, fb: FrameBuffers) {
         self.spare = Some(fb);
     }
+
+    /// A blurred frame's samples of step `k` among the `n` from sample `base` on (chunk
+    /// numbers, ascending), as `trace_pass` picks them (`begin_blurred`'s steps).
+    #[cfg(feature = "gpu")]
+    pub(super) fn step_samples(&self, base: usize, n: usize, k: u32) -> Vec<u32> {
+        let steps = self.sample_steps.get(base..base + n).unwrap_or_default();
+        steps
+            .iter()
+            .enumerate()
+            .filter(|(_, &st)| u32::from(st) == k)
+            .map(|(s, _)| s as u32)
+            .collect()
+    }
+
+    /// Keeps the Cryptomatte ids of a step's samples `sel` (chunk numbers from sample
+    /// `base`) from their camera hits, for `finish_blurred`.
+    #[cfg(feature = "gpu")]
+    pub(super) fn keep_step_crypto(
+        &mut self,
+        ctx: &ShadeContext<'_>,
+        names: &CryptoNames,
+        base: usize,
+        sel: &[u32],
+        hits: &[Option<Hit>],
+    ) {
+        keep_crypto_ids(ctx, names, &mut self.crypto_ids, base, sel, hits);
+    }
 }
 
 /// `v` as `n` copies of `x`, reusing its allocation.
