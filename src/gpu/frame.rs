@@ -55,6 +55,9 @@ pub struct ChunkOut {
     pub camera_hits: Option<Vec<Option<Hit>>>,
     pub shadow_rays: u64,
     pub secondary_rays: u64,
+    /// With the light-path passes: each pixel's four (diffuse, specular, transmission,
+    /// emission; RGB and 0), pixel by pixel, averaged (or summed) as `rgba` is.
+    pub passes: Option<Vec<[f32; 4]>>,
 }
 
 /// The camera's uniform (shade.wgsl's bindings: 0 and this uniforms, 1..=22 and
@@ -107,6 +110,9 @@ struct RoomSize {
     cand: u64,
     nsamples: u64,
     npix: u64,
+    /// With the light-path passes: the words an item's splits take in `local` (its four
+    /// and two a shadow ray slot; shade.wgsl's `split_stride`), else 0.
+    split: u64,
 }
 
 impl RoomSize {
@@ -116,6 +122,7 @@ impl RoomSize {
             && self.cand >= o.cand
             && self.nsamples >= o.nsamples
             && self.npix >= o.npix
+            && self.split >= o.split
     }
 }
 
@@ -159,7 +166,10 @@ impl Room {
             cand,
             nsamples,
             npix,
+            split,
         } = size;
+        // The light-path passes' words after the beauty's (shade.wgsl `light_paths`).
+        let paths = u64::from(split > 0);
         let b = |what, bytes| dev.buffer(what, bytes, USAGE);
         let (sh_count, nx_count) = (
             b("the shadow ray counts", (cap + 1) * 4)?,
@@ -181,9 +191,9 @@ impl Room {
             size,
             rays: [b("the rays", cap * 48)?, b("the next rays", cap * 48)?],
             items: [b("the items", cap * 48)?, b("the next items", cap * 48)?],
-            radiance: b("the samples' radiance", nsamples * 16)?,
+            radiance: b("the samples' radiance", nsamples * (1 + 4 * paths) * 16)?,
             hits: b("the hits", cap * 16)?,
-            local: b("the items' light", cap * 16)?,
+            local: b("the items' light", cap * (1 + split) * 16)?,
             sh_cand: b("the shadow ray candidates", cand * 64)?,
             nx_cand_r: b("the next rays' candidates", cap * NEXT_SLOTS * 48)?,
             nx_cand_i: b("the next items' candidates", cap * NEXT_SLOTS * 48)?,
@@ -194,10 +204,10 @@ impl Room {
             sh_start,
             nx_start,
             sh_rays: b("the shadow rays", caps * 48)?,
-            sh_add: b("the shadow rays' light", caps * 16)?,
+            sh_add: b("the shadow rays' light", caps * (1 + 2 * paths) * 16)?,
             sh_hits: b("the shadow rays' hits", caps * 16)?,
             cam_hits: b("the camera rays' hits", nsamples * 16)?,
-            rgba: b("the pixels", npix * 16)?,
+            rgba: b("the pixels", npix * (1 + 4 * paths) * 16)?,
             templates,
             made,
             plan,
@@ -545,6 +555,7 @@ impl GpuShading {
         };
         let cam = dev.uniform(bytemuck::bytes_of(&CameraRays {
             cone: shading.cone,
+            light_paths: if shading.light_paths { 1.0 } else { 0.0 },
             ..*camera
         }));
         // The buffers of the last chunk when they are large enough (every one is written
@@ -555,6 +566,11 @@ impl GpuShading {
             cand: cap * slots,
             nsamples,
             npix,
+            split: if shading.light_paths {
+                4 + 2 * slots
+            } else {
+                0
+            },
         };
         let kept = self.room.lock().ok().and_then(|mut g| g.take());
         let room = match kept {
@@ -707,6 +723,8 @@ impl GpuShading {
         // workgroups.
         // Diffuse bounces go on past `--max-depth` (a bounce is not a secondary ray):
         // at most that many levels more.
+        // The light-path passes' words after the beauty's (shade.wgsl `light_paths`).
+        let paths = u64::from(shading.light_paths);
         let makes_rays = materials
             .iter()
             .any(|m| m.reflects != 0 || m.transmission != 0.0);
@@ -719,7 +737,7 @@ impl GpuShading {
             let (g, k) = (&bind[level % 2], level % 2);
             if level == 0 {
                 if picked.is_some() {
-                    enc.clear_buffer(radiance, 0, Some(nsamples * 16));
+                    enc.clear_buffer(radiance, 0, Some(nsamples * (1 + 4 * paths) * 16));
                 }
                 Self::dispatch(&mut enc, &self.camera_pipe, g, traced);
             }
@@ -751,6 +769,7 @@ impl GpuShading {
             p.a[2] = 1;
             p.d[3] = 1.0;
         }
+        p.a[3] = paths as u32;
         let uni = dev.uniform(bytemuck::bytes_of(&p));
         let mut bufs: Vec<Option<&wgpu::Buffer>> = vec![None; LAST as usize + 1];
         bufs[0] = Some(&uni);
@@ -758,7 +777,7 @@ impl GpuShading {
         bufs[22] = Some(rgba);
         let group = self.group(dev, &bufs);
         Self::dispatch(&mut enc, &self.pixels_pipe, &group, npix);
-        let b = dev.read_back(enc, rgba, npix * 16)?;
+        let b = dev.read_back(enc, rgba, npix * (1 + 4 * paths) * 16)?;
         let t = dev.read_back(
             dev.device.create_command_encoder(&Default::default()),
             &totals,
@@ -783,6 +802,8 @@ impl GpuShading {
             camera_hits: None,
             shadow_rays: u64::from(t[1]),
             secondary_rays: u64::from(t[2]),
+            passes: (paths == 1)
+                .then(|| bytemuck::pod_collect_to_vec(&b[npix as usize * 16..npix as usize * 80])),
         };
         if let Some(b) = hits_back {
             let raw: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(&b[..traced as usize * 16]);

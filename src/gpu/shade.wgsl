@@ -55,8 +55,9 @@ struct Ray {
 }
 
 struct Item {
-    // weight (RGB); the diffuse bounces made, + 256 for a diffuse bounce's own ray
-    // (small integers, exact as f32)
+    // weight (RGB); the diffuse bounces made, + 256 for a diffuse bounce's own ray, +
+    // 512 × the light path (0 none yet, else its pass + 1; `Item::path`) (a small
+    // integer, exact as f32)
     w: vec4<f32>,
     // sample, depth, the random numbers' seed (`sampling::Seed`, low and high words;
     // made only when a ray reads it: F.e.y)
@@ -164,7 +165,8 @@ struct Cam {
     b: vec4<u32>,
     // the chunk's first pixel, 1 for orthographic, the zero of `nc`
     c: vec4<u32>,
-    // the camera rays' cone: width, spread (`wavefront::primary_cone`)
+    // the camera rays' cone: width, spread (`wavefront::primary_cone`); 1 when the
+    // light-path passes are traced (`light_paths`)
     d: vec4<f32>,
 }
 
@@ -904,15 +906,52 @@ fn lobes(m: Mat, s: Surf) -> Lobes {
 fn brdf(m: Mat, l: Lobes, s: Surf, to: vec3<f32>) -> vec3<f32> {
     var b = l.kd * FRAC_1_PI;
     if m.shininess > 0.0 {
-        let h = nz(to + l.v);
-        let nh = max(dot(s.ns, h), 0.0);
-        var p = 0.0;
-        if nh > 0.0 {
-            p = pow(nh, m.shininess);
-        }
-        b = b + m.f0 * m.glint_scale * min(m.glint_norm * p, 1e3);
+        b = b + glint(m, l, s, to);
     }
     return b;
+}
+
+// `ShadeContext::glint`: the capped Blinn-Phong highlight (0 without one).
+fn glint(m: Mat, l: Lobes, s: Surf, to: vec3<f32>) -> vec3<f32> {
+    if m.shininess <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    let h = nz(to + l.v);
+    let nh = max(dot(s.ns, h), 0.0);
+    var p = 0.0;
+    if nh > 0.0 {
+        p = pow(nh, m.shininess);
+    }
+    return m.f0 * m.glint_scale * min(m.glint_norm * p, 1e3);
+}
+
+// The light-path passes (`--aov diffuse,specular,transmission,emission`): each item's
+// own terms split over the four (`BlockOut::add_split`) after the items' beauty terms
+// in `local` (from word F.g.y on, `split_stride()` a item: its four, then two a shadow
+// ray slot), each shadow ray's (`split_light`: the diffuse lobe's part and the
+// glint's, and the pass they go to) after the shadow rays' beauty in `sh_add` (from
+// F.g.z on, two a ray), each sample's four after the samples' beauty in `radiance`
+// (from F.b.z × F.b.w on), and each pixel's four after the pixels in `rgba`.
+fn light_paths() -> bool {
+    return C.d.z != 0.0;
+}
+
+fn split_stride() -> u32 {
+    return 4u + 2u * slots();
+}
+
+// Where item i's pass k goes in `local`, and its shadow ray slot j's two words.
+fn split_at(i: u32, k: u32) -> u32 {
+    return F.g.y + i * split_stride() + k;
+}
+
+// A pass's index from an item's path code at a term that goes to `fallback` at a camera
+// ray's hit (`item.path.unwrap_or(fallback)`).
+fn pass_of(path: u32, fallback: u32) -> u32 {
+    if path == 0u {
+        return fallback;
+    }
+    return path - 1u;
 }
 
 @compute @workgroup_size(64)
@@ -948,14 +987,20 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     var nnx = 0u;
     var cover = 0.0;
     // `Item::bounces` and `Item::diffuse`.
-    let bounces = u32(it.w.w) & 255u;
-    let diffuse = it.w.w >= 256.0;
+    // `Item::bounces`, `Item::diffuse` and `Item::path` (the code in `w.w`).
+    let code = u32(it.w.w);
+    let bounces = code & 255u;
+    let diffuse = (code & 256u) != 0u;
+    let path = code >> 9u;
+    // The item's own terms split over the passes (emission, ambient, background).
+    var split: array<vec3<f32>, 4>;
     if h.y == NONE {
         if F.e.w != 0.0 {
             add = weight * env_radiance(r.d.xyz);
         } else {
             add = weight * F.d.xyz;
         }
+        split[pass_of(path, 3u)] = add;
     } else if h.y < F.g.x {
         // The cone's width at the hit: width + spread × distance.
         let width = it.c.x + it.c.y * (bitcast<f32>(h.x) * length(r.d.xyz));
@@ -969,6 +1014,8 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             emitted = m.emission;
         }
         add = weight * (emitted + lb.kd * F.c.xyz);
+        split[pass_of(path, 3u)] = weight * emitted;
+        split[pass_of(path, 0u)] = split[pass_of(path, 0u)] + weight * (lb.kd * F.c.xyz);
         let ap = abs(s.point);
         let eps = 1e-4 * max(max3(ap), 1e-3 * F.c.w);
         let origin = s.point + s.ng * eps;
@@ -1024,6 +1071,13 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             sh.r = sr;
             sh.c = vec4<f32>(c, f32(li));
             sh_cand[i * slots() + nsh] = sh;
+            if light_paths() {
+                // `split_light` with the highlight: the diffuse lobe's part and the glint's.
+                let e = weight * irr * cos_i;
+                let at = split_at(i, 4u + 2u * nsh);
+                local[at] = vec4<f32>(e * (lb.kd * FRAC_1_PI), f32(path));
+                local[at + 1u] = vec4<f32>(e * glint(m, lb, s, to), 0.0);
+            }
             nsh = nsh + 1u;
         }
         // `area_light`: shadow rays to points on the emissive triangles (one batch after
@@ -1104,6 +1158,16 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 sh.r = make_ray(origin, to, 0.0, dist * (1.0 - 1e-3));
                 sh.c = vec4<f32>(c, f32(nl));
                 sh_cand[i * slots() + nsh] = sh;
+                if light_paths() {
+                    let e = weight * le * (cos_i * cos_l / (d2 * pdf_area * f32(n)));
+                    var g = vec3<f32>(0.0);
+                    if m.reflects == 0u {
+                        g = e * glint(m, lb, s, to);
+                    }
+                    let at = split_at(i, 4u + 2u * nsh);
+                    local[at] = vec4<f32>(e * (lb.kd * FRAC_1_PI), f32(path));
+                    local[at + 1u] = vec4<f32>(g, 0.0);
+                }
                 nsh = nsh + 1u;
             }
         }
@@ -1115,7 +1179,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let dir = sample_cosine(s.ns, seed_get(it.m.zw, 3u, 0u));
                 if dot(dir, s.ng) > 0.0 {
                     var b: Item;
-                    b.w = vec4<f32>(wb, f32(bounces + 1u + 256u));
+                    b.w = vec4<f32>(wb, f32(bounces + 1u + 256u + 512u * select(path, 1u, path == 0u)));
                     b.m = vec4<u32>(it.m.x, it.m.y + 1u, seed_child(it.m.zw, 3u));
                     // A diffuse lobe spreads over the hemisphere: the coarsest level.
                     b.c = vec4<f32>(width, 1.0, 0.0, 0.0);
@@ -1143,7 +1207,8 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                     t = refract_(s.dir, s.ng, lb.eta);
                 }
                 if t.w != 0.0 && dot(t.xyz, s.ng) < 0.0 {
-                    next.w = vec4<f32>(kt_w, f32(bounces));
+                    // At the camera ray's hit the event names the pass (transmission).
+                    next.w = vec4<f32>(kt_w, f32(bounces + 512u * select(path, 3u, path == 0u)));
                     nx_cand_r[i * 3u + nnx] = make_ray(s.point - s.ng * eps, t.xyz, 0.0, inf());
                     nx_cand_i[i * 3u + nnx] = next;
                     nnx = nnx + 1u;
@@ -1160,7 +1225,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if dot(rd, s.ng) <= 0.0 {
                     rd = reflect_(s.dir, s.ng);
                 }
-                next.w = vec4<f32>(kr_w, f32(bounces));
+                next.w = vec4<f32>(kr_w, f32(bounces + 512u * select(path, 2u, path == 0u)));
                 nx_cand_r[i * 3u + nnx] = make_ray(origin, rd, 0.0, inf());
                 nx_cand_i[i * 3u + nnx] = next;
                 nnx = nnx + 1u;
@@ -1174,7 +1239,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if cos_l > 0.0 && dot(rd, s.ng) > 0.0 {
                     let w = kr_w * smith_g1(cos_l, alpha);
                     if max3(w) > F.e.x {
-                        next.w = vec4<f32>(w, f32(bounces));
+                        next.w = vec4<f32>(w, f32(bounces + 512u * select(path, 2u, path == 0u)));
                         // The lobe's width widens the cone.
                         next.c = vec4<f32>(width, it.c.y + alpha, 0.0, 0.0);
                         nx_cand_r[i * 3u + nnx] = make_ray(origin, rd, 0.0, inf());
@@ -1188,11 +1253,23 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     // `BlockOut::add_split` keeps only nonzero, finite terms.
     if is_zero3(add) || !finite3(add) {
         add = vec3<f32>(0.0);
+        split = array<vec3<f32>, 4>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     }
     local[i] = vec4<f32>(add, 0.0);
+    if light_paths() {
+        for (var k = 0u; k < 4u; k = k + 1u) {
+            local[split_at(i, k)] = vec4<f32>(split[k], 0.0);
+        }
+    }
     if first {
         // Each sample's coverage (a camera ray that met an opaque surface).
         radiance[smp] = vec4<f32>(0.0, 0.0, 0.0, cover);
+        if light_paths() {
+            let base = F.b.z * F.b.w + smp * 4u;
+            for (var k = 0u; k < 4u; k = k + 1u) {
+                radiance[base + k] = vec4<f32>(0.0);
+            }
+        }
     }
     sh_count[i] = nsh;
     nx_count[i] = nnx;
@@ -1214,6 +1291,11 @@ fn compact(@builtin(global_invocation_id) gid: vec3<u32>) {
             let c = sh_cand[i * nl + k];
             sh_rays[a + k] = c.r;
             sh_add[a + k] = c.c;
+            if light_paths() {
+                let at = split_at(i, 4u + 2u * k);
+                sh_add[F.g.z + 2u * (a + k)] = local[at];
+                sh_add[F.g.z + 2u * (a + k) + 1u] = local[at + 1u];
+            }
         }
     }
     let b = nx_start[i];
@@ -1289,8 +1371,22 @@ fn accum(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let old = radiance[s];
     var acc = old.xyz;
+    // The passes: each a sum of its own terms in the same order (`paths[sample]`).
+    let lp = light_paths();
+    let pbase = F.b.z * F.b.w + s * 4u;
+    var pacc: array<vec3<f32>, 4>;
+    if lp {
+        for (var q = 0u; q < 4u; q = q + 1u) {
+            pacc[q] = radiance[pbase + q].xyz;
+        }
+    }
     for (var j = i; j < e; j = j + 1u) {
         acc = acc + local[j].xyz;
+        if lp {
+            for (var q = 0u; q < 4u; q = q + 1u) {
+                pacc[q] = pacc[q] + local[split_at(j, q)].xyz;
+            }
+        }
     }
     for (var l = 0u; l < batches(); l = l + 1u) {
         for (var j = i; j < e; j = j + 1u) {
@@ -1298,11 +1394,30 @@ fn accum(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let a = sh_add[k];
                 if u32(a.w) == l && sh_hits[k].y == NONE {
                     acc = acc + a.xyz;
+                    if lp {
+                        // `split_light`: at a camera ray's hit the diffuse lobe's part
+                        // is diffuse and the glint's specular (the other two add 0);
+                        // deeper, both go to the path's pass.
+                        let d = sh_add[F.g.z + 2u * k];
+                        let g = sh_add[F.g.z + 2u * k + 1u].xyz;
+                        let path = u32(d.w);
+                        if path == 0u {
+                            pacc[0] = pacc[0] + d.xyz;
+                            pacc[1] = pacc[1] + g;
+                        } else {
+                            pacc[path - 1u] = pacc[path - 1u] + (d.xyz + g);
+                        }
+                    }
                 }
             }
         }
     }
     radiance[s] = vec4<f32>(acc, old.w);
+    if lp {
+        for (var q = 0u; q < 4u; q = q + 1u) {
+            radiance[pbase + q] = vec4<f32>(pacc[q], 0.0);
+        }
+    }
 }
 
 // Each pixel's samples summed in order and averaged, as `trace_pass` does.
@@ -1326,6 +1441,17 @@ fn pixels(@builtin(global_invocation_id) gid: vec3<u32>) {
         rgba[p] = vec4<f32>(c * inv, a * inv);
     } else {
         rgba[p] = vec4<f32>(c * inv, min(a * inv, 1.0));
+    }
+    // The light-path passes (F.a.w 1), each averaged (or summed) as the beauty is.
+    if F.a.w != 0u {
+        let base = F.b.z * spp;
+        for (var q = 0u; q < 4u; q = q + 1u) {
+            var pc = vec3<f32>(0.0);
+            for (var s = p * spp; s < (p + 1u) * spp; s = s + 1u) {
+                pc = pc + radiance[base + s * 4u + q].xyz;
+            }
+            rgba[F.b.z + p * 4u + q] = vec4<f32>(pc * inv, 0.0);
+        }
     }
 }
 

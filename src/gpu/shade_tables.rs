@@ -186,7 +186,9 @@ pub struct CameraRays {
     /// The camera rays' cone (width, spread: the texture level of detail), set by
     /// `GpuShading::render_chunk` from `ShadeParams::cone`.
     pub cone: [f32; 2],
-    pub pad2: [u32; 2],
+    /// 1 when the light-path passes are traced (set from `ShadeParams::light_paths`).
+    pub light_paths: f32,
+    pub pad2: u32,
 }
 
 /// A frame's shading constants.
@@ -206,4 +208,6 @@ pub struct ShadeParams {
     pub diffuse_bounces: u32,
     /// The camera rays' cone (width, spread; the texture level of detail).
     pub cone: [f32; 2],
+    /// Trace the light-path passes (`--aov diffuse,specular,transmission,emission`).
+    pub light_paths: bool,
 }

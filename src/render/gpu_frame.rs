@@ -60,9 +60,6 @@ pub(super) fn outside_subset(
     moving_triangles: usize,
     max_binding: u64,
 ) -> Option<String> {
-    if opts.aovs.any_light_path() {
-        return Some("the light-path AOVs (--aov diffuse,specular,transmission,emission)".into());
-    }
     if let Some(env) = &opts.shading.environment {
         let bytes = (8 + 3 * env.texel_count() as u64) * 4;
         if bytes > max_binding {
@@ -466,7 +463,8 @@ pub(super) fn camera_rays(camera: &CameraModel, frame: u32, spp: u32, overscan: 
         zero: 0,
         pad: 0,
         cone: [0.0; 2],
-        pad2: [0; 2],
+        light_paths: 0.0,
+        pad2: 0,
     }
 }
 
@@ -521,6 +519,7 @@ pub(super) fn render_frame_gpu(
         light_samples: LIGHT_SAMPLES.div_ceil(spp.max(1) as u32),
         diffuse_bounces: ctx.options.diffuse_bounces,
         cone: [cone.width, cone.spread],
+        light_paths: fb.light_paths.is_some(),
     };
     // Uploaded once a render (the key names the file's bytes, turn and scale).
     let env = match &ctx.options.environment {
@@ -640,6 +639,26 @@ pub(super) fn render_frame_gpu(
                 }
             }
             Some(_) => {}
+        }
+        if let (Some(passes), Some(lp)) = (&out.passes, fb.light_paths.as_mut()) {
+            // Each pass averaged (or, for a step, summed and added) as the beauty is.
+            let add = match &picked {
+                None => Some(false),
+                Some(sel) if !sel.is_empty() => Some(true),
+                Some(_) => None,
+            };
+            if let Some(add) = add {
+                for (k, pass) in lp.passes.iter_mut().enumerate() {
+                    for (i, px) in pass[px0..px0 + npix].iter_mut().enumerate() {
+                        let c = passes[i * 4 + k];
+                        *px = if add {
+                            [px[0] + c[0], px[1] + c[1], px[2] + c[2]]
+                        } else {
+                            [c[0], c[1], c[2]]
+                        };
+                    }
+                }
+            }
         }
         if let (Some(hits), Some(sel), Some(names)) = (&out.camera_hits, &picked, crypto) {
             // A step's samples: their ids kept until every step has traced.
@@ -774,6 +793,7 @@ mod tests {
             light_samples: 8,
             diffuse_bounces: 0,
             cone: [0.0; 2],
+            light_paths: false,
         };
         // Every pixel on the cube's front face.
         let camera = CameraModel {
@@ -1107,7 +1127,8 @@ mod tests {
         assert_eq!(why(&plain, &blur), None);
         let mut paths = RenderOptions::default();
         paths.aovs.specular = true;
-        assert!(why(&plain, &paths).unwrap().contains("light-path"));
+        // The light-path passes are inside.
+        assert_eq!(why(&plain, &paths), None);
         let mut bounces = RenderOptions::default();
         bounces.shading.diffuse_bounces = 1;
         // Diffuse bounces are inside.
