@@ -24,7 +24,9 @@ use std::path::{Path, PathBuf};
 use common::build::{diffuse, mesh, perspective, placed, SceneBuilder};
 use common::exr_read::read_exr;
 use common::farm::{ok, s, stderr};
-use common::render_scene::{cube, files_under, quad, temp_dir, tumbling, write_scene};
+use common::render_scene::{
+    cube, files_under, quad, shaded_on_cpu, temp_dir, tumbling, write_scene,
+};
 use glam::Vec2;
 use glam::{Quat, Vec3, Vec4};
 use subfield::geometry::Ray;
@@ -915,6 +917,22 @@ fn gpu_frames_with_textures_agree_with_the_cpu() {
     let glossy = write(&glossy_dir, &glossy);
     let a = ["--frames", "0", "--spp", "2", "--max-depth", "2"];
     agree(&dir, &glossy, "textured-glossy", &a);
+    // Materials' own ambient colours (AFF) under the scene's ambient light: the tiled
+    // floor's and the wall's times their base colour textures, the metal's alone.
+    let mut aff = textured_scene();
+    aff.ambient = Some(Vec3::new(0.5, 0.4, 0.3));
+    for m in &mut aff.materials {
+        m.ambient = match m.name.as_deref() {
+            Some("floor") => Some(Vec3::new(0.2, 0.6, 0.9)),
+            Some("wall") => Some(Vec3::new(0.9, 0.3, 0.2)),
+            Some("patchy metal") => Some(Vec3::new(0.1, 0.8, 0.1)),
+            _ => m.ambient,
+        };
+    }
+    let aff_dir = dir.join("aff");
+    std::fs::create_dir_all(&aff_dir).unwrap();
+    let aff = write(&aff_dir, &aff);
+    agree(&dir, &aff, "textured-aff", &a);
 }
 
 /// Motion blur on the GPU: each time step traces its own samples (the CPU's choice,
@@ -1018,7 +1036,8 @@ fn light_path_passes_agree_with_the_cpu() {
     agree(&dir, &lamp, "paths-lamp", &[&b[..], &passes[..]].concat());
 }
 
-/// A scene outside the subset (alpha below 1) traces on the GPU and shades on the
+/// A scene outside the subset (an emissive texture on an area light) traces on the GPU
+/// and shades on the
 /// CPU: its frames are the CPU's to the bit, and the log says why.
 #[test]
 fn outside_the_subset_falls_back_and_says_why() {
@@ -1026,21 +1045,14 @@ fn outside_the_subset_falls_back_and_says_why() {
         return;
     }
     let dir = temp_dir("gpu-frames-fallback");
-    let mut veiled = subset_scene();
-    veiled.materials.push(Material {
-        name: Some("veil".into()),
-        base_color: Vec4::new(1.0, 1.0, 1.0, 0.5),
-        alpha_mode: subfield::scene::AlphaMode::Blend,
-        ..Material::default()
-    });
-    let scene = write(&dir, &veiled);
+    let scene = write(&dir, &shaded_on_cpu(subset_scene()));
     let a = ["--frames", "2", "--spp", "1"];
     render(&scene, &dir, "cpu", "cpu", &a);
     let log = render(&scene, &dir, "gpu", "gpu", &a);
     assert!(
         log.contains(
             "note: shading on the CPU, tracing on the GPU: the GPU frame path does not take \
-             material 'veil': alpha below 1 (pass-through)"
+             material 'textured lamp': an emissive texture on an area light"
         ),
         "stderr: {log}"
     );

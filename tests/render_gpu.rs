@@ -13,8 +13,7 @@ use std::process::Command;
 
 use common::exr_read::read_exr;
 use common::farm::{ok, s};
-use common::render_scene::{files_under, scene, temp_dir, write_scene};
-use subfield::scene::{AlphaMode, Material};
+use common::render_scene::{files_under, scene, shaded_on_cpu, temp_dir, write_scene};
 
 fn contains(hay: &[u8], needle: &str) -> bool {
     hay.windows(needle.len()).any(|w| w == needle.as_bytes())
@@ -40,18 +39,11 @@ fn render_on(dir: &Path, scene: &Path, device: &str, folder: &str, extra: &[&str
     ok(&args);
 }
 
-/// The test scene with one more material, unused, that keeps it off the GPU frame path
-/// (alpha below 1: shading on the CPU, tracing on the GPU), as `dir/veiled.glb`.
+/// The test scene kept off the GPU frame path (`shaded_on_cpu`: shading on the CPU,
+/// tracing on the GPU), as `dir/cpu-shaded.glb`.
 fn write_scene_shaded_on_cpu(dir: &Path) -> std::path::PathBuf {
-    let mut sc = scene();
-    sc.materials.push(Material {
-        name: Some("veil".into()),
-        base_color: glam::Vec4::new(1.0, 1.0, 1.0, 0.5),
-        alpha_mode: AlphaMode::Blend,
-        ..Material::default()
-    });
-    let p = dir.join("veiled.glb");
-    subfield::import::write_gltf(&sc, &p).unwrap();
+    let p = dir.join("cpu-shaded.glb");
+    subfield::import::write_gltf(&shaded_on_cpu(scene()), &p).unwrap();
     p
 }
 
@@ -121,8 +113,8 @@ fn gpu_frames_equal_cpu_frames() {
     }
 }
 
-/// The rest of the shading model with tracing on the GPU (an unused translucent material
-/// keeps the scene off the GPU frame path: shading on the CPU): motion blur, the light-path passes
+/// The rest of the shading model with tracing on the GPU (an unused material keeps the
+/// scene off the GPU frame path: shading on the CPU): motion blur, the light-path passes
 /// and Cryptomatte, diffuse bounces, an environment map, overscan and exposure, glossy
 /// sampling with several samples a pixel. The frames are the CPU's to the bit.
 #[test]

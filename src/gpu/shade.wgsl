@@ -95,6 +95,9 @@ struct Mat {
     tex: vec4<u32>,
     factors: vec4<f32>,
     xf: array<vec4<f32>, 8>,
+    // The material's own ambient colour (AFF; w 1 when it has one), which the ambient
+    // light is reflected with instead of the diffuse colour.
+    aff: vec4<f32>,
 }
 
 // frame.rs `ShadeLight`.
@@ -1013,9 +1016,18 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (s.entering || m.double_sided != 0u) && !diffuse {
             emitted = m.emission;
         }
-        add = weight * (emitted + lb.kd * F.c.xyz);
+        // The ambient light is reflected with the diffuse colour, or with the material's
+        // own ambient colour (AFF) times its base colour texture.
+        var ambient = lb.kd;
+        if m.aff.w != 0.0 {
+            ambient = m.aff.xyz;
+            if m.tex.x != NONE {
+                ambient = ambient * tex_at(s.mat, 0u, s.uv, s.lod).xyz;
+            }
+        }
+        add = weight * (emitted + ambient * F.c.xyz);
         split[pass_of(path, 3u)] = weight * emitted;
-        split[pass_of(path, 0u)] = split[pass_of(path, 0u)] + weight * (lb.kd * F.c.xyz);
+        split[pass_of(path, 0u)] = split[pass_of(path, 0u)] + weight * (ambient * F.c.xyz);
         let ap = abs(s.point);
         let eps = 1e-4 * max(max3(ap), 1e-3 * F.c.w);
         let origin = s.point + s.ng * eps;

@@ -82,6 +82,8 @@ pub struct ShadeMaterial {
     /// Each slot's `KHR_texture_transform`: scale (x, y), sin and cos of the rotation;
     /// offset (x, y), 1 when there is one, 0.
     pub transform: [[f32; 4]; 8],
+    /// The material's own ambient colour (AFF) and 1, or zeros without one.
+    pub aff: [f32; 4],
 }
 
 /// The textures of a frame path's render, uploaded once (`GpuShading::new_textured`):

@@ -106,9 +106,6 @@ pub(super) fn outside_subset(
 /// below 1 somewhere (with `MASK` or `BLEND`), a metallic-roughness texture that could
 /// make a roughness of the glossy range.
 fn material_outside(scene: &Scene, m: &Material) -> Option<&'static str> {
-    if m.ambient.is_some() {
-        return Some("its own ambient colour (AFF)");
-    }
     let opaque = match m.alpha_mode {
         AlphaMode::Opaque => true,
         AlphaMode::Mask { cutoff } => m.base_color.w >= cutoff,
@@ -352,6 +349,7 @@ fn materials(scene: &Scene) -> Vec<ShadeMaterial> {
                     },
                 ],
                 transform,
+                aff: m.ambient.map_or([0.0; 4], |a| a.extend(1.0).to_array()),
             }
         })
         .collect()
@@ -1060,13 +1058,6 @@ mod tests {
             ),
             (
                 scene_with(Material {
-                    ambient: Some(Vec3::ONE),
-                    ..Material::default()
-                }),
-                "ambient colour",
-            ),
-            (
-                scene_with(Material {
                     alpha_mode: AlphaMode::Blend,
                     base_color: glam::Vec4::new(1.0, 1.0, 1.0, 0.5),
                     ..Material::default()
@@ -1078,6 +1069,13 @@ mod tests {
             let w = why(&scene, &opts).unwrap_or_default();
             assert!(w.contains(said) && w.contains("material 0"), "{said}: {w}");
         }
+        // A material's own ambient colour is inside.
+        let aff = scene_with(Material {
+            ambient: Some(Vec3::ONE),
+            ..Material::default()
+        });
+        assert_eq!(why(&aff, &opts), None);
+        assert_eq!(materials(&aff)[0].aff, [1.0; 4]);
         // Glossy (GGX) reflection is inside: its numbers come from the items' seeds.
         let glossy = Material {
             roughness: 0.2,

@@ -276,3 +276,36 @@ pub fn files_under(dir: &Path) -> Vec<PathBuf> {
     out.sort();
     out
 }
+
+/// `scene` with one more material, unused, that keeps it off the GPU frame path: an
+/// emissive texture on an emitting material (an area light's samples read its emission
+/// constant on the GPU), so `--device gpu` traces on the GPU and shades on the CPU, its
+/// frames the CPU's to the bit; the log names material 'textured lamp'.
+#[allow(dead_code)]
+pub fn shaded_on_cpu(mut scene: Scene) -> Scene {
+    let image = scene.images.len() as u32;
+    scene.images.push(subfield::scene::Image {
+        name: None,
+        width: 2,
+        height: 2,
+        rgba8: vec![255; 16],
+    });
+    let texture = scene.textures.len() as u32;
+    scene.textures.push(subfield::scene::Texture {
+        image,
+        wrap_s: subfield::scene::Wrap::Repeat,
+        wrap_t: subfield::scene::Wrap::Repeat,
+        nearest: false,
+    });
+    scene.materials.push(Material {
+        name: Some("textured lamp".into()),
+        emissive: Vec3::ONE,
+        emissive_texture: Some(subfield::scene::TextureRef {
+            texture,
+            tex_coord: 0,
+            transform: None,
+        }),
+        ..Material::default()
+    });
+    scene
+}
