@@ -14,7 +14,7 @@ use std::process::Command;
 use common::exr_read::read_exr;
 use common::farm::{ok, s};
 use common::render_scene::{files_under, scene, temp_dir, write_scene};
-use subfield::scene::{AlphaMode, Material};
+use subfield::scene::Material;
 
 fn contains(hay: &[u8], needle: &str) -> bool {
     hay.windows(needle.len()).any(|w| w == needle.as_bytes())
@@ -41,16 +41,16 @@ fn render_on(dir: &Path, scene: &Path, device: &str, folder: &str, extra: &[&str
 }
 
 /// The test scene with one more material, unused, that keeps it off the GPU frame path
-/// (alpha below 1: shading on the CPU, tracing on the GPU), as `dir/veiled.glb`.
+/// (its own ambient colour: shading on the CPU, tracing on the GPU), as
+/// `dir/tinted.glb`.
 fn write_scene_shaded_on_cpu(dir: &Path) -> std::path::PathBuf {
     let mut sc = scene();
     sc.materials.push(Material {
-        name: Some("veil".into()),
-        base_color: glam::Vec4::new(1.0, 1.0, 1.0, 0.5),
-        alpha_mode: AlphaMode::Blend,
+        name: Some("tint".into()),
+        ambient: Some(glam::Vec3::new(0.2, 0.3, 0.4)),
         ..Material::default()
     });
-    let p = dir.join("veiled.glb");
+    let p = dir.join("tinted.glb");
     subfield::import::write_gltf(&sc, &p).unwrap();
     p
 }

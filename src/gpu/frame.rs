@@ -66,9 +66,12 @@ const CAMERA: u32 = 23;
 const LAST: u32 = 30;
 // Every binding but the two uniforms is storage: what the device is opened for.
 const _: () = assert!(LAST + 1 - 2 == super::device::FRAME_BINDINGS);
-/// Next-level ray candidates an item may make: a diffuse bounce, a refraction, a
-/// reflection.
-const NEXT_SLOTS: u64 = 3;
+/// Next-level ray candidates an item may make: a pass-through, a diffuse bounce, a
+/// refraction, a reflection (shade.wgsl's `NEXT_SLOTS`).
+const NEXT_SLOTS: u64 = 4;
+/// Passes through surfaces of alpha below 1 a ray may make (`render::shade`'s
+/// `MAX_PASSES`, shade.wgsl's; a test in `render::gpu_frame` holds them equal).
+pub const MAX_PASSES: u32 = 16;
 
 /// The frame path's kernels and the static triangles' surfaces (uploaded once).
 pub struct GpuShading {
@@ -692,8 +695,16 @@ impl GpuShading {
         let makes_rays = materials
             .iter()
             .any(|m| m.reflects != 0 || m.transmission != 0.0);
-        let deepest =
-            if makes_rays { shading.max_depth } else { 0 }.saturating_add(shading.diffuse_bounces);
+        // A pass-through ray keeps its depth: up to `MAX_PASSES` levels more where a
+        // material may pass rays through (alpha below 1).
+        let passes = if materials.iter().any(|m| m.alpha[3] != 0.0) {
+            MAX_PASSES
+        } else {
+            0
+        };
+        let deepest = if makes_rays { shading.max_depth } else { 0 }
+            .saturating_add(shading.diffuse_bounces)
+            .saturating_add(passes);
         // Word offsets in `made`: this file's uniform, the closest hits', the any
         // hits', then the workgroups (items, closest, any).
         let (w_f, w_tc, w_ta, w_args) = (0u64, 28u64, 68u64, 108u64);

@@ -62,7 +62,9 @@ struct Item {
     // made only when a ray reads it: F.e.y)
     m: vec4<u32>,
     // the ray cone's width where the ray starts and its spread (the texture level of
-    // detail)
+    // detail); the share of the sample's coverage the ray decides (`Item::coverage`:
+    // 1 for a camera ray, the (1 - alpha) products for its pass-through rays, 0 for
+    // others) and the passes made through surfaces of alpha below 1 (a small integer)
     c: vec4<f32>,
 }
 
@@ -94,6 +96,10 @@ struct Mat {
     tex: vec4<u32>,
     factors: vec4<f32>,
     xf: array<vec4<f32>, 8>,
+    // The base colour's alpha (the factor's; `textured` multiplies the texture's in),
+    // the MASK cutoff, the mode (0 OPAQUE, 1 MASK, 2 BLEND), 1 when a hit may pass rays
+    // through (for the host).
+    alpha: vec4<f32>,
 }
 
 // frame.rs `ShadeLight`.
@@ -195,7 +201,11 @@ const NONE: u32 = 0xffffffffu;
 const GLOSSY_LIMIT: f32 = 0.4;
 const MIRROR_ALPHA: f32 = 0.001;
 const MAX_SHININESS: f32 = 256.0;
+const MAX_PASSES: f32 = 16.0;
 const FRAC_1_PI: f32 = 0.31830988618379067;
+// Next-level ray slots an item has: a pass-through, a diffuse bounce, a refraction, a
+// reflection (frame.rs `NEXT_SLOTS`).
+const NEXT_SLOTS: u32 = 4u;
 const PI: f32 = 3.14159265358979323846;
 
 fn inf() -> f32 {
@@ -718,7 +728,10 @@ fn textured(mi: u32, s: Surf) -> Mat {
         return m;
     }
     if m.tex.x != NONE {
-        m.albedo = m.albedo * tex_at(mi, 0u, s.uv, s.lod).xyz;
+        // `base_color`: factor × texture, alpha too.
+        let t = tex_at(mi, 0u, s.uv, s.lod);
+        m.albedo = m.albedo * t.xyz;
+        m.alpha.x = m.alpha.x * t.w;
     }
     if m.tex.y != NONE {
         let t = tex_at(mi, 1u, s.uv, s.lod);
@@ -741,6 +754,17 @@ fn textured(mi: u32, s: Surf) -> Mat {
         m.emission = m.emission * tex_at(mi, 2u, s.uv, s.lod).xyz;
     }
     return m;
+}
+
+// `alpha_of`: the coverage of material `m` (as `textured` made it) at the hit.
+fn alpha_of(m: Mat) -> f32 {
+    if m.alpha.z == 1.0 {
+        return select(0.0, 1.0, m.alpha.x >= m.alpha.y);
+    }
+    if m.alpha.z == 2.0 {
+        return clamp(m.alpha.x, 0.0, 1.0);
+    }
+    return 1.0;
 }
 
 fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
@@ -935,12 +959,12 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             it.m = vec4<u32>(i, 0u, seed_camera(camera_sample(i)));
         }
         // The camera ray's cone (`wavefront::primary_cone`).
-        it.c = vec4<f32>(C.d.x, C.d.y, 0.0, 0.0);
+        it.c = vec4<f32>(C.d.x, C.d.y, 1.0, 0.0);
     } else {
         it = items[i];
     }
     let h = hits[i];
-    let weight = it.w.xyz;
+    var weight = it.w.xyz;
     var add = vec3<f32>(0.0);
     var nsh = 0u;
     var nnx = 0u;
@@ -958,8 +982,35 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         // The cone's width at the hit: width + spread × distance.
         let width = it.c.x + it.c.y * (bitcast<f32>(h.x) * length(r.d.xyz));
         let s = surface(r, h, width);
-        cover = 1.0;
         let m = textured(s.mat, s);
+        let alpha = alpha_of(m);
+        let ap = abs(s.point);
+        let eps = 1e-4 * max(max3(ap), 1e-3 * F.c.w);
+        // `pass_through`: on through the surface, same direction, same depth, the cone
+        // at the hit, weight and coverage × (1 - alpha).
+        if alpha < 1.0 && it.c.w < MAX_PASSES {
+            let wp = weight * (1.0 - alpha);
+            if max3(wp) > F.e.x || it.c.z > 0.0 {
+                var p: Item;
+                p.w = vec4<f32>(wp, it.w.w);
+                p.m = it.m;
+                if random {
+                    p.m = vec4<u32>(it.m.x, it.m.y, seed_child(it.m.zw, 2u));
+                }
+                p.c = vec4<f32>(width, it.c.y, it.c.z * (1.0 - alpha), it.c.w + 1.0);
+                nx_cand_r[i * NEXT_SLOTS + nnx] = make_ray(s.point - s.ng * eps, s.dir, 0.0, inf());
+                nx_cand_i[i * NEXT_SLOTS + nnx] = p;
+                nnx = nnx + 1u;
+            }
+        }
+        if alpha <= 0.0 {
+            finish(i, first, vec3<f32>(0.0), 0.0, 0u, nnx);
+            return;
+        }
+        // `BlockOut::cover` keeps positive terms only.
+        let c = it.c.z * alpha;
+        cover = select(0.0, c, c > 0.0);
+        weight = weight * alpha;
         let lb = lobes(m, s);
         var emitted = vec3<f32>(0.0);
         // A diffuse bounce's ray adds no emission (next-event estimation lit it).
@@ -967,8 +1018,6 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             emitted = m.emission;
         }
         add = weight * (emitted + lb.kd * F.c.xyz);
-        let ap = abs(s.point);
-        let eps = 1e-4 * max(max3(ap), 1e-3 * F.c.w);
         let origin = s.point + s.ng * eps;
         // Direct light: a shadow ray a light that lights the point, in table order.
         for (var li = 0u; li < nl; li = li + 1u) {
@@ -1116,9 +1165,9 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                     b.w = vec4<f32>(wb, f32(bounces + 1u + 256u));
                     b.m = vec4<u32>(it.m.x, it.m.y + 1u, seed_child(it.m.zw, 3u));
                     // A diffuse lobe spreads over the hemisphere: the coarsest level.
-                    b.c = vec4<f32>(width, 1.0, 0.0, 0.0);
-                    nx_cand_r[i * 3u + nnx] = make_ray(origin, dir, 0.0, inf());
-                    nx_cand_i[i * 3u + nnx] = b;
+                    b.c = vec4<f32>(width, 1.0, 0.0, it.c.w);
+                    nx_cand_r[i * NEXT_SLOTS + nnx] = make_ray(origin, dir, 0.0, inf());
+                    nx_cand_i[i * NEXT_SLOTS + nnx] = b;
                     nnx = nnx + 1u;
                 }
             }
@@ -1131,7 +1180,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             let seed = it.m.zw;
             next.m = vec4<u32>(it.m.x, it.m.y + 1u, 0u, 0u);
             // The cone goes on from its width at the hit, with its spread.
-            next.c = vec4<f32>(width, it.c.y, 0.0, 0.0);
+            next.c = vec4<f32>(width, it.c.y, 0.0, it.c.w);
             if max3(kt_w) > F.e.x {
                 if random {
                     next.m = vec4<u32>(it.m.x, it.m.y + 1u, seed_child(seed, 1u));
@@ -1142,8 +1191,8 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
                 if t.w != 0.0 && dot(t.xyz, s.ng) < 0.0 {
                     next.w = vec4<f32>(kt_w, f32(bounces));
-                    nx_cand_r[i * 3u + nnx] = make_ray(s.point - s.ng * eps, t.xyz, 0.0, inf());
-                    nx_cand_i[i * 3u + nnx] = next;
+                    nx_cand_r[i * NEXT_SLOTS + nnx] = make_ray(s.point - s.ng * eps, t.xyz, 0.0, inf());
+                    nx_cand_i[i * NEXT_SLOTS + nnx] = next;
                     nnx = nnx + 1u;
                 } else {
                     kr = kr + lb.kt;
@@ -1159,8 +1208,8 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                     rd = reflect_(s.dir, s.ng);
                 }
                 next.w = vec4<f32>(kr_w, f32(bounces));
-                nx_cand_r[i * 3u + nnx] = make_ray(origin, rd, 0.0, inf());
-                nx_cand_i[i * 3u + nnx] = next;
+                nx_cand_r[i * NEXT_SLOTS + nnx] = make_ray(origin, rd, 0.0, inf());
+                nx_cand_i[i * NEXT_SLOTS + nnx] = next;
                 nnx = nnx + 1u;
             } else if max3(kr_w) > F.e.x && m.reflects == 2u {
                 // One direction from the visible normals: the weight is F · G1(l)
@@ -1174,23 +1223,29 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                     if max3(w) > F.e.x {
                         next.w = vec4<f32>(w, f32(bounces));
                         // The lobe's width widens the cone.
-                        next.c = vec4<f32>(width, it.c.y + alpha, 0.0, 0.0);
-                        nx_cand_r[i * 3u + nnx] = make_ray(origin, rd, 0.0, inf());
-                        nx_cand_i[i * 3u + nnx] = next;
+                        next.c = vec4<f32>(width, it.c.y + alpha, 0.0, it.c.w);
+                        nx_cand_r[i * NEXT_SLOTS + nnx] = make_ray(origin, rd, 0.0, inf());
+                        nx_cand_i[i * NEXT_SLOTS + nnx] = next;
                         nnx = nnx + 1u;
                     }
                 }
             }
         }
     }
+    finish(i, first, add, cover, nsh, nnx);
+}
+
+// What item `i` hands on: its own light and coverage (`accum` adds them), its counts.
+fn finish(i: u32, first: bool, add_in: vec3<f32>, cover: f32, nsh: u32, nnx: u32) {
+    var add = add_in;
     // `BlockOut::add_split` keeps only nonzero, finite terms.
     if is_zero3(add) || !finite3(add) {
         add = vec3<f32>(0.0);
     }
-    local[i] = vec4<f32>(add, 0.0);
+    local[i] = vec4<f32>(add, cover);
     if first {
-        // Each sample's coverage (a camera ray that met an opaque surface).
-        radiance[i] = vec4<f32>(0.0, 0.0, 0.0, cover);
+        // Each sample's sums start at 0 (at the camera rays' level item i is sample i).
+        radiance[i] = vec4<f32>(0.0);
     }
     sh_count[i] = nsh;
     nx_count[i] = nnx;
@@ -1217,8 +1272,8 @@ fn compact(@builtin(global_invocation_id) gid: vec3<u32>) {
     let b = nx_start[i];
     for (var k = 0u; k < nx_count[i]; k = k + 1u) {
         if b + k < F.g.y {
-            nx_rays[b + k] = nx_cand_r[i * 3u + k];
-            nx_items[b + k] = nx_cand_i[i * 3u + k];
+            nx_rays[b + k] = nx_cand_r[i * NEXT_SLOTS + k];
+            nx_items[b + k] = nx_cand_i[i * NEXT_SLOTS + k];
         }
     }
 }
@@ -1287,8 +1342,12 @@ fn accum(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let old = radiance[s];
     var acc = old.xyz;
+    // The coverage terms in item order, as `coverage[sample]` sums `BlockOut::cover`'s
+    // (a zero term adds nothing: the CPU pushes none).
+    var cov = old.w;
     for (var j = i; j < e; j = j + 1u) {
         acc = acc + local[j].xyz;
+        cov = cov + local[j].w;
     }
     for (var l = 0u; l < batches(); l = l + 1u) {
         for (var j = i; j < e; j = j + 1u) {
@@ -1300,7 +1359,7 @@ fn accum(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
-    radiance[s] = vec4<f32>(acc, old.w);
+    radiance[s] = vec4<f32>(acc, cov);
 }
 
 // Each pixel's samples summed in order and averaged, as `trace_pass` does.

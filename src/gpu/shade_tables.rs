@@ -82,6 +82,10 @@ pub struct ShadeMaterial {
     /// Each slot's `KHR_texture_transform`: scale (x, y), sin and cos of the rotation;
     /// offset (x, y), 1 when there is one, 0.
     pub transform: [[f32; 4]; 8],
+    /// Coverage (`alpha_of`): the base colour factor's alpha, the `MASK` cutoff, the
+    /// mode (0 `OPAQUE`, 1 `MASK`, 2 `BLEND`), 1 when a hit may pass rays through
+    /// (alpha below 1 somewhere: the host encodes the levels for it).
+    pub alpha: [f32; 4],
 }
 
 /// The textures of a frame path's render, uploaded once (`GpuShading::new_textured`):
