@@ -656,8 +656,8 @@ fn alpha_scene() -> Scene {
         quad(Vec3::new(-1.2, 0.7, 0.5), x * 0.5, y * 0.5, mask_off),
         quad(Vec3::new(2.2, 0.9, 0.5), x * 0.7, y * 0.7, mask_tex),
         quad(Vec3::new(-1.5, 2.3, -1.8), x * 0.8, y * 0.6, mask_fine),
-        quad(Vec3::new(1.0, 0.5, 1.5), x * 0.4, y * 0.4, blue),
-        quad(Vec3::new(1.3, 0.7, 1.2), x * 0.4, y * 0.4, yellow),
+        quad(Vec3::new(-2.6, 2.4, 0.0), x * 0.4, y * 0.4, blue),
+        quad(Vec3::new(-2.3, 2.6, -0.3), x * 0.4, y * 0.4, yellow),
     ];
     for k in 0..18 {
         let z = 2.6 - 0.04 * k as f32;
