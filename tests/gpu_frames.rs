@@ -585,7 +585,8 @@ fn environment_and_bounces_agree_with_the_cpu() {
 /// front of a mirror (a pass-through ray meets the mirror, the mirror's ray the window
 /// again from behind), `MASK` quads of constant alpha above and below the cutoff and
 /// one whose base colour texture's alpha crosses it (texels of alpha 0 to 252, a
-/// magnified and a minified copy), two overlapping `BLEND` quads (two passes) and a
+/// magnified and a minified copy), a `BLEND` quad of that texture's alpha over the
+/// background, two overlapping `BLEND` quads (two passes) and a
 /// stack of 18 `BLEND` quads of alpha 0.3 (more than `MAX_PASSES`, 16: the rest of the
 /// coverage is lost at the 17th), over a floor, under a point and a directional light.
 fn alpha_scene() -> Scene {
@@ -634,6 +635,11 @@ fn alpha_scene() -> Scene {
         ),
         ..mask("mask fine", Vec4::new(1.0, 1.0, 1.0, 1.0))
     });
+    let blend_tex = b.add_material(Material {
+        alpha_mode: AlphaMode::Blend,
+        base_color_texture: slot(t_holes, None),
+        ..diffuse("blend texture", Vec4::new(1.0, 0.9, 0.8, 1.0), 0.6)
+    });
     let blue = b.add_material(Material {
         alpha_mode: AlphaMode::Blend,
         ..diffuse("blue glass", Vec4::new(0.2, 0.3, 0.9, 0.5), 0.7)
@@ -656,6 +662,7 @@ fn alpha_scene() -> Scene {
         quad(Vec3::new(-1.2, 0.7, 0.5), x * 0.5, y * 0.5, mask_off),
         quad(Vec3::new(2.2, 0.9, 0.5), x * 0.7, y * 0.7, mask_tex),
         quad(Vec3::new(-1.5, 2.3, -1.8), x * 0.8, y * 0.6, mask_fine),
+        quad(Vec3::new(2.8, 2.8, -1.0), x * 0.6, y * 0.6, blend_tex),
         quad(Vec3::new(-2.6, 2.4, 0.0), x * 0.4, y * 0.4, blue),
         quad(Vec3::new(-2.3, 2.6, -0.3), x * 0.4, y * 0.4, yellow),
     ];

@@ -2,9 +2,9 @@
 // shadow and next-level rays compacted in the CPU's order, its light summed into the
 // samples in the CPU's order, and the pixels averaged. The shading is
 // `render::shade::ShadeContext::shade` restricted to the subset `render::gpu_frame`
-// admits (opaque materials, textured or not; a mirror, GGX or no reflection ray;
-// punctual and area lights; a background or environment map; diffuse bounces), step
-// for step; the random numbers are the CPU's (`sampling::Seed`, carried by each item);
+// admits (materials textured or not, alpha below 1 passing rays through; a mirror, GGX
+// or no reflection ray; punctual and area lights; a background or environment map;
+// diffuse bounces), step for step; the random numbers are the CPU's (`sampling::Seed`, carried by each item);
 // what depends on the material alone (F0, the Blinn-Phong exponent and its
 // normalisation, 1/ior, the spot's cone cosines) comes computed by the CPU's own code in
 // the tables, and `textured` recomputes per hit what a texture changes.

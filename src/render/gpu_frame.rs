@@ -140,8 +140,16 @@ fn passes_through(scene: &Scene, m: &Material) -> bool {
         .is_some_and(|(lo, _)| lo < 255);
     match m.alpha_mode {
         AlphaMode::Opaque => false,
-        AlphaMode::Mask { cutoff } => texture || !(m.base_color.w >= cutoff),
-        AlphaMode::Blend => texture || !(m.base_color.w.clamp(0.0, 1.0) >= 1.0),
+        // `alpha_of`: 0 unless the factor reaches the cutoff (a NaN does not).
+        AlphaMode::Mask { cutoff } => {
+            texture
+                || m.base_color
+                    .w
+                    .partial_cmp(&cutoff)
+                    .is_none_or(std::cmp::Ordering::is_lt)
+        }
+        // The factor clamped to [0, 1] (a NaN stays one, and passes nothing through).
+        AlphaMode::Blend => texture || m.base_color.w < 1.0,
     }
 }
 
@@ -1046,7 +1054,12 @@ mod tests {
         ];
         for (scene, table) in alpha {
             assert_eq!(why(&scene, &opts), None, "{:?}", scene.materials[0]);
-            assert_eq!(materials(&scene)[0].alpha, table, "{:?}", scene.materials[0]);
+            assert_eq!(
+                materials(&scene)[0].alpha,
+                table,
+                "{:?}",
+                scene.materials[0]
+            );
         }
         let outside = [
             (
