@@ -69,9 +69,12 @@ const CAMERA: u32 = 23;
 const LAST: u32 = 30;
 // Every binding but the two uniforms is storage: what the device is opened for.
 const _: () = assert!(LAST + 1 - 2 == super::device::FRAME_BINDINGS);
-/// Next-level ray candidates an item may make: a diffuse bounce, a refraction, a
-/// reflection.
-const NEXT_SLOTS: u64 = 3;
+/// Next-level ray candidates an item may make: a pass-through, a diffuse bounce, a
+/// refraction, a reflection (shade.wgsl's `NEXT_SLOTS`).
+const NEXT_SLOTS: u64 = 4;
+/// Passes through surfaces of alpha below 1 a ray may make (`render::shade`'s
+/// `MAX_PASSES`, shade.wgsl's; a test in `render::gpu_frame` holds them equal).
+pub const MAX_PASSES: u32 = 16;
 
 /// The frame path's kernels and the static triangles' surfaces (uploaded once).
 pub struct GpuShading {
@@ -473,14 +476,22 @@ impl GpuShading {
         Ok(bytemuck::pod_collect_to_vec(&bytes[..rays.len() * 48]))
     }
 
-    /// The most items a level can hold with `lights` lights: what one binding and a
-    /// budget of 256 MiB for a chunk's buffers allow (the frame path's buffers take
-    /// some 560 + 144 · slots bytes an item, `slots` the shadow rays an item may make:
-    /// the punctual lights, and the area-light samples at a camera ray's hit).
-    pub fn max_capacity(dev: &GpuDevice, slots: usize) -> u64 {
+    /// The most items a level can hold: what one binding and a budget of 256 MiB for a
+    /// chunk's buffers allow. The frame path's buffers take some 656 + 144 · slots
+    /// bytes an item, `slots` the shadow rays an item may make (the punctual lights,
+    /// and the area-light samples at a camera ray's hit), and with the light-path
+    /// passes (`paths`) 192 + 96 · slots more (the items' splits, the shadow rays',
+    /// the samples').
+    pub fn max_capacity(dev: &GpuDevice, slots: usize, paths: bool) -> u64 {
         let l = slots as u64;
-        let per_binding = dev.max_binding() / (64 * l).max(96);
-        let budget = (256u64 << 20) / (560 + 144 * l);
+        let p = u64::from(paths);
+        // The largest binding per item: the shadow candidates, the next rays', or the
+        // items' light with their splits.
+        let widest = (64 * l)
+            .max(NEXT_SLOTS * 48)
+            .max(16 * (1 + p * (4 + 2 * l)));
+        let per_binding = dev.max_binding() / widest;
+        let budget = (256u64 << 20) / (656 + 144 * l + p * (192 + 96 * l));
         per_binding.min(budget).clamp(1024, 1 << 22)
     }
 
@@ -728,8 +739,16 @@ impl GpuShading {
         let makes_rays = materials
             .iter()
             .any(|m| m.reflects != 0 || m.transmission != 0.0);
-        let deepest =
-            if makes_rays { shading.max_depth } else { 0 }.saturating_add(shading.diffuse_bounces);
+        // A pass-through ray keeps its depth: up to `MAX_PASSES` levels more where a
+        // material may pass rays through (alpha below 1).
+        let passes = if materials.iter().any(|m| m.alpha[3] != 0.0) {
+            MAX_PASSES
+        } else {
+            0
+        };
+        let deepest = if makes_rays { shading.max_depth } else { 0 }
+            .saturating_add(shading.diffuse_bounces)
+            .saturating_add(passes);
         // Word offsets in `made`: this file's uniform, the closest hits', the any
         // hits', then the workgroups (items, closest, any).
         let (w_f, w_tc, w_ta, w_args) = (0u64, 28u64, 68u64, 108u64);

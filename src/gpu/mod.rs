@@ -23,6 +23,8 @@ mod static_part;
 mod trace;
 
 pub use device::{AdapterPolicy, GpuDevice};
+#[cfg(test)]
+pub(crate) use frame::MAX_PASSES;
 pub use frame::{packed_on_cpu, ChunkOut, GpuEnvironment, GpuShading, GpuSurfaces};
 pub use moving::GpuMoving;
 pub use shade_tables::{

@@ -2,9 +2,9 @@
 // shadow and next-level rays compacted in the CPU's order, its light summed into the
 // samples in the CPU's order, and the pixels averaged. The shading is
 // `render::shade::ShadeContext::shade` restricted to the subset `render::gpu_frame`
-// admits (opaque materials, textured or not; a mirror, GGX or no reflection ray;
-// punctual and area lights; a background or environment map; diffuse bounces), step
-// for step; the random numbers are the CPU's (`sampling::Seed`, carried by each item);
+// admits (materials textured or not, alpha below 1 passing rays through; a mirror, GGX
+// or no reflection ray; punctual and area lights; a background or environment map;
+// diffuse bounces), step for step; the random numbers are the CPU's (`sampling::Seed`, carried by each item);
 // what depends on the material alone (F0, the Blinn-Phong exponent and its
 // normalisation, 1/ior, the spot's cone cosines) comes computed by the CPU's own code in
 // the tables, and `textured` recomputes per hit what a texture changes.
@@ -63,7 +63,9 @@ struct Item {
     // made only when a ray reads it: F.e.y)
     m: vec4<u32>,
     // the ray cone's width where the ray starts and its spread (the texture level of
-    // detail)
+    // detail); the share of the sample's coverage the ray decides (`Item::coverage`:
+    // 1 for a camera ray, the (1 - alpha) products for its pass-through rays, 0 for
+    // others) and the passes made through surfaces of alpha below 1 (a small integer)
     c: vec4<f32>,
 }
 
@@ -98,6 +100,10 @@ struct Mat {
     // The material's own ambient colour (AFF; w 1 when it has one), which the ambient
     // light is reflected with instead of the diffuse colour.
     aff: vec4<f32>,
+    // The base colour's alpha (the factor's; `textured` multiplies the texture's in),
+    // the MASK cutoff, the mode (0 OPAQUE, 1 MASK, 2 BLEND), 1 when a hit may pass rays
+    // through (for the host).
+    alpha: vec4<f32>,
 }
 
 // frame.rs `ShadeLight`.
@@ -200,7 +206,11 @@ const NONE: u32 = 0xffffffffu;
 const GLOSSY_LIMIT: f32 = 0.4;
 const MIRROR_ALPHA: f32 = 0.001;
 const MAX_SHININESS: f32 = 256.0;
+const MAX_PASSES: f32 = 16.0;
 const FRAC_1_PI: f32 = 0.31830988618379067;
+// Next-level ray slots an item has: a pass-through, a diffuse bounce, a refraction, a
+// reflection (frame.rs `NEXT_SLOTS`).
+const NEXT_SLOTS: u32 = 4u;
 const PI: f32 = 3.14159265358979323846;
 
 fn inf() -> f32 {
@@ -724,7 +734,10 @@ fn textured(mi: u32, s: Surf) -> Mat {
         return m;
     }
     if m.tex.x != NONE {
-        m.albedo = m.albedo * tex_at(mi, 0u, s.uv, s.lod).xyz;
+        // `base_color`: factor × texture, alpha too.
+        let t = tex_at(mi, 0u, s.uv, s.lod);
+        m.albedo = m.albedo * t.xyz;
+        m.alpha.x = m.alpha.x * t.w;
     }
     if m.tex.y != NONE {
         let t = tex_at(mi, 1u, s.uv, s.lod);
@@ -747,6 +760,17 @@ fn textured(mi: u32, s: Surf) -> Mat {
         m.emission = m.emission * tex_at(mi, 2u, s.uv, s.lod).xyz;
     }
     return m;
+}
+
+// `alpha_of`: the coverage of material `m` (as `textured` made it) at the hit.
+fn alpha_of(m: Mat) -> f32 {
+    if m.alpha.z == 1.0 {
+        return select(0.0, 1.0, m.alpha.x >= m.alpha.y);
+    }
+    if m.alpha.z == 2.0 {
+        return clamp(m.alpha.x, 0.0, 1.0);
+    }
+    return 1.0;
 }
 
 fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
@@ -979,17 +1003,16 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             it.m = vec4<u32>(smp, 0u, seed_camera(camera_sample(smp)));
         }
         // The camera ray's cone (`wavefront::primary_cone`).
-        it.c = vec4<f32>(C.d.x, C.d.y, 0.0, 0.0);
+        it.c = vec4<f32>(C.d.x, C.d.y, 1.0, 0.0);
     } else {
         it = items[i];
     }
     let h = hits[i];
-    let weight = it.w.xyz;
+    var weight = it.w.xyz;
     var add = vec3<f32>(0.0);
     var nsh = 0u;
     var nnx = 0u;
     var cover = 0.0;
-    // `Item::bounces` and `Item::diffuse`.
     // `Item::bounces`, `Item::diffuse` and `Item::path` (the code in `w.w`).
     let code = u32(it.w.w);
     let bounces = code & 255u;
@@ -1008,8 +1031,35 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         // The cone's width at the hit: width + spread × distance.
         let width = it.c.x + it.c.y * (bitcast<f32>(h.x) * length(r.d.xyz));
         let s = surface(r, h, width);
-        cover = 1.0;
         let m = textured(s.mat, s);
+        let alpha = alpha_of(m);
+        let ap = abs(s.point);
+        let eps = 1e-4 * max(max3(ap), 1e-3 * F.c.w);
+        // `pass_through`: on through the surface, same direction, same depth, the cone
+        // at the hit, weight and coverage × (1 - alpha).
+        if alpha < 1.0 && it.c.w < MAX_PASSES {
+            let wp = weight * (1.0 - alpha);
+            if max3(wp) > F.e.x || it.c.z > 0.0 {
+                var p: Item;
+                p.w = vec4<f32>(wp, it.w.w);
+                p.m = it.m;
+                if random {
+                    p.m = vec4<u32>(it.m.x, it.m.y, seed_child(it.m.zw, 2u));
+                }
+                p.c = vec4<f32>(width, it.c.y, it.c.z * (1.0 - alpha), it.c.w + 1.0);
+                nx_cand_r[i * NEXT_SLOTS + nnx] = make_ray(s.point - s.ng * eps, s.dir, 0.0, inf());
+                nx_cand_i[i * NEXT_SLOTS + nnx] = p;
+                nnx = nnx + 1u;
+            }
+        }
+        if alpha <= 0.0 {
+            finish(i, first, smp, vec3<f32>(0.0), split, 0.0, 0u, nnx);
+            return;
+        }
+        // `BlockOut::cover` keeps positive terms only.
+        let c = it.c.z * alpha;
+        cover = select(0.0, c, c > 0.0);
+        weight = weight * alpha;
         let lb = lobes(m, s);
         var emitted = vec3<f32>(0.0);
         // A diffuse bounce's ray adds no emission (next-event estimation lit it).
@@ -1028,8 +1078,6 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         add = weight * (emitted + ambient * F.c.xyz);
         split[pass_of(path, 3u)] = weight * emitted;
         split[pass_of(path, 0u)] = split[pass_of(path, 0u)] + weight * (ambient * F.c.xyz);
-        let ap = abs(s.point);
-        let eps = 1e-4 * max(max3(ap), 1e-3 * F.c.w);
         let origin = s.point + s.ng * eps;
         // Direct light: a shadow ray a light that lights the point, in table order.
         for (var li = 0u; li < nl; li = li + 1u) {
@@ -1194,9 +1242,9 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                     b.w = vec4<f32>(wb, f32(bounces + 1u + 256u + 512u * select(path, 1u, path == 0u)));
                     b.m = vec4<u32>(it.m.x, it.m.y + 1u, seed_child(it.m.zw, 3u));
                     // A diffuse lobe spreads over the hemisphere: the coarsest level.
-                    b.c = vec4<f32>(width, 1.0, 0.0, 0.0);
-                    nx_cand_r[i * 3u + nnx] = make_ray(origin, dir, 0.0, inf());
-                    nx_cand_i[i * 3u + nnx] = b;
+                    b.c = vec4<f32>(width, 1.0, 0.0, it.c.w);
+                    nx_cand_r[i * NEXT_SLOTS + nnx] = make_ray(origin, dir, 0.0, inf());
+                    nx_cand_i[i * NEXT_SLOTS + nnx] = b;
                     nnx = nnx + 1u;
                 }
             }
@@ -1209,7 +1257,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             let seed = it.m.zw;
             next.m = vec4<u32>(it.m.x, it.m.y + 1u, 0u, 0u);
             // The cone goes on from its width at the hit, with its spread.
-            next.c = vec4<f32>(width, it.c.y, 0.0, 0.0);
+            next.c = vec4<f32>(width, it.c.y, 0.0, it.c.w);
             if max3(kt_w) > F.e.x {
                 if random {
                     next.m = vec4<u32>(it.m.x, it.m.y + 1u, seed_child(seed, 1u));
@@ -1221,8 +1269,8 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if t.w != 0.0 && dot(t.xyz, s.ng) < 0.0 {
                     // At the camera ray's hit the event names the pass (transmission).
                     next.w = vec4<f32>(kt_w, f32(bounces + 512u * select(path, 3u, path == 0u)));
-                    nx_cand_r[i * 3u + nnx] = make_ray(s.point - s.ng * eps, t.xyz, 0.0, inf());
-                    nx_cand_i[i * 3u + nnx] = next;
+                    nx_cand_r[i * NEXT_SLOTS + nnx] = make_ray(s.point - s.ng * eps, t.xyz, 0.0, inf());
+                    nx_cand_i[i * NEXT_SLOTS + nnx] = next;
                     nnx = nnx + 1u;
                 } else {
                     kr = kr + lb.kt;
@@ -1238,8 +1286,8 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                     rd = reflect_(s.dir, s.ng);
                 }
                 next.w = vec4<f32>(kr_w, f32(bounces + 512u * select(path, 2u, path == 0u)));
-                nx_cand_r[i * 3u + nnx] = make_ray(origin, rd, 0.0, inf());
-                nx_cand_i[i * 3u + nnx] = next;
+                nx_cand_r[i * NEXT_SLOTS + nnx] = make_ray(origin, rd, 0.0, inf());
+                nx_cand_i[i * NEXT_SLOTS + nnx] = next;
                 nnx = nnx + 1u;
             } else if max3(kr_w) > F.e.x && m.reflects == 2u {
                 // One direction from the visible normals: the weight is F · G1(l)
@@ -1253,29 +1301,47 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                     if max3(w) > F.e.x {
                         next.w = vec4<f32>(w, f32(bounces + 512u * select(path, 2u, path == 0u)));
                         // The lobe's width widens the cone.
-                        next.c = vec4<f32>(width, it.c.y + alpha, 0.0, 0.0);
-                        nx_cand_r[i * 3u + nnx] = make_ray(origin, rd, 0.0, inf());
-                        nx_cand_i[i * 3u + nnx] = next;
+                        next.c = vec4<f32>(width, it.c.y + alpha, 0.0, it.c.w);
+                        nx_cand_r[i * NEXT_SLOTS + nnx] = make_ray(origin, rd, 0.0, inf());
+                        nx_cand_i[i * NEXT_SLOTS + nnx] = next;
                         nnx = nnx + 1u;
                     }
                 }
             }
         }
     }
+    finish(i, first, smp, add, split, cover, nsh, nnx);
+}
+
+// What item `i` hands on: its own light and coverage (`accum` adds them), its counts.
+// `smp`: its sample; `split_in`: its own light split over the light-path passes.
+fn finish(
+    i: u32,
+    first: bool,
+    smp: u32,
+    add_in: vec3<f32>,
+    split_in: array<vec3<f32>, 4>,
+    cover: f32,
+    nsh: u32,
+    nnx: u32,
+) {
+    var add = add_in;
+    var split = split_in;
     // `BlockOut::add_split` keeps only nonzero, finite terms.
     if is_zero3(add) || !finite3(add) {
         add = vec3<f32>(0.0);
         split = array<vec3<f32>, 4>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     }
-    local[i] = vec4<f32>(add, 0.0);
+    local[i] = vec4<f32>(add, cover);
     if light_paths() {
         for (var k = 0u; k < 4u; k = k + 1u) {
             local[split_at(i, k)] = vec4<f32>(split[k], 0.0);
         }
     }
     if first {
-        // Each sample's coverage (a camera ray that met an opaque surface).
-        radiance[smp] = vec4<f32>(0.0, 0.0, 0.0, cover);
+        // Each sample's sums start at 0 (its coverage too: `accum` adds the items'
+        // coverage terms).
+        radiance[smp] = vec4<f32>(0.0);
         if light_paths() {
             let base = F.b.z * F.b.w + smp * 4u;
             for (var k = 0u; k < 4u; k = k + 1u) {
@@ -1313,8 +1379,8 @@ fn compact(@builtin(global_invocation_id) gid: vec3<u32>) {
     let b = nx_start[i];
     for (var k = 0u; k < nx_count[i]; k = k + 1u) {
         if b + k < F.g.y {
-            nx_rays[b + k] = nx_cand_r[i * 3u + k];
-            nx_items[b + k] = nx_cand_i[i * 3u + k];
+            nx_rays[b + k] = nx_cand_r[i * NEXT_SLOTS + k];
+            nx_items[b + k] = nx_cand_i[i * NEXT_SLOTS + k];
         }
     }
 }
@@ -1383,6 +1449,9 @@ fn accum(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let old = radiance[s];
     var acc = old.xyz;
+    // The coverage terms in item order, as `coverage[sample]` sums `BlockOut::cover`'s
+    // (a zero term adds nothing: the CPU pushes none).
+    var cov = old.w;
     // The passes: each a sum of its own terms in the same order (`paths[sample]`).
     let lp = light_paths();
     let pbase = F.b.z * F.b.w + s * 4u;
@@ -1394,6 +1463,7 @@ fn accum(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     for (var j = i; j < e; j = j + 1u) {
         acc = acc + local[j].xyz;
+        cov = cov + local[j].w;
         if lp {
             for (var q = 0u; q < 4u; q = q + 1u) {
                 pacc[q] = pacc[q] + local[split_at(j, q)].xyz;
@@ -1424,7 +1494,7 @@ fn accum(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
-    radiance[s] = vec4<f32>(acc, old.w);
+    radiance[s] = vec4<f32>(acc, cov);
     if lp {
         for (var q = 0u; q < 4u; q = q + 1u) {
             radiance[pbase + q] = vec4<f32>(pacc[q], 0.0);

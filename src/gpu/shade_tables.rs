@@ -84,6 +84,10 @@ pub struct ShadeMaterial {
     pub transform: [[f32; 4]; 8],
     /// The material's own ambient colour (AFF) and 1, or zeros without one.
     pub aff: [f32; 4],
+    /// Coverage (`alpha_of`): the base colour factor's alpha, the `MASK` cutoff, the
+    /// mode (0 `OPAQUE`, 1 `MASK`, 2 `BLEND`), 1 when a hit may pass rays through
+    /// (alpha below 1 somewhere: the host encodes the levels for it).
+    pub alpha: [f32; 4],
 }
 
 /// The textures of a frame path's render, uploaded once (`GpuShading::new_textured`):

@@ -5,10 +5,11 @@
 //! whole wavefront on the GPU (`gpu::GpuShading`, shade.wgsl): camera rays made here,
 //! pixels and (for the AOVs and Cryptomatte) the camera rays' hits read back.
 //!
-//! The subset is what `ShadeContext::shade` does but for alpha below 1, a material's
-//! own ambient colour and the light-path passes, with or without motion blur (a
-//! blurred frame's time steps each a pass of their samples): opaque materials (base
-//! colour, metallic, roughness, emission, transmission, IOR, double-sided), textured or
+//! The subset is all `ShadeContext::shade` does, with or without motion blur (a
+//! blurred frame's time steps each a pass of their samples) and the light-path passes,
+//! but for an emissive texture on an area light: materials (base colour, metallic,
+//! roughness, emission, transmission, IOR, double-sided, a material's own ambient
+//! colour, alpha: `MASK` and `BLEND` with their pass-through rays), textured or
 //! not (the textures uploaded once a render, [`textures`], and filtered in the kernel
 //! as `render::mips` filters them); the mirror reflection (GGX width under
 //! `MIRROR_ALPHA`), one reflection ray drawn from the GGX lobe (the random numbers made
@@ -80,7 +81,7 @@ pub(super) fn outside_subset(
             Some(n) => format!("material '{n}'"),
             None => format!("material {i}"),
         };
-        if let Some(why) = material_outside(scene, m) {
+        if let Some(why) = material_outside(m) {
             return Some(format!("{name}: {why}"));
         }
     }
@@ -101,28 +102,9 @@ pub(super) fn outside_subset(
     None
 }
 
-/// Why material `m` of `scene` is outside the subset, if it is. Textures are inside,
-/// except where they could make a hit leave it: a base colour texture whose alpha is
-/// below 1 somewhere (with `MASK` or `BLEND`), a metallic-roughness texture that could
-/// make a roughness of the glossy range.
-fn material_outside(scene: &Scene, m: &Material) -> Option<&'static str> {
-    let opaque = match m.alpha_mode {
-        AlphaMode::Opaque => true,
-        AlphaMode::Mask { cutoff } => m.base_color.w >= cutoff,
-        AlphaMode::Blend => m.base_color.w.clamp(0.0, 1.0) >= 1.0,
-    };
-    if !opaque {
-        return Some("alpha below 1 (pass-through)");
-    }
-    // Every mip level's byte lies between the image's least and greatest (the box
-    // filter's means), so a texture of alpha 255 throughout reads 1 wherever filtered
-    // (glam's lerp of 1 and 1 is 1), and the factor decides as without it.
-    let texture_alpha = m
-        .base_color_texture
-        .and_then(|r| byte_range(scene, r.texture, 3));
-    if m.alpha_mode != AlphaMode::Opaque && texture_alpha.is_some_and(|(lo, _)| lo < 255) {
-        return Some("alpha below 1 (pass-through) from its base colour texture");
-    }
+/// Why material `m` is outside the subset, if it is. Textures are inside,
+/// but for an emissive texture on an area light.
+fn material_outside(m: &Material) -> Option<&'static str> {
     // An area light's own samples read its emission constant (`GpuShading`'s emitter
     // table): a texture on it stays on the CPU.
     if emits(m) && m.emissive_texture.is_some() {
@@ -138,6 +120,31 @@ fn image_of(scene: &Scene, t: u32) -> Option<&Image> {
     let img = scene.images.get(tex.image as usize)?;
     let (w, h) = (u64::from(img.width), u64::from(img.height));
     (w > 0 && h > 0 && img.rgba8.len() as u64 == w * h * 4).then_some(img)
+}
+
+/// Whether a hit on `m` may pass rays through (alpha below 1 somewhere, as `alpha_of`
+/// finds it): its factor's alpha, or a base colour texture with an alpha byte below 255
+/// under `MASK` or `BLEND` (every mip level's byte lies between the image's least and
+/// greatest, the box filter's means, so a texture of alpha 255 throughout reads 1
+/// wherever filtered, and the factor decides as without it).
+fn passes_through(scene: &Scene, m: &Material) -> bool {
+    let texture = m
+        .base_color_texture
+        .and_then(|r| byte_range(scene, r.texture, 3))
+        .is_some_and(|(lo, _)| lo < 255);
+    match m.alpha_mode {
+        AlphaMode::Opaque => false,
+        // `alpha_of`: 0 unless the factor reaches the cutoff (a NaN does not).
+        AlphaMode::Mask { cutoff } => {
+            texture
+                || m.base_color
+                    .w
+                    .partial_cmp(&cutoff)
+                    .is_none_or(std::cmp::Ordering::is_lt)
+        }
+        // The factor clamped to [0, 1] (a NaN stays one, and passes nothing through).
+        AlphaMode::Blend => texture || m.base_color.w < 1.0,
+    }
 }
 
 /// The least and greatest byte of channel `c` of texture `t`'s image.
@@ -262,7 +269,9 @@ pub(super) fn textures(scene: &Scene, mips: &TextureMips) -> GpuTextures {
 /// triangles without one), each as `ShadeContext::lobes` and `glint` compute it, with
 /// its textures' views (numbered as [`textures`] numbers them). A material with a
 /// metallic-roughness texture is marked as reflecting and transmitting as its factors
-/// allow (so the levels are encoded; the kernel decides per hit).
+/// allow (so the levels are encoded; the kernel decides per hit), and one that may
+/// pass rays through as such ([`passes_through`]: the levels of the passes are
+/// encoded).
 fn materials(scene: &Scene) -> Vec<ShadeMaterial> {
     let default = Material::default();
     let views = texture_views(scene);
@@ -350,6 +359,19 @@ fn materials(scene: &Scene) -> Vec<ShadeMaterial> {
                 ],
                 transform,
                 aff: m.ambient.map_or([0.0; 4], |a| a.extend(1.0).to_array()),
+                alpha: [
+                    m.base_color.w,
+                    match m.alpha_mode {
+                        AlphaMode::Mask { cutoff } => cutoff,
+                        _ => 0.0,
+                    },
+                    match m.alpha_mode {
+                        AlphaMode::Opaque => 0.0,
+                        AlphaMode::Mask { .. } => 1.0,
+                        AlphaMode::Blend => 2.0,
+                    },
+                    if passes_through(scene, m) { 1.0 } else { 0.0 },
+                ],
             }
         })
         .collect()
@@ -556,7 +578,7 @@ pub(super) fn render_frame_gpu(
         } else {
             params.light_samples as usize
         };
-    let max_capacity = GpuShading::max_capacity(gpu.dev, slots) as usize;
+    let max_capacity = GpuShading::max_capacity(gpu.dev, slots, params.light_paths) as usize;
     let mut rows_per_chunk = ((CHUNK_SAMPLES.min(max_capacity / 4)) / (w * spp)).max(1);
     let mut capacity = 0;
     let mut y0 = 0;
@@ -715,6 +737,7 @@ pub(super) fn render_frame_gpu(
 mod tests {
     use super::*;
     use crate::render::options::MotionBlur;
+    use crate::render::shade::MAX_PASSES;
     use crate::scene::TextureRef;
 
     /// A level that outgrows its room is refused (`None`), and the chunk traced with
@@ -954,6 +977,8 @@ mod tests {
             ShadeContext::shininess(0.0),
             "the cap"
         );
+        assert_eq!(constant("MAX_PASSES"), f32::from(MAX_PASSES));
+        assert_eq!(crate::gpu::MAX_PASSES, u32::from(MAX_PASSES), "the levels");
     }
 
     /// Every feature the frame path does not shade sends the scene to the CPU's
@@ -1039,32 +1064,64 @@ mod tests {
         for m in textured_inside {
             assert_eq!(why(&textured(m.clone()), &opts), None, "{m:?}");
         }
-        let outside = [
+        // Alpha below 1 (pass-through rays), from the factor or from the texture; the
+        // table marks the materials that may pass rays through (the levels encoded).
+        let half = glam::Vec4::new(1.0, 1.0, 1.0, 0.5);
+        let alpha = [
             (
                 textured(Material {
                     base_color_texture: tex(1),
                     alpha_mode: AlphaMode::Mask { cutoff: 0.5 },
                     ..Material::default()
                 }),
-                "pass-through) from its base colour texture",
+                [1.0, 0.5, 1.0, 1.0],
             ),
             (
                 textured(Material {
-                    emissive: Vec3::ONE,
-                    emissive_texture: tex(0),
+                    base_color_texture: tex(0),
+                    base_color: half,
+                    alpha_mode: AlphaMode::Blend,
                     ..Material::default()
                 }),
-                "an emissive texture on an area light",
+                [0.5, 0.0, 2.0, 1.0],
             ),
             (
                 scene_with(Material {
-                    alpha_mode: AlphaMode::Blend,
-                    base_color: glam::Vec4::new(1.0, 1.0, 1.0, 0.5),
+                    base_color: half,
+                    alpha_mode: AlphaMode::Mask { cutoff: 0.6 },
                     ..Material::default()
                 }),
-                "pass-through",
+                [0.5, 0.6, 1.0, 1.0],
             ),
+            // Opaque under MASK (the factor over the cutoff, the texture opaque).
+            (
+                textured(Material {
+                    base_color_texture: tex(0),
+                    base_color: half,
+                    alpha_mode: AlphaMode::Mask { cutoff: 0.4 },
+                    ..Material::default()
+                }),
+                [0.5, 0.4, 1.0, 0.0],
+            ),
+            (scene_with(Material::default()), [1.0, 0.0, 0.0, 0.0]),
         ];
+        for (scene, table) in alpha {
+            assert_eq!(why(&scene, &opts), None, "{:?}", scene.materials[0]);
+            assert_eq!(
+                materials(&scene)[0].alpha,
+                table,
+                "{:?}",
+                scene.materials[0]
+            );
+        }
+        let outside = [(
+            textured(Material {
+                emissive: Vec3::ONE,
+                emissive_texture: tex(0),
+                ..Material::default()
+            }),
+            "an emissive texture on an area light",
+        )];
         for (scene, said) in outside {
             let w = why(&scene, &opts).unwrap_or_default();
             assert!(w.contains(said) && w.contains("material 0"), "{said}: {w}");

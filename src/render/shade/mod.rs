@@ -104,7 +104,7 @@ pub struct ShadeContext<'a> {
 }
 
 /// Passes through alpha-cut surfaces a ray may make.
-const MAX_PASSES: u16 = 16;
+pub(in crate::render) const MAX_PASSES: u16 = 16;
 /// Contributions below this (max component of the weight) are dropped.
 pub(in crate::render) const MIN_WEIGHT: f32 = 1e-4;
 /// Largest Blinn–Phong exponent (roughness below about 0.3 gets this).
