@@ -23,9 +23,9 @@ use std::path::{Path, PathBuf};
 
 use common::build::{diffuse, mesh, perspective, placed, SceneBuilder};
 use common::exr_read::read_exr;
-use common::farm::{ok, s, stderr};
+use common::farm::{ok, ok_with, s, stderr};
 use common::render_scene::{
-    cube, files_under, quad, shaded_on_cpu, temp_dir, tumbling, write_scene,
+    cube, files_under, quad, scene, temp_dir, tumbling, with_textured_lamp, write_scene,
 };
 use glam::Vec2;
 use glam::{Quat, Vec3, Vec4};
@@ -208,6 +208,16 @@ fn render_at(
         args.extend(["--aov", "depth,normal,albedo,position,motion,cryptomatte"]);
     }
     args.extend_from_slice(extra);
+    // On the GPU, shading on the CPU where `device` says `gpu-cpu` (the diagnostic
+    // switch `SUBFIELD_GPU_SHADING=cpu`).
+    if device == "gpu-cpu" {
+        let i = args
+            .iter()
+            .position(|a| *a == "gpu-cpu")
+            .unwrap_or_default();
+        args[i] = "gpu";
+        return stderr(&ok_with(&args, &[("SUBFIELD_GPU_SHADING", "cpu")]));
+    }
     stderr(&ok(&args))
 }
 
@@ -547,6 +557,12 @@ fn area_lights_agree_with_the_cpu() {
     let lamp = write_scene(&lamp_dir);
     let two = ["--frames", "2..4", "--spp", "2", "--max-depth", "2"];
     agree(&dir, &lamp, "lamp", &two);
+    // The lamp's emission textured: each light sample reads the texture where it lands
+    // (`uv_at`, the finest level).
+    let textured_dir = dir.join("textured-lamp");
+    std::fs::create_dir_all(&textured_dir).unwrap();
+    let textured = write(&textured_dir, &with_textured_lamp(scene()));
+    agree(&dir, &textured, "textured-lamp", &two);
 }
 
 /// An environment map and diffuse bounces on the GPU: misses look the map up (turned
@@ -1214,24 +1230,31 @@ fn light_path_passes_agree_with_the_cpu() {
     agree(&dir, &lamp, "paths-lamp", &[&b[..], &passes[..]].concat());
 }
 
-/// A scene outside the subset (an emissive texture on an area light) traces on the GPU
-/// and shades on the CPU: its frames are the CPU's to the bit, and the log says why.
+/// Asked to shade on the CPU (`SUBFIELD_GPU_SHADING=cpu`), a scene the frame path could
+/// take traces on the GPU and shades on the CPU: its frames are the CPU's to the bit,
+/// the log says why, and the options string says so (`shading=cpu`: `--resume` does
+/// not keep such frames for a GPU-shaded sequence).
 #[test]
-fn outside_the_subset_falls_back_and_says_why() {
+fn shading_kept_on_the_cpu_gives_the_cpus_frames_and_says_why() {
     if common::gpu::device().is_none() {
         return;
     }
     let dir = temp_dir("gpu-frames-fallback");
-    let scene = write(&dir, &shaded_on_cpu(subset_scene()));
+    let scene = write(&dir, &subset_scene());
     let a = ["--frames", "2", "--spp", "1"];
     render(&scene, &dir, "cpu", "cpu", &a);
-    let log = render(&scene, &dir, "gpu", "gpu", &a);
+    let log = render(&scene, &dir, "gpu-cpu", "gpu", &a);
     assert!(
         log.contains(
             "note: shading on the CPU, tracing on the GPU: the GPU frame path does not take \
-             material 'textured lamp': an emissive texture on an area light"
+             a render asked to shade on the CPU (SUBFIELD_GPU_SHADING=cpu)"
         ),
         "stderr: {log}"
+    );
+    let header = std::fs::read(dir.join("gpu").join("f.02.exr")).unwrap();
+    assert!(
+        header.windows(22).any(|w| w == b"device=gpu shading=cpu"),
+        "no shading=cpu in the header"
     );
     for f in files_under(&dir.join("cpu")) {
         let (_, _, ca) = read_exr(&dir.join("cpu").join(&f));

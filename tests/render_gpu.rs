@@ -1,6 +1,7 @@
 //! `subfield render --device gpu` as a program: the frames equal `--device cpu`'s pixel
-//! for pixel and channel for channel (the GPU's hits are the CPU's to the bit, and
-//! shading is the CPU's), the header names the device so `--resume` re-renders frames
+//! for pixel and channel for channel when shading stays on the CPU
+//! (`SUBFIELD_GPU_SHADING=cpu`: the GPU's hits are the CPU's to the bit; the GPU frame
+//! path's shading is held to a bound in tests/gpu_frames.rs), the header names the device so `--resume` re-renders frames
 //! made on the other one, `auto` without a discrete GPU traces on the CPU and says so,
 //! and `gpu` without any adapter fails in one line and writes nothing.
 //!
@@ -12,14 +13,15 @@ use std::path::Path;
 use std::process::Command;
 
 use common::exr_read::read_exr;
-use common::farm::{ok, s};
-use common::render_scene::{files_under, scene, shaded_on_cpu, temp_dir, write_scene};
+use common::farm::{ok, ok_with, s};
+use common::render_scene::{files_under, temp_dir, write_scene};
 
 fn contains(hay: &[u8], needle: &str) -> bool {
     hay.windows(needle.len()).any(|w| w == needle.as_bytes())
 }
 
-/// Renders `scene`'s frames 2..5 at 40x30 on `device` into `dir/folder` with `extra`.
+/// Renders `scene`'s frames 2..5 at 40x30 on `device` into `dir/folder` with `extra`,
+/// shading on the CPU (`SUBFIELD_GPU_SHADING=cpu`).
 fn render_on(dir: &Path, scene: &Path, device: &str, folder: &str, extra: &[&str]) {
     let out = dir.join(format!("{folder}/f.##.exr"));
     let mut args = vec![
@@ -36,15 +38,8 @@ fn render_on(dir: &Path, scene: &Path, device: &str, folder: &str, extra: &[&str
         "--quiet",
     ];
     args.extend_from_slice(extra);
-    ok(&args);
-}
-
-/// The test scene kept off the GPU frame path (`shaded_on_cpu`: shading on the CPU,
-/// tracing on the GPU), as `dir/cpu-shaded.glb`.
-fn write_scene_shaded_on_cpu(dir: &Path) -> std::path::PathBuf {
-    let p = dir.join("cpu-shaded.glb");
-    subfield::import::write_gltf(&shaded_on_cpu(scene()), &p).unwrap();
-    p
+    // Traced on the GPU, shaded on the CPU (the diagnostic switch, docs/GPU.md).
+    ok_with(&args, &[("SUBFIELD_GPU_SHADING", "cpu")]);
 }
 
 /// Every frame in `dir/a` is channel for channel, bit for bit, the one in `dir/b`; how
@@ -76,7 +71,7 @@ fn gpu_frames_equal_cpu_frames() {
         return;
     }
     let dir = temp_dir("gpu-vs-cpu");
-    let scene = write_scene_shaded_on_cpu(&dir);
+    let scene = write_scene(&dir);
     let extra = [
         "--spp",
         "2",
@@ -123,7 +118,7 @@ fn every_shading_feature_renders_the_cpus_frames_with_gpu_tracing() {
         return;
     }
     let dir = temp_dir("gpu-features");
-    let scene = write_scene_shaded_on_cpu(&dir);
+    let scene = write_scene(&dir);
     // A 4x2 Radiance map, flat scanlines (RGBE: these values are exact).
     let map = dir.join("sky.hdr");
     let mut hdr = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 2 +X 4\n".to_vec();
@@ -243,4 +238,25 @@ fn demo_on_a_gpu_without_an_adapter_writes_nothing() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("Vulkan adapter"), "stderr: {err}");
     assert!(!out.exists(), "the demo wrote into {}", out.display());
+}
+
+/// `SUBFIELD_GPU_SHADING` takes `cpu` or `gpu`; anything else is one line naming it,
+/// before anything is read or written.
+#[test]
+fn a_bad_gpu_shading_switch_is_one_line() {
+    let dir = temp_dir("gpu-shading-switch");
+    let scene = write_scene(&dir);
+    let out = dir.join("f.#.exr");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_subfield"))
+        .args(["render", s(&scene), "-o", s(&out), "--frames", "0"])
+        .env("SUBFIELD_GPU_SHADING", "maybe")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("SUBFIELD_GPU_SHADING=maybe: expected cpu or gpu"),
+        "{err}"
+    );
+    assert!(!dir.join("f.0.exr").exists());
 }

@@ -338,6 +338,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         shading,
         exposure: a.exposure,
         device: a.device,
+        cpu_shading: cpu_shading()?,
         compression: a.compression,
         overscan: a.overscan,
         motion_blur: motion_blur(a)?,
@@ -643,4 +644,18 @@ fn frame_event(f: &render::FrameReport) -> serde_json::Value {
         });
     }
     v
+}
+
+/// `SUBFIELD_GPU_SHADING`: `cpu` keeps shading on the CPU with `--device gpu` (a
+/// diagnostic, docs/GPU.md); `gpu` or unset, the GPU frame path where it can.
+fn cpu_shading() -> anyhow::Result<bool> {
+    match std::env::var("SUBFIELD_GPU_SHADING") {
+        Err(std::env::VarError::NotPresent) => Ok(false),
+        Ok(v) if v == "gpu" || v.is_empty() => Ok(false),
+        Ok(v) if v == "cpu" => Ok(true),
+        Ok(v) => bail!("SUBFIELD_GPU_SHADING={v}: expected cpu or gpu"),
+        Err(std::env::VarError::NotUnicode(v)) => {
+            bail!("SUBFIELD_GPU_SHADING={v:?}: expected cpu or gpu")
+        }
+    }
 }

@@ -773,6 +773,22 @@ fn alpha_of(m: Mat) -> f32 {
     return 1.0;
 }
 
+// `ShadeContext::emission` at barycentrics `b` of emitter `e`'s triangle (`uv_at`; the
+// finest texture level, as the CPU reads it for a light sample).
+fn emitted_at(e: Emitter, b: vec2<f32>) -> vec3<f32> {
+    var em = mats[e.material].emission;
+    if mats[e.material].tex.z != NONE && !is_zero3(em) {
+        var uv = vec2<f32>(0.0);
+        if bitcast<u32>(tri_vec(e.tri, 7u).w) != 0u {
+            let a6 = tri_vec(e.tri, 6u);
+            let a7 = tri_vec(e.tri, 7u);
+            uv = a6.xy * (1.0 - b.x - b.y) + a6.zw * b.x + a7.xy * b.y;
+        }
+        em = em * tex_at(e.material, 2u, uv, -inf()).xyz;
+    }
+    return em;
+}
+
 fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
     let sin_t2 = eta * eta * (1.0 - cos_i * cos_i);
     if sin_t2 >= 1.0 {
@@ -1204,7 +1220,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if cos_l <= 0.0 {
                     continue;
                 }
-                let le = mats[e.material].emission;
+                let le = emitted_at(e, vec2<f32>(su * (1.0 - rs.y), su * rs.y));
                 // The glint only on a surface without a reflection ray.
                 var b = lb.kd * FRAC_1_PI;
                 if m.reflects == 0u {

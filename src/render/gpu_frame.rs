@@ -61,6 +61,9 @@ pub(super) fn outside_subset(
     moving_triangles: usize,
     max_binding: u64,
 ) -> Option<String> {
+    if opts.cpu_shading {
+        return Some("a render asked to shade on the CPU (SUBFIELD_GPU_SHADING=cpu)".into());
+    }
     if let Some(env) = &opts.shading.environment {
         let bytes = (8 + 3 * env.texel_count() as u64) * 4;
         if bytes > max_binding {
@@ -76,15 +79,6 @@ pub(super) fn outside_subset(
             "area lights at more than {MAX_AREA_SPP} samples a pixel (--spp)"
         ));
     }
-    for (i, m) in scene.materials.iter().enumerate() {
-        let name = match &m.name {
-            Some(n) => format!("material '{n}'"),
-            None => format!("material {i}"),
-        };
-        if let Some(why) = material_outside(m) {
-            return Some(format!("{name}: {why}"));
-        }
-    }
     let texels = texel_count(scene).saturating_mul(4);
     if texels > max_binding {
         return Some(format!(
@@ -98,17 +92,6 @@ pub(super) fn outside_subset(
                 "the {what} triangles' surfaces ({bytes} bytes) exceed one GPU storage binding ({max_binding} bytes)"
             ));
         }
-    }
-    None
-}
-
-/// Why material `m` is outside the subset, if it is. Textures are inside,
-/// but for an emissive texture on an area light.
-fn material_outside(m: &Material) -> Option<&'static str> {
-    // An area light's own samples read its emission constant (`GpuShading`'s emitter
-    // table): a texture on it stays on the CPU.
-    if emits(m) && m.emissive_texture.is_some() {
-        return Some("an emissive texture on an area light");
     }
     None
 }
@@ -1114,18 +1097,21 @@ mod tests {
                 scene.materials[0]
             );
         }
-        let outside = [(
-            textured(Material {
-                emissive: Vec3::ONE,
-                emissive_texture: tex(0),
-                ..Material::default()
-            }),
-            "an emissive texture on an area light",
-        )];
-        for (scene, said) in outside {
-            let w = why(&scene, &opts).unwrap_or_default();
-            assert!(w.contains(said) && w.contains("material 0"), "{said}: {w}");
-        }
+        // An area light with an emissive texture is inside (its samples read it).
+        let lamp = textured(Material {
+            emissive: Vec3::ONE,
+            emissive_texture: tex(0),
+            ..Material::default()
+        });
+        assert_eq!(why(&lamp, &opts), None);
+        // Asked to shade on the CPU: outside, saying so.
+        let asked = RenderOptions {
+            cpu_shading: true,
+            ..RenderOptions::default()
+        };
+        assert!(why(&lamp, &asked)
+            .unwrap_or_default()
+            .contains("SUBFIELD_GPU_SHADING=cpu"));
         // A material's own ambient colour is inside.
         let aff = scene_with(Material {
             ambient: Some(Vec3::ONE),

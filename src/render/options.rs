@@ -572,6 +572,11 @@ pub struct RenderOptions {
     /// Where frames are traced. The options string names the device that traced (for
     /// `Auto`, the one it chose), so `--resume` re-renders frames made on the other.
     pub device: TraceDevice,
+    /// On the GPU, shade on the CPU even where the GPU frame path could shade (the CLI's
+    /// environment variable `SUBFIELD_GPU_SHADING=cpu`, a diagnostic: it tells a
+    /// difference the GPU's shading makes from one its tracing makes). Named in the
+    /// options string, so a sequence never mixes the two.
+    pub cpu_shading: bool,
     /// `--compression`: the EXR's codec. Lossless, so not part of the options string
     /// (a frame resumed with another codec has the same pixels and is kept).
     pub compression: ExrCompression,
@@ -608,6 +613,7 @@ impl Default for RenderOptions {
             shading: ShadingOptions::default(),
             exposure: 0.0,
             device: TraceDevice::Cpu,
+            cpu_shading: false,
             compression: ExrCompression::Zip,
             overscan: 0,
             motion_blur: None,
@@ -689,6 +695,9 @@ impl RenderOptions {
         }
         s += &format!(" exposure={}", self.exposure);
         s += &format!(" device={}", self.device.name());
+        if self.cpu_shading && self.device != TraceDevice::Cpu {
+            s += " shading=cpu";
+        }
         // Only when asked for: frames without overscan keep the string (and bytes) they
         // had before the option existed.
         if self.overscan > 0 {

@@ -13,7 +13,16 @@ pub fn subfield(args: &[&str]) -> Output {
 }
 
 pub fn ok(args: &[&str]) -> Output {
-    let o = subfield(args);
+    ok_with(args, &[])
+}
+
+/// [`ok`] with environment variables set for the run.
+pub fn ok_with(args: &[&str], env: &[(&str, &str)]) -> Output {
+    let o = Command::new(env!("CARGO_BIN_EXE_subfield"))
+        .args(args)
+        .envs(env.iter().copied())
+        .output()
+        .unwrap();
     assert!(
         o.status.success(),
         "subfield {args:?} failed: {}",

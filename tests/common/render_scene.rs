@@ -277,35 +277,34 @@ pub fn files_under(dir: &Path) -> Vec<PathBuf> {
     out
 }
 
-/// `scene` with one more material, unused, that keeps it off the GPU frame path: an
-/// emissive texture on an emitting material (an area light's samples read its emission
-/// constant on the GPU), so `--device gpu` traces on the GPU and shades on the CPU, its
-/// frames the CPU's to the bit; the log names material 'textured lamp'.
+/// `scene` with its lamp's emission textured (a 2x2 sRGB image, warm to cold across
+/// the quad, bilinear): the area light's samples read the texture where they land.
 #[allow(dead_code)]
-pub fn shaded_on_cpu(mut scene: Scene) -> Scene {
+pub fn with_textured_lamp(mut scene: Scene) -> Scene {
     let image = scene.images.len() as u32;
     scene.images.push(subfield::scene::Image {
         name: None,
         width: 2,
         height: 2,
-        rgba8: vec![255; 16],
+        rgba8: vec![
+            255, 200, 120, 255, 120, 160, 255, 255, 255, 255, 255, 255, 40, 40, 40, 255,
+        ],
     });
     let texture = scene.textures.len() as u32;
     scene.textures.push(subfield::scene::Texture {
         image,
-        wrap_s: subfield::scene::Wrap::Repeat,
-        wrap_t: subfield::scene::Wrap::Repeat,
+        wrap_s: subfield::scene::Wrap::ClampToEdge,
+        wrap_t: subfield::scene::Wrap::ClampToEdge,
         nearest: false,
     });
-    scene.materials.push(Material {
-        name: Some("textured lamp".into()),
-        emissive: Vec3::ONE,
-        emissive_texture: Some(subfield::scene::TextureRef {
-            texture,
-            tex_coord: 0,
-            transform: None,
-        }),
-        ..Material::default()
-    });
+    for m in &mut scene.materials {
+        if m.name.as_deref() == Some("lamp") {
+            m.emissive_texture = Some(subfield::scene::TextureRef {
+                texture,
+                tex_coord: 0,
+                transform: None,
+            });
+        }
+    }
     scene
 }
