@@ -96,6 +96,16 @@ run)
             grep -h "note:" "$out/whole-$dev-$size.log" | head -n 1
         done
     done
+    # The demo (glossy marble, glass, mirrors, depth 4: wholly on the GPU frame path),
+    # 60 frames at 640x480, on each device.
+    for dev in gpu cpu; do
+        t0=$(date +%s.%N)
+        timeout 90 .device/gpu/subfield demo -o "/tmp/demo-$dev" --frames 0..60 --device "$dev" \
+            >"$out/demo-$dev.log" 2>&1 &&
+            echo "demo, $dev: $(echo "$(date +%s.%N) $t0" | awk '{printf "%.1f ms a frame", ($1-$2)*1000/60}')" ||
+            echo "demo, $dev: FAILED (see $out/demo-$dev.log)"
+        grep -h "note:\|per frame" "$out/demo-$dev.log" | head -n 2
+    done
     # The CPU path on all the host's cores against Embree, equal work (issue 38): 1 to 16
     # threads at 640x480, 1 and 16 at 1920x1080, both cameras; benches/efficiency.py on
     # the 1- and 2-thread runs says where the cores wait.

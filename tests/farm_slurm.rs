@@ -353,7 +353,9 @@ fn a_resource_failure_requeues_the_task_three_times_then_fails() {
     };
     // The queue can be empty for a moment while a task is requeued: wait for the fourth
     // try's failure and an empty queue, then a little more for any further requeue.
-    wait_until(&format!("job {job} to fail four times"), 120, || {
+    // Up to 300 s, as `wait_job_gone`: on 2 cores beside the other Slurm tests' jobs a
+    // requeued try can wait that long for the node (120 s timed out once in CI).
+    wait_until(&format!("job {job} to fail four times"), 300, || {
         let q = squeue(&job);
         if q.iter().any(|(_, state)| state == "PENDING") {
             let _ = Command::new("scontrol")
