@@ -333,7 +333,7 @@ fn a_resource_failure_requeues_the_task_three_times_then_fails() {
     let Some(_c) = cluster("a_resource_failure_requeues_the_task_three_times_then_fails") else {
         return;
     };
-    let st = setup("slurm-requeue");
+    let st = setup("slurm-resource");
     let opts = look("48x36", "1");
     let o = Command::new("bash")
         .arg("-c")
