@@ -144,23 +144,7 @@ fn byte_range(scene: &Scene, t: u32, c: usize) -> Option<(u8, u8)> {
 /// (`TextureMips::build`'s chains: base colour and emissive sRGB, the others linear),
 /// in the order of the textures, sRGB first; textures the CPU does not read left out.
 fn texture_views(scene: &Scene) -> Vec<(u32, bool)> {
-    let mut want = vec![(false, false); scene.textures.len()];
-    for m in &scene.materials {
-        for (slot, srgb) in [
-            (m.base_color_texture, true),
-            (m.emissive_texture, true),
-            (m.metallic_roughness_texture, false),
-            (m.normal_texture, false),
-        ] {
-            if let Some(w) = slot.and_then(|t| want.get_mut(t.texture as usize)) {
-                if srgb {
-                    w.0 = true;
-                } else {
-                    w.1 = true;
-                }
-            }
-        }
-    }
+    let want = TextureMips::wanted(scene);
     let mut views = Vec::new();
     for (t, (s, l)) in want.into_iter().enumerate() {
         let t = t as u32;

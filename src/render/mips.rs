@@ -116,12 +116,10 @@ fn reduce(src: &[u8], w: u32, h: u32, srgb: bool, lut: &[f32]) -> Level {
 }
 
 impl TextureMips {
-    /// Chains for every texture the scene's materials use (colour slots in sRGB, the
-    /// others linear); images of the wrong size are left without one.
-    pub fn build(scene: &Scene) -> TextureMips {
-        let lut: Vec<f32> = (0..256).map(|i| srgb_to_linear(i as f32 / 255.0)).collect();
-        let n = scene.textures.len();
-        let mut want = vec![(false, false); n];
+    /// For each texture of `scene`, whether a material reads it in sRGB (the colour
+    /// slots) and whether linearly (the others).
+    pub(super) fn wanted(scene: &Scene) -> Vec<(bool, bool)> {
+        let mut want = vec![(false, false); scene.textures.len()];
         for m in &scene.materials {
             for (slot, srgb) in [
                 (m.base_color_texture, true),
@@ -138,6 +136,14 @@ impl TextureMips {
                 }
             }
         }
+        want
+    }
+
+    /// Chains for every texture the scene's materials use (colour slots in sRGB, the
+    /// others linear); images of the wrong size are left without one.
+    pub fn build(scene: &Scene) -> TextureMips {
+        let lut: Vec<f32> = (0..256).map(|i| srgb_to_linear(i as f32 / 255.0)).collect();
+        let want = Self::wanted(scene);
         let chains = scene
             .textures
             .iter()
