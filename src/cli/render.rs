@@ -151,8 +151,8 @@ pub struct Args {
     pub float: bool,
     /// Where frames are traced: cpu (the default), gpu (a Vulkan adapter through wgpu;
     /// an error when there is none), auto (a discrete GPU when there is one, else the CPU;
-    /// says which). On the GPU, scenes inside its subset are shaded there too; others
-    /// are shaded on the CPU, and the log says why (docs/GPU.md).
+    /// says which). On the GPU frames are shaded there too, unless their data do not
+    /// fit it (then on the CPU, and the log says why; docs/GPU.md).
     #[arg(long, value_name = "cpu|gpu|auto", default_value = "cpu", value_parser = parse::parse_device)]
     pub device: TraceDevice,
     /// Skip frames whose output file exists and reads back complete.

@@ -470,8 +470,8 @@ impl PartialEq for CancelFlag {
     }
 }
 
-/// Where frames are traced (`--device`, DESIGN.md §4); on the GPU, scenes inside the frame
-/// path's subset are shaded there too (`render::gpu_frame`).
+/// Where frames are traced (`--device`, DESIGN.md §4); on the GPU they are shaded there
+/// too where their data fit it (`render::gpu_frame`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum TraceDevice {
     /// The CPU tracer on every core (the default).
