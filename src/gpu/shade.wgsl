@@ -376,7 +376,12 @@ fn seed_child(s: vec2<u32>, kind: u32) -> vec2<u32> {
 // `Seed::get(purpose, i)`: two uniform numbers in [0, 1), the CPU's to the bit
 // (integers under 2^24 times 2^-24).
 fn seed_get(s: vec2<u32>, purpose: u32, i: u32) -> vec2<f32> {
-    let h = mix64(s ^ mix64(vec2<u32>(i, purpose)));
+    return unit2(mix64(s ^ mix64(vec2<u32>(i, purpose))));
+}
+
+// Two uniform numbers in [0, 1) from a 64-bit hash's bits 40..64 and 16..40, as the
+// CPU takes them (integers under 2^24 times 2^-24: exact).
+fn unit2(h: vec2<u32>) -> vec2<f32> {
     return vec2<f32>(
         f32(h.y >> 8u) * (1.0 / 16777216.0),
         f32(((h.y << 16u) | (h.x >> 16u)) & 0xffffffu) * (1.0 / 16777216.0),
@@ -390,15 +395,10 @@ fn sample_offset(x: u32, y: u32, k: u32) -> vec2<f32> {
     }
     let sx = C.b.x;
     let sy = C.b.y;
-    let h = hash4(vec4<u32>(C.a.z, x, y, k));
-    // Integers under 2^24 times 2^-24: exact.
-    let rx = f32(h.y >> 8u) * (1.0 / 16777216.0);
-    let ry = f32(((h.y << 16u) | (h.x >> 16u)) & 0xffffffu) * (1.0 / 16777216.0);
-    // 0.999_999_9 as f32.
-    let top = bitcast<f32>(0x3f7ffffeu);
+    let r = unit2(hash4(vec4<u32>(C.a.z, x, y, k)));
     return vec2<f32>(
-        min(div_rn(f32(k % sx) + rx, f32(sx)), top),
-        min(div_rn(f32(k / sx) + ry, f32(sy)), top),
+        min(div_rn(f32(k % sx) + r.x, f32(sx)), top()),
+        min(div_rn(f32(k / sx) + r.y, f32(sy)), top()),
     );
 }
 
