@@ -5,7 +5,7 @@
 # (../shared/peers/embree_anchor.py) and Blender Cycles' render of the same file and frames
 # (../shared/peers/blender_peer.py), in one run, mean and worst frame.
 #
-#   benches/frame.sh [--quick] [--frames A:B] [--size WxH] [--threads T]
+#   benches/frame.sh [--quick] [--frames A:B] [--size WxH] [--threads T] [--in-flight N]
 #                    [--configs STATIC:DYNAMIC:SEED,...] [--skinned JOINTS:TRIS|none]
 #                    [--camera still|dolly] [--own-materials]
 #                    [--repeat N] [--no-blender] [--out DIR]
@@ -24,6 +24,7 @@
 # 10284:65536:4; a skinned scene of benches/skinned_scene.py, 128 joints and 16,384
 # triangles (Embree's harness poses morph weights only: no Embree column there); frames
 # 0:24 (the first cluster spreading out, the issue's 24 frames); 640x480; threads = nproc;
+# frames in flight: the render's own choice (--in-flight N passes --frames-in-flight N);
 # --repeat 2. --quick: frames 0:6 at 320x240, the first two configurations. Each side runs
 # N times, alternating which goes first; the table shows each side's median over its runs
 # (of each figure) and the ratios run by run. subfield renders with --max-depth 1 (one
@@ -43,6 +44,7 @@ die() { echo "benches/frame.sh: $*" >&2; exit 1; }
 FRAMES=0:24
 SIZE=640x480
 THREADS=$(nproc)
+IN_FLIGHT=""
 CONFIGS=10284:16384:1,10284:16384:2,10284:4096:3,10284:65536:4
 SKINNED=128:16384
 REPEAT=2
@@ -56,6 +58,7 @@ while [ $# -gt 0 ]; do
         --frames) FRAMES=${2:?--frames needs a value}; shift ;;
         --size) SIZE=${2:?--size needs a value}; shift ;;
         --threads) THREADS=${2:?--threads needs a value}; shift ;;
+        --in-flight) IN_FLIGHT=${2:?--in-flight needs a value}; shift ;;
         --configs) CONFIGS=${2:?--configs needs a value}; shift ;;
         --skinned) SKINNED=${2:?--skinned needs a value}; shift ;;
         --repeat) REPEAT=${2:?--repeat needs a value}; shift ;;
@@ -76,6 +79,9 @@ F0=${BASH_REMATCH[1]}; F1=${BASH_REMATCH[2]}
 ((F1 > F0)) || die "--frames A:B needs B > A (got $FRAMES)"
 [[ "$SIZE" =~ ^([0-9]+)x([0-9]+)$ ]] || die "--size needs WxH (got $SIZE)"
 W=${BASH_REMATCH[1]}; H=${BASH_REMATCH[2]}
+[[ -z "$IN_FLIGHT" || "$IN_FLIGHT" =~ ^[1-9][0-9]*$ ]] || die "--in-flight needs a whole number, 1 or more (got $IN_FLIGHT)"
+in_flight=()
+[ -n "$IN_FLIGHT" ] && in_flight=(--frames-in-flight "$IN_FLIGHT")
 [[ "$REPEAT" =~ ^[1-9][0-9]*$ ]] || die "--repeat needs a whole number of runs, 1 or more (got $REPEAT)"
 command -v python3 >/dev/null || die "python3 is missing"
 python3 -c "import numpy" 2>/dev/null || die "python3 cannot import numpy: pip install numpy"
@@ -104,7 +110,7 @@ echo
 echo "* machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//')"
 echo "* load before the run: $(uptime | sed 's/.*load average/load average/')"
 echo "* frames $F0..$F1 (Embree: plus one untimed warm-up), ${W}x${H}, $THREADS threads, $REPEAT run(s) a side, alternating"
-echo "* subfield: $SUBFIELD ($("$SUBFIELD" --version 2>/dev/null || echo '?')), \`subfield render SCENE --frames $F0..$F1 --size ${W}x${H} --max-depth 1 --threads $THREADS --stats\` (static part baked in memory; frame = update + trace + shade of the CSV; wall = the whole command / frames, import and bake included)"
+echo "* subfield: $SUBFIELD ($("$SUBFIELD" --version 2>/dev/null || echo '?')), \`subfield render SCENE --frames $F0..$F1 --size ${W}x${H} --max-depth 1 --threads $THREADS${IN_FLIGHT:+ --frames-in-flight $IN_FLIGHT} --stats\` (static part baked in memory; frame = update + trace + shade of the CSV; wall = the whole command / frames, import and bake included)"
 ((EMBREE)) && echo "* Embree: $(python3 -c 'import embreex; print("embreex", embreex.__version__)'), embree_anchor.py$( ((EQUAL)) && echo ' --whitted') (two-level, per-frame rebuild; frame = eval + update + trace, no shading, no image)"
 if ((EQUAL)); then
     echo "* equal work: every material a half mirror (glb_material.py 0.5 0.0), Embree --whitted; camera $CAMERA"
@@ -151,7 +157,7 @@ for entry in "${scenes[@]}"; do
         rm -rf "$OUT/$tag.frames"
         t0=$(date +%s.%N)
         "$SUBFIELD" render "$scene" -o "$OUT/$tag.frames/frame.####.exr" \
-            --frames "$F0..$F1" --size "${W}x${H}" --max-depth 1 --threads "$THREADS" \
+            --frames "$F0..$F1" --size "${W}x${H}" --max-depth 1 --threads "$THREADS" "${in_flight[@]}" \
             --stats "$csv" --quiet >"$OUT/$tag.subfield.err" 2>&1 ||
             { echo "skipped: subfield render failed: $(tail -n1 "$OUT/$tag.subfield.err")"; return 1; }
         t1=$(date +%s.%N)

@@ -7,9 +7,11 @@
 #
 #   benches/scaling.sh [--threads 1,2,4,...] [--cameras still,dolly] [--frames A:B]
 #                      [--size WxH] [--config STATIC:DYNAMIC:SEED] [--repeat N] [--out DIR]
+#                      [--in-flight N]
 #
 # Defaults: powers of two up to nproc (and nproc itself), both cameras, frames 0:24,
-# 640x480, 10284:16384:1 (the museum class), --repeat 1. Needs what frame.sh needs
+# 640x480, 10284:16384:1 (the museum class), --repeat 1, frames in flight as the render
+# chooses (--in-flight N: --frames-in-flight N at every thread count). Needs what frame.sh needs
 # (python3 with embreex and numpy, gcc); Blender is not run. SUBFIELD=BINARY as in frame.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -19,6 +21,7 @@ n=$(nproc); THREADS=""; t=1
 while ((t < n)); do THREADS+="$t,"; t=$((t * 2)); done; THREADS+="$n"
 CAMERAS=still,dolly; FRAMES=0:24; SIZE=640x480; CONFIG=10284:16384:1; REPEAT=1
 OUT=target/scaling-bench
+IN_FLIGHT=""
 while [ $# -gt 0 ]; do
     case "$1" in
         --threads) THREADS=${2:?--threads needs a list}; shift ;;
@@ -28,7 +31,8 @@ while [ $# -gt 0 ]; do
         --config) CONFIG=${2:?--config needs STATIC:DYNAMIC:SEED}; shift ;;
         --repeat) REPEAT=${2:?--repeat needs a number}; shift ;;
         --out) OUT=${2:?--out needs a folder}; shift ;;
-        -h|--help) sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        --in-flight) IN_FLIGHT=${2:?--in-flight needs a number}; shift ;;
+        -h|--help) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) die "unknown option $1 (see --help)" ;;
     esac
     shift
@@ -51,7 +55,7 @@ for cam in "${cameras[@]}"; do
         md="$OUT/frame_${cam}_t$t.md"
         bash benches/frame.sh --no-blender --skinned none --configs "$CONFIG" --frames "$FRAMES" \
             --size "$SIZE" --threads "$t" --repeat "$REPEAT" --camera "$cam" \
-            --out "$OUT/frame_${cam}_t$t" > "$md" || die "frame.sh failed for $cam at $t threads: see $md"
+            ${IN_FLIGHT:+--in-flight "$IN_FLIGHT"} --out "$OUT/frame_${cam}_t$t" > "$md" || die "frame.sh failed for $cam at $t threads: see $md"
         # The table rows of frame.sh: subfield's wall ms a frame is the last column of its
         # row, Embree's frame mean the second column of its row.
         wall=$(awk -F'|' '/^\| subfield render/ {gsub(/ /,"",$10); print $10}' "$md")

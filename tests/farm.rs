@@ -359,10 +359,15 @@ fn a_dry_run_prints_a_script_naming_both_hashes_and_the_missing_shards() {
         "--look-from=-1,2,6",
         "--look-at",
         "0,0,0",
+        "--frames-in-flight",
+        "2",
         "--dry-run",
     ]);
     let script = String::from_utf8(o.stdout).unwrap();
     assert!(script.contains("#SBATCH --array=0,2-3\n"), "{script}");
+    // Not an option of the pixels (the shards' frames above stay complete), but the
+    // tasks render with it.
+    assert!(script.contains("--frames-in-flight=2"), "{script}");
     assert!(script.contains(&format!("--baked-hash={hash}")), "{script}");
     let scene_hash = subfield::format::hash_file(&scene).unwrap().to_string();
     assert!(

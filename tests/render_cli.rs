@@ -89,8 +89,9 @@ fn frame_of(dir: &Path, sub: &str, k: u32) -> Vec<u8> {
 }
 
 /// Renders `frames` of `scene` through `camera` (96x72, `--max-depth 2`, `--aov aovs`)
-/// into `dir/name` on 2 threads and `dir/name1` on 1, and each frame of `check` alone,
-/// and asserts that each of those frames is the same bytes in all three.
+/// into `dir/name` on 2 threads and `dir/name1` on 1, one frame in flight, `dir/name3`
+/// with three frames in flight on 2 threads, and each frame of `check` alone, and
+/// asserts that each of those frames is the same bytes in all four.
 fn sequence_is_its_frames_alone(
     dir: &Path,
     scene: &Path,
@@ -99,7 +100,7 @@ fn sequence_is_its_frames_alone(
     check: &[u32],
     aovs: &str,
 ) {
-    let render = |sub: &str, frames: &str, threads: &str| {
+    let render = |sub: &str, frames: &str, threads: &str, in_flight: &str| {
         let out = dir.join(format!("{sub}/f.##.exr"));
         ok(&[
             "render",
@@ -118,14 +119,19 @@ fn sequence_is_its_frames_alone(
             aovs,
             "--threads",
             threads,
+            "--frames-in-flight",
+            in_flight,
             "--quiet",
         ]);
     };
-    render(name, frames, "2");
-    render(&format!("{name}1"), frames, "1");
+    render(name, frames, "2", "1");
+    render(&format!("{name}1"), frames, "1", "1");
+    // Three frames at once, each lane's frames three apart (what a lane keeps from its
+    // last frame is three frames old), on two threads.
+    render(&format!("{name}3"), frames, "2", "3");
     for &k in check {
         let alone = format!("{name}-alone{k}");
-        render(&alone, &k.to_string(), "2");
+        render(&alone, &k.to_string(), "2", "1");
         assert!(
             frame_of(dir, name, k) == frame_of(dir, &alone, k),
             "{name} camera: frame {k} of a sequence differs from the frame rendered alone"
@@ -133,6 +139,10 @@ fn sequence_is_its_frames_alone(
         assert!(
             frame_of(dir, name, k) == frame_of(dir, &format!("{name}1"), k),
             "{name} camera: frame {k} differs between 1 and 2 threads"
+        );
+        assert!(
+            frame_of(dir, name, k) == frame_of(dir, &format!("{name}3"), k),
+            "{name} camera: frame {k} differs between one and three frames in flight"
         );
     }
 }
@@ -231,6 +241,9 @@ fn resume_completes_an_interrupted_run_and_redoes_broken_frames() {
         "--size",
         SIZE,
         "--resume",
+        // Rounds of three frames at once: the skipped frame's place taken by the next.
+        "--frames-in-flight",
+        "3",
     ]);
     let log = String::from_utf8_lossy(&o.stderr);
     assert!(log.contains("(1 skipped as complete)"), "{log}");
@@ -583,6 +596,10 @@ fn bad_input_gives_one_line_and_writes_nothing() {
         (vec![&sc, "-o", &p, "--size", "0x10"], "--size"),
         (vec![&sc, "-o", &p, "--shard", "2/2"], "--shard"),
         (vec![&sc, "-o", &p, "--shard", "1/0"], "--shard"),
+        (
+            vec![&sc, "-o", &p, "--frames-in-flight", "0"],
+            "--frames-in-flight 0",
+        ),
         (vec![&sc, "-o", &p, "--animation", "dance"], "dance"),
         (vec![&sc, "-o", &p, "--look-from", "0,0,1"], "--look-at"),
         (

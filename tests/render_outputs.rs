@@ -2,7 +2,7 @@
 //! 24, Ctrl-C): outputs that are not regular files refused before anything is rendered,
 //! a huge frame range that costs no memory before frame 0, a full disk that names the
 //! file and the cause and leaves complete frames to resume from, and Ctrl-C that stops
-//! after the frame in flight.
+//! after the frames in flight.
 
 mod common;
 
@@ -568,9 +568,9 @@ fn a_stopping_signal_stops_after_the_frame_in_flight_and_resume_completes() {
     assert_eq!(want.len(), 48);
 
     for (signal, code, said) in [
-        ("INT", 130, "interrupt: stopping after the frame in flight"),
-        ("TERM", 143, "SIGTERM): stopping after the frame in flight"),
-        ("HUP", 129, "SIGHUP): stopping after the frame in flight"),
+        ("INT", 130, "interrupt: stopping after the frames in flight"),
+        ("TERM", 143, "SIGTERM): stopping after the frames in flight"),
+        ("HUP", 129, "SIGHUP): stopping after the frames in flight"),
     ] {
         let part = dir.join(format!("part-{signal}"));
         let mut child = Command::new(exe())

@@ -65,7 +65,7 @@ Exit codes (the same for every command):
   3            bad input: scene, bake or option values (retrying cannot help)
   4            a bake or scene file whose hash is not the one expected (re-bake or resubmit)
   5            I/O or resource failure: disk full, out of memory, GPU lost (retry, perhaps elsewhere)
-  129/130/143  stopped by SIGHUP/SIGINT/SIGTERM after the frame in flight (--resume carries on)";
+  129/130/143  stopped by SIGHUP/SIGINT/SIGTERM after the frames in flight (--resume carries on)";
 
 /// The class of a command's error: the first cause in its chain (outermost first) that
 /// is one of the library's typed errors or an I/O error decides. A message the command

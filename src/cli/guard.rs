@@ -1,6 +1,6 @@
 //! Signals turned into words. **SIGINT** (Ctrl-C), **SIGTERM** (Slurm's `scancel`, time
 //! limit and preemption; most farm managers) and **SIGHUP** during a render: the first
-//! stops the run after the frame in flight (the render's cancel flag; the CLI then says
+//! stops the run after the frames in flight (the render's cancel flag; the CLI then says
 //! what was written, that `--resume` carries on, and exits with 128 + the signal: 130,
 //! 143, 129), a second stops at once (exit 128 + the second signal; a frame being
 //! written is lost, its hidden temporary removed by the next run). **SIGBUS**: one clear line instead of a bare signal when a baked file mapped
@@ -83,30 +83,30 @@ static INTERRUPT: OnceLock<Arc<AtomicBool>> = OnceLock::new();
 /// The signal that set [`INTERRUPT`] (0 while none has): the exit status is 128 + it.
 static SIGNAL: AtomicI32 = AtomicI32::new(0);
 
-/// The signals that stop a render after the frame in flight, each with the line the
+/// The signals that stop a render after the frames in flight, each with the line the
 /// first one writes, as text and as a `--log-format json` event. SIGTERM is how Slurm
 /// (`scancel`, a time limit, preemption) and most farm managers stop a task before they
 /// SIGKILL it; SIGHUP is a closed terminal or ssh session.
 const STOP_SIGNALS: [(libc::c_int, &[u8], &[u8]); 3] = [
     (
         libc::SIGINT,
-        b"\ninterrupt: stopping after the frame in flight (Ctrl-C again stops at once)\n",
-        b"{\"event\":\"signal\",\"signal\":\"SIGINT\",\"message\":\"stopping after the frame in flight\"}\n",
+        b"\ninterrupt: stopping after the frames in flight (Ctrl-C again stops at once)\n",
+        b"{\"event\":\"signal\",\"signal\":\"SIGINT\",\"message\":\"stopping after the frames in flight\"}\n",
     ),
     (
         libc::SIGTERM,
-        b"\nterminated (SIGTERM): stopping after the frame in flight (a second signal stops at once)\n",
-        b"{\"event\":\"signal\",\"signal\":\"SIGTERM\",\"message\":\"stopping after the frame in flight\"}\n",
+        b"\nterminated (SIGTERM): stopping after the frames in flight (a second signal stops at once)\n",
+        b"{\"event\":\"signal\",\"signal\":\"SIGTERM\",\"message\":\"stopping after the frames in flight\"}\n",
     ),
     (
         libc::SIGHUP,
-        b"\nhangup (SIGHUP): stopping after the frame in flight (a second signal stops at once)\n",
-        b"{\"event\":\"signal\",\"signal\":\"SIGHUP\",\"message\":\"stopping after the frame in flight\"}\n",
+        b"\nhangup (SIGHUP): stopping after the frames in flight (a second signal stops at once)\n",
+        b"{\"event\":\"signal\",\"signal\":\"SIGHUP\",\"message\":\"stopping after the frames in flight\"}\n",
     ),
 ];
 const STOPPED: &[u8] =
-    b"\ninterrupt: stopped at once; the frame in flight is lost, run again with --resume\n";
-const STOPPED_JSON: &[u8] = b"{\"event\":\"signal\",\"message\":\"stopped at once; the frame in flight is lost, run again with --resume\"}\n";
+    b"\ninterrupt: stopped at once; the frames in flight are lost, run again with --resume\n";
+const STOPPED_JSON: &[u8] = b"{\"event\":\"signal\",\"message\":\"stopped at once; the frames in flight are lost, run again with --resume\"}\n";
 
 /// Whether the handlers write JSON events (`--log-format json`) rather than text.
 static JSON_LINES: AtomicBool = AtomicBool::new(false);

@@ -164,6 +164,11 @@ pub struct Args {
     /// Worker threads; 0 or absent: all cores.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Frames rendered at once on the CPU, sharing the threads, each with its own
+    /// moving layer and buffers (about 300 MB a frame at 640x480); the same bytes
+    /// whatever N. Absent: one for every 8 threads (on the GPU always one).
+    #[arg(long, value_name = "N")]
+    pub frames_in_flight: Option<usize>,
     /// No progress or report.
     #[arg(long, short)]
     pub quiet: bool,
@@ -343,6 +348,13 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         overscan: a.overscan,
         motion_blur: motion_blur(a)?,
         cancel: Default::default(),
+        frames_in_flight: match a.frames_in_flight {
+            Some(0) => bail!(
+                "--frames-in-flight 0: give 1 or more, or leave it out to let the render choose"
+            ),
+            Some(n) => n,
+            None => 0,
+        },
     })
 }
 
@@ -405,7 +417,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
 }
 
 /// Renders with progress and a closing report (shared with `subfield demo`). Ctrl-C,
-/// SIGTERM or SIGHUP stops the run after the frame in flight: a line says what was
+/// SIGTERM or SIGHUP stops the run after the frames in flight: a line says what was
 /// written and how to carry on, and the answer is `None` (the command then exits with
 /// 128 + the signal).
 pub fn drive(

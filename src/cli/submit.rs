@@ -207,6 +207,10 @@ fn render_flags(r: &render_cmd::Args) -> Vec<String> {
     opt("overscan", (r.overscan > 0).then(|| r.overscan.to_string()));
     opt("shutter", r.shutter.map(|x| x.to_string()));
     opt("motion-steps", r.motion_steps.map(|k| k.to_string()));
+    opt(
+        "frames-in-flight",
+        r.frames_in_flight.map(|n| n.to_string()),
+    );
     if r.float {
         v.push("--float".into());
     }

@@ -8,7 +8,7 @@
 //! * [`openjd`]: the same work as an Open Job Description job template (frame chunks).
 //!
 //! Each task runs `subfield render --resume` on its share of the frames, so a task that
-//! dies, is cancelled or requeued loses at most the frame in flight, and submitting the
+//! dies, is cancelled or requeued loses at most the frames in flight, and submitting the
 //! same job again renders only what is missing. Temporaries carry the host's name
 //! ([`crate::atomic`]), so nodes sharing an output folder never remove each other's.
 

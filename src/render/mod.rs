@@ -148,7 +148,7 @@ pub enum RenderError {
         #[source]
         source: std::io::Error,
     },
-    /// The run was stopped through [`RenderOptions::cancel`] after the frame in flight:
+    /// The run was stopped through [`RenderOptions::cancel`] after the frames in flight:
     /// every frame file written is complete, and a run with `resume` carries on.
     #[error("interrupted: {} written by this run ({skipped} complete before it), {left} left; the same command with --resume carries on", crate::plural(*written as u64, "frame"))]
     Cancelled {

@@ -442,7 +442,7 @@ impl Default for ShadingOptions {
     }
 }
 
-/// A flag that stops a render after the frame in flight when set (from another thread or
+/// A flag that stops a render after the frames in flight when set (from another thread or
 /// a signal handler): [`render_sequence`](super::render_sequence) then answers
 /// [`RenderError::Cancelled`](super::RenderError::Cancelled). Two flags are equal when
 /// they are the same flag.
@@ -585,8 +585,13 @@ pub struct RenderOptions {
     pub overscan: u32,
     /// Motion blur; `None` (or a shutter of 0) renders each frame at its own time.
     pub motion_blur: Option<MotionBlur>,
-    /// Stops the run after the frame in flight (Ctrl-C); not an option of the pixels.
+    /// Stops the run after the frames in flight (Ctrl-C); not an option of the pixels.
     pub cancel: CancelFlag,
+    /// `--frames-in-flight N`: frames the CPU path renders at once, each with its own
+    /// moving layer and buffers, all sharing the threads (0: chosen from the thread
+    /// count, [`RenderOptions::lanes`]). Not an option of the pixels: a frame is the same
+    /// bytes whichever frames render beside it.
+    pub frames_in_flight: usize,
 }
 
 impl Default for RenderOptions {
@@ -618,6 +623,7 @@ impl Default for RenderOptions {
             overscan: 0,
             motion_blur: None,
             cancel: CancelFlag::default(),
+            frames_in_flight: 0,
         }
     }
 }

@@ -8,6 +8,7 @@ use std::sync::mpsc;
 use std::time::Instant;
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use super::aov::{CryptoNames, FrameHeader};
 use super::camera::CameraModel;
@@ -344,8 +345,8 @@ struct Written {
     plot: PlotBars,
     preview_written: Option<PathBuf>,
     first_error: Option<RenderError>,
-    /// The buffers of the last frame written, for the next frame to reuse.
-    spare: Option<FrameBuffers>,
+    /// The buffers of the frames written, for the next frames to reuse.
+    spare: Vec<FrameBuffers>,
 }
 
 impl Written {
@@ -373,7 +374,7 @@ impl Written {
                 if job.preview.is_some() {
                     self.preview_written = job.preview.clone();
                 }
-                self.spare = Some(job.frame);
+                self.spare.push(job.frame);
                 on_event(RenderEvent::Frame(&FrameReport {
                     frame: st.frame,
                     index: job.index,
@@ -407,13 +408,71 @@ fn take_preview(pending: &mut PreviewPending, frame: u32) -> Option<PathBuf> {
     }
 }
 
+/// What one frame in flight renders with: a moving layer (or the GPU's parts) and the
+/// buffers a frame fills, kept from one of its frames to its next.
+struct Lane {
+    tracing: Tracing,
+    dyn_soup: TriangleSoup,
+    next_soup: TriangleSoup,
+    scratch: FrameScratch,
+}
+
+impl Lane {
+    fn new(tracing: Tracing) -> Lane {
+        Lane {
+            tracing,
+            dyn_soup: TriangleSoup::new(),
+            next_soup: TriangleSoup::new(),
+            scratch: FrameScratch::default(),
+        }
+    }
+
+    fn render(
+        &mut self,
+        frames: &Frames<'_>,
+        static_bounds: Option<(Vec3, Vec3)>,
+        frame: u32,
+    ) -> Result<(FrameBuffers, FrameHeader, FrameStats), RenderError> {
+        frames.render_one(
+            static_bounds,
+            &mut self.tracing,
+            &mut self.dyn_soup,
+            &mut self.next_soup,
+            &mut self.scratch,
+            frame,
+        )
+    }
+}
+
+/// Frames the CPU path renders at once: `asked` (`--frames-in-flight`), or for 0 one a
+/// [`THREADS_A_FRAME`] threads of the pool's `threads`, two at least from two threads
+/// on and [`MAX_AUTO_LANES`] at most. On 2 cores two frames in flight made a dollying
+/// camera's whole render 10 % faster and a still camera's the same (benches/PERF.md,
+/// issue 38, frames in flight): a frame alone leaves the threads waiting at the ends
+/// of its many parallel loops, which another frame's work fills.
+pub(super) fn lanes(asked: usize, threads: usize) -> usize {
+    match asked {
+        0 if threads < 2 => 1,
+        0 => (threads / THREADS_A_FRAME).clamp(2, MAX_AUTO_LANES),
+        n => n,
+    }
+}
+
+/// The threads a frame in flight gets when `--frames-in-flight` is left to the render.
+const THREADS_A_FRAME: usize = 4;
+
+/// The most frames in flight the render chooses by itself (each costs its buffers:
+/// about 150 MB at 640x480 for a moving camera, 330 MB for a still one, 480 MB at
+/// 1920x1080).
+const MAX_AUTO_LANES: usize = 8;
+
 impl Frames<'_> {
     /// Every planned frame rendered (or skipped when resumed) and handed to a writer
-    /// thread; stops at the first error, once the writer has answered for the frames
-    /// sent.
+    /// thread in order, several at once on the CPU (a round of one a lane); stops at
+    /// the first error, once the writer has answered for the frames sent.
     fn run(
         &self,
-        mut tracing: Tracing,
+        tracing: Tracing,
         stats_file: Option<(StatsFile, PathBuf)>,
         on_event: &mut dyn FnMut(RenderEvent<'_>),
     ) -> Result<Done, RenderError> {
@@ -434,7 +493,7 @@ impl Frames<'_> {
             plot: PlotBars::default(),
             preview_written: None,
             first_error: None,
-            spare: None,
+            spare: Vec::new(),
         };
         let mut skipped = 0usize;
         let mut replaced = 0usize;
@@ -444,8 +503,25 @@ impl Frames<'_> {
         let mut cancelled = false;
         let mut writer_gone = false;
 
+        // The frames rendered at once (`--frames-in-flight`): lanes of their own moving
+        // layer and buffers; the GPU traces one frame at a time.
+        let lanes_wanted = match &tracing {
+            Tracing::Cpu(_) => lanes(opts.frames_in_flight, rayon::current_num_threads()),
+            #[cfg(feature = "gpu")]
+            Tracing::Gpu(_) => 1,
+        }
+        .clamp(1, total.max(1));
+        let mut lanes: Vec<Lane> = std::iter::once(Lane::new(tracing))
+            .chain((1..lanes_wanted).map(|_| {
+                Lane::new(Tracing::Cpu(Box::new(DynamicLayer::for_triangles(
+                    plan.split.dynamic_triangles,
+                ))))
+            }))
+            .collect();
+
         std::thread::scope(|sc| {
-            let (tx, rx) = mpsc::sync_channel::<Job>(1);
+            // A round's frames wait here while the writer writes the round before.
+            let (tx, rx) = mpsc::sync_channel::<Job>(lanes.len());
             let (done_tx, done_rx) = mpsc::channel::<Result<(Job, f64), RenderError>>();
             sc.spawn(move || {
                 for job in rx {
@@ -457,75 +533,92 @@ impl Frames<'_> {
                 }
             });
 
-            let mut dyn_soup = TriangleSoup::new();
-            let mut next_soup = TriangleSoup::new();
-            let mut scratch = FrameScratch::default();
             let mut preview_pending = preview_frame;
             // The render threads' CPU time a frame, beside its wall time (`--stats`).
             let cpu_clock = super::cpu_clock::CpuClock::of_pool();
-            for (index, frame) in plan.frames.iter().enumerate() {
+            let mut pending = plan.frames.iter().enumerate().peekable();
+            'rounds: while pending.peek().is_some() {
                 while let Ok(r) = done_rx.try_recv() {
                     written.finish(r, on_event);
                 }
                 if written.first_error.is_some() {
                     break;
                 }
-                // Stop between frames: the one in flight is written, nothing else started.
+                // Stop between rounds: the frames in flight are written, nothing else
+                // started.
                 if opts.cancel.is_set() {
                     cancelled = true;
                     break;
                 }
-                done += 1;
-                let path = plan.pattern.path(frame);
-                let found = resumed(opts, &path, &self.options);
-                replaced += usize::from(found == Some(FrameFile::OtherOptions));
-                if found == Some(FrameFile::Complete) {
-                    skipped += 1;
-                    on_event(RenderEvent::Frame(&FrameReport {
-                        frame,
-                        index,
-                        total,
-                        path,
-                        skipped: true,
-                        stats: None,
-                    }));
-                    continue;
+                // The round: the next frames to render, one a lane, in order; the frames
+                // resumed before them skipped.
+                let mut round: Vec<(usize, u32, PathBuf)> = Vec::with_capacity(lanes.len());
+                while round.len() < lanes.len() {
+                    let Some((index, frame)) = pending.next() else {
+                        break;
+                    };
+                    done += 1;
+                    let path = plan.pattern.path(frame);
+                    let found = resumed(opts, &path, &self.options);
+                    replaced += usize::from(found == Some(FrameFile::OtherOptions));
+                    if found == Some(FrameFile::Complete) {
+                        skipped += 1;
+                        on_event(RenderEvent::Frame(&FrameReport {
+                            frame,
+                            index,
+                            total,
+                            path,
+                            skipped: true,
+                            stats: None,
+                        }));
+                    } else {
+                        round.push((index, frame, path));
+                    }
                 }
                 // Written frames' buffers come back for the next.
-                if let Some(fb) = written.spare.take() {
-                    scratch.recycle(fb);
+                for (lane, fb) in lanes.iter_mut().zip(written.spare.drain(..)) {
+                    lane.scratch.recycle(fb);
                 }
                 let cpu_start = cpu_clock.as_ref().and_then(|c| c.now_ns());
-                match self.render_one(
-                    static_bounds,
-                    &mut tracing,
-                    &mut dyn_soup,
-                    &mut next_soup,
-                    &mut scratch,
-                    frame,
-                ) {
-                    Ok((fb, header, mut st)) => {
-                        if let Some(c) = &cpu_clock {
-                            st.cpu_ms = c.ms_since(cpu_start);
-                            st.threads = c.threads();
+                let rendered: Vec<_> = match round.as_slice() {
+                    [] => continue,
+                    [(_, frame, _)] => vec![lanes[0].render(self, static_bounds, *frame)],
+                    _ => lanes
+                        .par_iter_mut()
+                        .zip(round.par_iter())
+                        .map(|(lane, (_, frame, _))| lane.render(self, static_bounds, *frame))
+                        .collect(),
+                };
+                // The round's CPU time, shared by its frames.
+                let cpu_ms = cpu_clock
+                    .as_ref()
+                    .and_then(|c| c.ms_since(cpu_start))
+                    .map(|ms| ms / round.len() as f64);
+                for ((index, frame, path), r) in round.into_iter().zip(rendered) {
+                    match r {
+                        Ok((fb, header, mut st)) => {
+                            if let Some(c) = &cpu_clock {
+                                st.cpu_ms = cpu_ms;
+                                st.threads = c.threads();
+                            }
+                            let job = Job {
+                                index,
+                                path,
+                                frame: fb,
+                                header,
+                                stats: st,
+                                preview: take_preview(&mut preview_pending, frame),
+                            };
+                            if tx.send(job).is_err() {
+                                // The writer stopped: its error is on `done_rx`.
+                                writer_gone = true;
+                                break 'rounds;
+                            }
                         }
-                        let job = Job {
-                            index,
-                            path,
-                            frame: fb,
-                            header,
-                            stats: st,
-                            preview: take_preview(&mut preview_pending, frame),
-                        };
-                        if tx.send(job).is_err() {
-                            // The writer stopped: its error is on `done_rx`.
-                            writer_gone = true;
-                            break;
+                        Err(e) => {
+                            written.first_error.get_or_insert(e.in_frame(frame));
+                            break 'rounds;
                         }
-                    }
-                    Err(e) => {
-                        written.first_error.get_or_insert(e.in_frame(frame));
-                        break;
                     }
                 }
             }
