@@ -32,7 +32,7 @@ while [ $# -gt 0 ]; do
         --repeat) REPEAT=${2:?--repeat needs a number}; shift ;;
         --out) OUT=${2:?--out needs a folder}; shift ;;
         --in-flight) IN_FLIGHT=${2:?--in-flight needs a number}; shift ;;
-        -h|--help) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -h|--help) sed -n '2,15p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) die "unknown option $1 (see --help)" ;;
     esac
     shift
