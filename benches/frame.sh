@@ -66,7 +66,7 @@ while [ $# -gt 0 ]; do
         --camera) CAMERA=${2:?--camera needs still or dolly}; shift ;;
         --own-materials) EQUAL=0 ;;
         --out) OUT=${2:?--out needs a value}; shift ;;
-        -h|--help) sed -n '2,40p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -h|--help) sed -n '2,38p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) die "unknown option $1 (see --help)" ;;
     esac
     shift
