@@ -1,7 +1,14 @@
 //! The sequence loop: the static part opened or baked, then frame by frame the scene
 //! posed, the dynamic layer updated, the frame traced and shaded and handed to the
-//! writer thread (a channel of capacity 1, so one frame is written while the next is
-//! traced), and the tables written at the end.
+//! writer thread (a channel of a round's frames, so one round is written while the next
+//! is traced), and the tables written at the end.
+//!
+//! Frames in flight (`--frames-in-flight`): on the CPU the loop renders a round of
+//! frames at once, one a lane (a moving layer, soups and scratch of its own, kept from
+//! one of its frames to its next), the lanes side by side on the one pool, each frame's
+//! own parallel loops nested in it; the round's frames go to the writer in order. What
+//! a lane keeps (the static memo, the replay) is exact, so a frame's bytes do not depend
+//! on its lane or on the frames rendered before it.
 
 use std::path::PathBuf;
 use std::sync::mpsc;
