@@ -118,6 +118,12 @@ run)
         --out /tmp/scaling-hd >"$out/scaling-hd.md" 2>>"$out/scaling.err" &&
         echo "scaling (1920x1080): done" || echo "scaling (1920x1080): FAILED"
     tail -n 6 "$out/scaling-hd.md"
+    # The rows above render as many frames at once as the render chooses at each thread
+    # count (--frames-in-flight left out); one frame at a time on all cores beside them.
+    timeout 120 bash benches/scaling.sh --threads "$(nproc)" --frames 0:24 --in-flight 1 \
+        --out /tmp/scaling-one >"$out/scaling-one.md" 2>>"$out/scaling.err" &&
+        echo "scaling (one frame in flight): done" || echo "scaling (one frame in flight): FAILED"
+    tail -n 4 "$out/scaling-one.md"
     for cam in still dolly; do
         d=/tmp/scaling/frame_${cam}_t
         python3 benches/efficiency.py --predict "$(nproc)" "$(ls ${d}1/*.subfield.1.csv):$(ls ${d}1/*.subfield.1.wall)" \
