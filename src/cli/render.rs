@@ -165,8 +165,9 @@ pub struct Args {
     #[arg(long)]
     pub threads: Option<usize>,
     /// Frames rendered at once on the CPU, sharing the threads, each with its own
-    /// moving layer and buffers (about 300 MB a frame at 640x480); the same bytes
-    /// whatever N. Absent: one for every 8 threads (on the GPU always one).
+    /// moving layer and buffers (150-330 MB a frame at 640x480); the same bytes
+    /// whatever N. Absent: one a 4 threads, 2 at least from 2 threads, 8 at most,
+    /// within half the free memory (on the GPU always one).
     #[arg(long, value_name = "N")]
     pub frames_in_flight: Option<usize>,
     /// No progress or report.

@@ -453,25 +453,45 @@ impl Lane {
 
 /// Frames the CPU path renders at once: `asked` (`--frames-in-flight`), or for 0 one a
 /// [`THREADS_A_FRAME`] threads of the pool's `threads`, two at least from two threads
-/// on and [`MAX_AUTO_LANES`] at most. On 2 cores two frames in flight made a dollying
-/// camera's whole render 10 % faster and a still camera's the same (benches/PERF.md,
-/// issue 38, frames in flight): a frame alone leaves the threads waiting at the ends
-/// of its many parallel loops, which another frame's work fills.
-pub(super) fn lanes(asked: usize, threads: usize) -> usize {
-    match asked {
-        0 if threads < 2 => 1,
-        0 => (threads / THREADS_A_FRAME).clamp(2, MAX_AUTO_LANES),
-        n => n,
+/// on and [`MAX_AUTO_LANES`] at most, and no more than half the memory `available`
+/// (bytes; `None` where unknown) holds at [`LANE_BYTES_A_PIXEL`] for each of a frame's
+/// `pixels`. On 2 cores two frames in flight made a dollying camera's whole render 8 %
+/// faster, and a still camera's 4-9 % over 72 frames (benches/PERF.md, issue 38,
+/// frames in flight): a frame alone leaves the threads waiting at the ends of its many
+/// parallel loops, which another frame's work fills.
+pub(super) fn lanes(asked: usize, threads: usize, pixels: u64, available: Option<u64>) -> usize {
+    if asked > 0 {
+        return asked;
     }
+    if threads < 2 {
+        return 1;
+    }
+    let wanted = (threads / THREADS_A_FRAME).clamp(2, MAX_AUTO_LANES);
+    let fit = available.map_or(wanted, |bytes| {
+        let lane = pixels.max(1).saturating_mul(LANE_BYTES_A_PIXEL);
+        usize::try_from(bytes / 2 / lane).unwrap_or(usize::MAX)
+    });
+    wanted.min(fit).max(1)
 }
 
 /// The threads a frame in flight gets when `--frames-in-flight` is left to the render.
 const THREADS_A_FRAME: usize = 4;
 
-/// The most frames in flight the render chooses by itself (each costs its buffers:
-/// about 150 MB at 640x480 for a moving camera, 330 MB for a still one, 480 MB at
-/// 1920x1080).
+/// The most frames in flight the render chooses by itself.
 const MAX_AUTO_LANES: usize = 8;
+
+/// What a frame in flight may cost a pixel of the frame, for the render's own choice:
+/// measured 490 bytes (a moving camera) and 1,070 (a still one: its memo and replay) at
+/// 640x480, 230 at 1920x1080 (benches/PERF.md, issue 38, frames in flight).
+const LANE_BYTES_A_PIXEL: u64 = 1200;
+
+/// The memory the system can give without swapping (Linux's `MemAvailable`), if known.
+fn available_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
+}
 
 impl Frames<'_> {
     /// Every planned frame rendered (or skipped when resumed) and handed to a writer
@@ -513,7 +533,13 @@ impl Frames<'_> {
         // The frames rendered at once (`--frames-in-flight`): lanes of their own moving
         // layer and buffers; the GPU traces one frame at a time.
         let lanes_wanted = match &tracing {
-            Tracing::Cpu(_) => lanes(opts.frames_in_flight, rayon::current_num_threads()),
+            Tracing::Cpu(_) => lanes(
+                opts.frames_in_flight,
+                rayon::current_num_threads(),
+                u64::from(opts.width + 2 * opts.overscan)
+                    * u64::from(opts.height + 2 * opts.overscan),
+                available_memory(),
+            ),
             #[cfg(feature = "gpu")]
             Tracing::Gpu(_) => 1,
         }
@@ -885,5 +911,30 @@ impl Frames<'_> {
                 threads: 0,
             },
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_in_flight_follow_the_threads_and_fit_the_memory() {
+        let px = 640 * 480;
+        // Asked for: taken as asked.
+        assert_eq!(lanes(3, 1, px, Some(0)), 3);
+        // Left to the render: one frame on one thread, two from two threads, one a
+        // four threads beyond, eight at most.
+        assert_eq!(lanes(0, 1, px, None), 1);
+        assert_eq!(lanes(0, 2, px, None), 2);
+        assert_eq!(lanes(0, 8, px, None), 2);
+        assert_eq!(lanes(0, 16, px, None), 4);
+        assert_eq!(lanes(0, 128, px, None), MAX_AUTO_LANES);
+        // Half the available memory at LANE_BYTES_A_PIXEL a pixel, one at least.
+        let lane = px * LANE_BYTES_A_PIXEL;
+        assert_eq!(lanes(0, 16, px, Some(6 * lane)), 3);
+        assert_eq!(lanes(0, 16, px, Some(lane)), 1);
+        assert_eq!(lanes(0, 16, px, Some(0)), 1);
+        assert_eq!(lanes(0, 16, 3840 * 2160, Some(64 << 30)), 3);
     }
 }
