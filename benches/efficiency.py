@@ -19,7 +19,8 @@ threads' CPU time over update + trace + shade) gives how busy the threads were: 
 The process's time outside the frame loop (import, bake, the last frame's write, start-up
 and exit: wall − the sum of the frames' update + trace + shade) is reported on its own.
 Frame 0 of a still camera is left out of the medians (it fills the static hits kept for
-later frames); all frames count in the wall time.
+later frames); all frames count in the wall time. The phases are one frame's: render the
+CSVs with `--frames-in-flight 1` (several frames in flight overlap their phases).
 """
 import csv
 import statistics
