@@ -85,16 +85,20 @@ run)
     # the CPU path on all the host's cores, wall time of the whole process and --stats.
     cp /tmp/museum.glb /tmp/museum-hm.glb
     python3 .device/peers/glb_material.py /tmp/museum-hm.glb 0.5 0.0 >/dev/null
+    # `gpu1`: the GPU one frame at a time (`gpu` renders two at once, its default).
     for size in 640x480 1920x1080; do
-        for dev in gpu cpu; do
+        for dev in gpu gpu1 cpu; do
             t0=$(date +%s.%N)
+            inflight=(); [ "$dev" = gpu1 ] && inflight=(--frames-in-flight 1)
             timeout 150 .device/gpu/subfield render /tmp/museum-hm.glb -o "/tmp/frames-$dev-$size/f.####.exr" \
-                --frames 0..60 --size "$size" --max-depth 1 --device "$dev" \
+                --frames 0..60 --size "$size" --max-depth 1 --device "${dev%1}" "${inflight[@]}" \
                 --stats "$out/whole-$dev-$size.csv" >"$out/whole-$dev-$size.log" 2>&1 &&
                 echo "whole frames, $dev, $size: $(echo "$(date +%s.%N) $t0" | awk '{printf "%.1f ms a frame", ($1-$2)*1000/60}')" ||
                 echo "whole frames, $dev, $size: FAILED (see $out/whole-$dev-$size.log)"
             grep -h "note:" "$out/whole-$dev-$size.log" | head -n 1
         done
+        cmp -s "/tmp/frames-gpu-$size/f.0030.exr" "/tmp/frames-gpu1-$size/f.0030.exr" &&
+            echo "frames in flight, $size: the same bytes" || echo "frames in flight, $size: DIFFER"
     done
     # The demo (glossy marble, glass, mirrors, depth 4: wholly on the GPU frame path),
     # 60 frames at 640x480, on each device.

@@ -93,8 +93,9 @@ pub struct GpuShading {
     /// A small buffer for each storage binding a kernel does not read, and a camera.
     dummies: Vec<wgpu::Buffer>,
     dummy_camera: wgpu::Buffer,
-    /// The last chunk's buffers, for the next chunk or frame that fits them.
-    room: std::sync::Mutex<Option<Room>>,
+    /// The last chunks' buffers, for the next chunks or frames that fit them: one a
+    /// frame in flight (frames rendered at once each take one), [`ROOMS`] at most.
+    room: std::sync::Mutex<Vec<Room>>,
     /// The environment map (shade.wgsl's `env`) and what names it, uploaded once for
     /// the frames that use it ([`GpuShading::set_environment`]).
     env: std::sync::Mutex<Option<(String, GpuEnvironment)>>,
@@ -103,6 +104,10 @@ pub struct GpuShading {
 /// An environment map on the GPU ([`GpuShading::environment`]).
 #[derive(Clone, Debug)]
 pub struct GpuEnvironment(std::sync::Arc<wgpu::Buffer>);
+
+/// Chunk buffers kept for later chunks, at most: one for each of the frames the GPU
+/// path renders at once (`--frames-in-flight`, at most this many on the GPU).
+pub const ROOMS: usize = 4;
 
 /// What a chunk's buffers hold: items a level, shadow rays a level, shadow ray
 /// candidates (items × lights), samples, pixels.
@@ -318,7 +323,7 @@ impl GpuShading {
             textures,
             dummies,
             dummy_camera,
-            room: std::sync::Mutex::new(None),
+            room: std::sync::Mutex::new(Vec::new()),
             env: std::sync::Mutex::new(None),
         })
     }
@@ -583,10 +588,20 @@ impl GpuShading {
                 0
             },
         };
-        let kept = self.room.lock().ok().and_then(|mut g| g.take());
+        // One that holds the chunk, else new buffers (a room too small is dropped).
+        let kept = self.room.lock().ok().and_then(|mut g| {
+            let at = g.iter().position(|r| r.size.holds(&size));
+            match at {
+                Some(i) => Some(g.swap_remove(i)),
+                None => {
+                    g.pop();
+                    None
+                }
+            }
+        });
         let room = match kept {
-            Some(r) if r.size.holds(&size) => r,
-            _ => Room::new(dev, size)?,
+            Some(r) => r,
+            None => Room::new(dev, size)?,
         };
         let Room {
             rays,
@@ -811,7 +826,9 @@ impl GpuShading {
         };
         // Kept for the next chunk (only once everything read back is read).
         if let Ok(mut g) = self.room.lock() {
-            *g = Some(room);
+            if g.len() < ROOMS {
+                g.push(room);
+            }
         }
         if t[0] != 0 {
             return Ok(None);

@@ -25,7 +25,7 @@ mod trace;
 pub use device::{AdapterPolicy, GpuDevice};
 #[cfg(test)]
 pub(crate) use frame::MAX_PASSES;
-pub use frame::{packed_on_cpu, ChunkOut, GpuEnvironment, GpuShading, GpuSurfaces};
+pub use frame::{packed_on_cpu, ChunkOut, GpuEnvironment, GpuShading, GpuSurfaces, ROOMS};
 pub use moving::GpuMoving;
 pub use shade_tables::{
     CameraRays, GpuTextures, ShadeEmitter, ShadeLight, ShadeMaterial, ShadeParams, SurfaceTriangle,

@@ -3,10 +3,12 @@
 //! writer thread (a channel of a round's frames, so one round is written while the next
 //! is traced), and the tables written at the end.
 //!
-//! Frames in flight (`--frames-in-flight`): on the CPU the loop renders a round of
-//! frames at once, one a lane (a moving layer, soups and scratch of its own, kept from
-//! one of its frames to its next), the lanes side by side on the one pool, each frame's
-//! own parallel loops nested in it; the round's frames go to the writer in order. What
+//! Frames in flight (`--frames-in-flight`): the loop renders a round of frames at once,
+//! one a lane (a moving layer, or moving triangles on the GPU, soups and scratch of its
+//! own, kept from one of its frames to its next), the lanes side by side on the one
+//! pool, each frame's own parallel loops nested in it; the round's frames go to the
+//! writer in order. On the GPU the lanes share the adapter, the static part and the
+//! frame path's kernels, and one lane's CPU side runs while another's kernels do. What
 //! a lane keeps (the static memo, the replay) is exact, so a frame's bytes do not depend
 //! on its lane or on the frames rendered before it.
 
@@ -193,14 +195,38 @@ enum Tracing {
     Gpu(Box<GpuParts>),
 }
 
+/// A frame in flight's part of the GPU: the parts every frame shares (the adapter,
+/// the static part, the frame path's kernels) and its own moving triangles.
 #[cfg(feature = "gpu")]
 struct GpuParts {
+    shared: std::sync::Arc<GpuShared>,
+    moving: crate::gpu::GpuMoving,
+}
+
+#[cfg(feature = "gpu")]
+struct GpuShared {
     dev: crate::gpu::GpuDevice,
     stat: crate::gpu::GpuStatic,
-    moving: crate::gpu::GpuMoving,
     /// The GPU frame path's kernels and static surfaces, when the scene is inside its
     /// subset (`gpu_frame`).
     shading: Option<crate::gpu::GpuShading>,
+}
+
+#[cfg(feature = "gpu")]
+impl GpuParts {
+    /// Another frame in flight's parts: the same shared ones, moving triangles of its own.
+    fn another(&self) -> Result<GpuParts, RenderError> {
+        Ok(GpuParts {
+            shared: self.shared.clone(),
+            moving: crate::gpu::GpuMoving::new(&self.shared.dev).map_err(|source| {
+                RenderError::Gpu {
+                    device: "gpu",
+                    frame: None,
+                    source,
+                }
+            })?,
+        })
+    }
 }
 
 #[cfg(feature = "gpu")]
@@ -284,10 +310,8 @@ fn tracing(
                 None => None,
             };
             Ok(Tracing::Gpu(Box::new(GpuParts {
-                dev,
-                stat,
+                shared: std::sync::Arc::new(GpuShared { dev, stat, shading }),
                 moving,
-                shading,
             })))
         }
         #[cfg(not(feature = "gpu"))]
@@ -474,6 +498,12 @@ pub(super) fn lanes(asked: usize, threads: usize, pixels: u64, available: Option
     wanted.min(fit).max(1)
 }
 
+/// Frames in flight on the GPU when `--frames-in-flight` is left to the render: while
+/// one frame's kernels run, the other's CPU side (posing, the tables, uploads, reading
+/// the pixels back, the AOVs) runs beside them (at most [`crate::gpu::ROOMS`]).
+#[cfg(feature = "gpu")]
+const GPU_LANES: usize = 2;
+
 /// The threads a frame in flight gets when `--frames-in-flight` is left to the render.
 const THREADS_A_FRAME: usize = 4;
 
@@ -531,7 +561,7 @@ impl Frames<'_> {
         let mut writer_gone = false;
 
         // The frames rendered at once (`--frames-in-flight`): lanes of their own moving
-        // layer and buffers; the GPU traces one frame at a time.
+        // layer (or moving triangles on the GPU) and buffers.
         let lanes_wanted = match &tracing {
             Tracing::Cpu(_) => lanes(
                 opts.frames_in_flight,
@@ -541,16 +571,24 @@ impl Frames<'_> {
                 available_memory(),
             ),
             #[cfg(feature = "gpu")]
-            Tracing::Gpu(_) => 1,
+            Tracing::Gpu(_) => match opts.frames_in_flight {
+                0 => GPU_LANES,
+                n => n.min(crate::gpu::ROOMS),
+            },
         }
         .clamp(1, total.max(1));
-        let mut lanes: Vec<Lane> = std::iter::once(Lane::new(tracing))
-            .chain((1..lanes_wanted).map(|_| {
-                Lane::new(Tracing::Cpu(Box::new(DynamicLayer::for_triangles(
+        let mut lanes: Vec<Lane> = Vec::with_capacity(lanes_wanted);
+        for _ in 1..lanes_wanted {
+            let more = match &tracing {
+                Tracing::Cpu(_) => Tracing::Cpu(Box::new(DynamicLayer::for_triangles(
                     plan.split.dynamic_triangles,
-                ))))
-            }))
-            .collect();
+                ))),
+                #[cfg(feature = "gpu")]
+                Tracing::Gpu(g) => Tracing::Gpu(Box::new(g.another()?)),
+            };
+            lanes.push(Lane::new(more));
+        }
+        lanes.insert(0, Lane::new(tracing));
 
         std::thread::scope(|sc| {
             // A round's frames wait here while the writer writes the round before.
@@ -713,7 +751,7 @@ impl Frames<'_> {
             #[cfg(feature = "gpu")]
             Tracing::Gpu(g) => g
                 .moving
-                .update(&g.dev, &dyn_soup.positions)
+                .update(&g.shared.dev, &dyn_soup.positions)
                 .map_err(|source| RenderError::Gpu {
                     device: "gpu",
                     frame: None,
@@ -774,11 +812,12 @@ impl Frames<'_> {
             }
             #[cfg(feature = "gpu")]
             Tracing::Gpu(g) => {
-                if let Some(shading) = &g.shading {
+                let GpuShared { dev, stat, shading } = &*g.shared;
+                if let Some(shading) = shading {
                     // The whole frame (or a blurred frame's step) on the GPU (`gpu_frame`).
                     let parts = super::gpu_frame::GpuParts {
-                        dev: &g.dev,
-                        stat: &g.stat,
+                        dev,
+                        stat,
                         moving: &g.moving,
                         shading,
                     };
@@ -791,7 +830,7 @@ impl Frames<'_> {
                         source,
                     });
                 }
-                let tracer = crate::gpu::GpuTracer::new(&g.dev, &g.stat, &g.moving);
+                let tracer = crate::gpu::GpuTracer::new(dev, stat, &g.moving);
                 render_pass_with(scratch, fb, work, ctx, &tracer, args, pass);
                 // A batch that failed answered "no hit": the frame is not written.
                 if let Some(source) = tracer.take_error() {
