@@ -87,6 +87,11 @@ fn rank(t: wgpu::DeviceType) -> u32 {
     }
 }
 
+/// How long a read-back waits for its buffer's mapping once its submission has run
+/// (the callback may run on another thread's poll): beyond it the device is taken as
+/// lost.
+const READ_BACK_ANSWER: std::time::Duration = std::time::Duration::from_secs(60);
+
 impl GpuDevice {
     /// Opens the adapter `policy` picks. `Ok(None)` when `policy` is `Discrete` and
     /// there is no discrete GPU; `Err(NoAdapter)` when it is `Any` and there is none.
@@ -434,20 +439,26 @@ impl GpuDevice {
             mapped_at_creation: false,
         });
         encoder.copy_buffer_to_buffer(src, 0, &staging, 0, size);
-        self.queue.submit([encoder.finish()]);
-        let done: Arc<Mutex<Option<Result<(), wgpu::BufferAsyncError>>>> = Arc::default();
-        let flag = done.clone();
+        let index = self.queue.submit([encoder.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
         staging.map_async(wgpu::MapMode::Read, .., move |r| {
-            if let Ok(mut g) = flag.lock() {
-                *g = Some(r);
-            }
+            let _ = tx.send(r);
         });
-        self.wait()?;
-        let mapped = done.lock().ok().and_then(|mut g| g.take());
-        match mapped {
-            Some(Ok(())) => {}
-            Some(Err(e)) => return Err(GpuError::Lost(format!("reading results back: {e}"))),
-            None => return Err(GpuError::Lost("reading results back: no answer".into())),
+        // This submission's end, not the queue's: frames in flight submit from other
+        // threads, and this one need not wait for their work.
+        self.device
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(index),
+                timeout: None,
+            })
+            .map_err(|e| GpuError::Lost(e.to_string()))?;
+        self.check()?;
+        // Another thread's poll may have taken the callback and not yet run it when
+        // this poll returns: its answer is waited for, not assumed missing.
+        match rx.recv_timeout(READ_BACK_ANSWER) {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(GpuError::Lost(format!("reading results back: {e}"))),
+            Err(_) => return Err(GpuError::Lost("reading results back: no answer".into())),
         }
         let bytes = staging
             .get_mapped_range(..)
