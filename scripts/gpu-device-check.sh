@@ -85,13 +85,15 @@ run)
     # the CPU path on all the host's cores, wall time of the whole process and --stats.
     cp /tmp/museum.glb /tmp/museum-hm.glb
     python3 .device/peers/glb_material.py /tmp/museum-hm.glb 0.5 0.0 >/dev/null
-    # `gpu1`: the GPU one frame at a time (`gpu` renders two at once, its default).
+    # `gpu1`, `gpu4`: the GPU one and four frames at a time (`gpu` renders two at once,
+    # its default).
     for size in 640x480 1920x1080; do
-        for dev in gpu gpu1 cpu; do
+        for dev in gpu gpu1 gpu4 cpu; do
             t0=$(date +%s.%N)
-            inflight=(); [ "$dev" = gpu1 ] && inflight=(--frames-in-flight 1)
+            inflight=()
+            case "$dev" in gpu1) inflight=(--frames-in-flight 1) ;; gpu4) inflight=(--frames-in-flight 4) ;; esac
             timeout 150 .device/gpu/subfield render /tmp/museum-hm.glb -o "/tmp/frames-$dev-$size/f.####.exr" \
-                --frames 0..60 --size "$size" --max-depth 1 --device "${dev%1}" "${inflight[@]}" \
+                --frames 0..60 --size "$size" --max-depth 1 --device "${dev%[14]}" "${inflight[@]}" \
                 --stats "$out/whole-$dev-$size.csv" >"$out/whole-$dev-$size.log" 2>&1 &&
                 echo "whole frames, $dev, $size: $(echo "$(date +%s.%N) $t0" | awk '{printf "%.1f ms a frame", ($1-$2)*1000/60}')" ||
                 echo "whole frames, $dev, $size: FAILED (see $out/whole-$dev-$size.log)"
