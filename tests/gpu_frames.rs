@@ -1275,6 +1275,46 @@ fn shading_kept_on_the_cpu_gives_the_cpus_frames_and_says_why() {
     }
 }
 
+/// Frames in flight on the GPU: four at once (more asked for: a note says four) give
+/// the bytes of one at a time, frames of a sequence whose moving cube tumbles.
+#[test]
+fn frames_in_flight_on_the_gpu_give_the_same_bytes() {
+    if common::gpu::device().is_none() {
+        return;
+    }
+    let dir = temp_dir("gpu-frames-in-flight");
+    let scene = write(&dir, &subset_scene());
+    let a = ["--frames", "0..7", "--spp", "1", "--max-depth", "2"];
+    render(
+        &scene,
+        &dir,
+        "gpu",
+        "one",
+        &[&a[..], &["--frames-in-flight", "1"]].concat(),
+    );
+    let log = render(
+        &scene,
+        &dir,
+        "gpu",
+        "many",
+        &[&a[..], &["--frames-in-flight", "9"]].concat(),
+    );
+    assert!(
+        log.contains("note: --frames-in-flight 9: the GPU renders 4 frames at once at most"),
+        "stderr: {log}"
+    );
+    let files = files_under(&dir.join("one"));
+    assert_eq!(files.len(), 7);
+    for f in files {
+        assert!(
+            std::fs::read(dir.join("one").join(&f)).unwrap()
+                == std::fs::read(dir.join("many").join(&f)).unwrap(),
+            "{}: four frames in flight differ from one",
+            f.display()
+        );
+    }
+}
+
 /// The rays the frame path makes on the GPU (shadow, reflected, refracted) carry the
 /// shear `geometry::Shear::new` computes, to the bit, and the same validity: random
 /// directions of every octant and scale, axis-aligned ones, and invalid rays.

@@ -443,6 +443,7 @@ pub fn drive(
     // Messages wait until every check has passed, so that an error is the only line;
     // `preface` comes first (what was done before the scene was planned).
     let mut pending = preface;
+    let mut static_said = false;
     pending.extend(scene.warnings.iter().map(|w| format!("warning: {w}")));
     let mut done = 0u64;
     // The sequence runs on a pool thread (this one waits): each of its parallel loops
@@ -482,7 +483,13 @@ pub fn drive(
                 pending.push(format!("tracing on: {d}"));
             }
             RenderEvent::Note(n) => {
-                pending.push(format!("note: {n}"));
+                let line = format!("note: {n}");
+                // Said with the preface, or at once when that was said already.
+                if !static_said {
+                    pending.push(line);
+                } else if !quiet || json {
+                    report::line(&line);
+                }
             }
             RenderEvent::StaticReady {
                 triangles,
@@ -499,6 +506,7 @@ pub fn drive(
                     },
                     seconds
                 ));
+                static_said = true;
                 if !quiet || json {
                     for line in pending.drain(..) {
                         report::line(&line);

@@ -573,7 +573,14 @@ impl Frames<'_> {
             #[cfg(feature = "gpu")]
             Tracing::Gpu(_) => match opts.frames_in_flight {
                 0 => GPU_LANES,
-                n => n.min(crate::gpu::ROOMS),
+                n if n > crate::gpu::ROOMS => {
+                    on_event(RenderEvent::Note(&format!(
+                        "--frames-in-flight {n}: the GPU renders {} frames at once at most",
+                        crate::gpu::ROOMS
+                    )));
+                    crate::gpu::ROOMS
+                }
+                n => n,
             },
         }
         .clamp(1, total.max(1));
