@@ -65,8 +65,19 @@ pub fn json() -> bool {
 
 /// Writes one event as a JSON line on stderr; a stderr that is gone is not an error.
 pub fn event(value: serde_json::Value) {
-    let mut err = std::io::stderr().lock();
-    let _ = writeln!(err, "{value}");
+    say(&value.to_string());
+}
+
+/// `text` and a newline on stderr in one write: stderr is unbuffered, and a line
+/// formatted straight into it goes out in pieces, between which a stopping signal's
+/// own line (`guard`, written from its handler) could land (seen once in a test: a
+/// `signal` event inside a `frame` event). One write of a line under the pipe's
+/// atomic size is never split.
+fn say(text: &str) {
+    let mut bytes = Vec::with_capacity(text.len() + 1);
+    bytes.extend_from_slice(text.as_bytes());
+    bytes.push(b'\n');
+    let _ = std::io::stderr().lock().write_all(&bytes);
 }
 
 /// A line for people: itself in text mode, an `info` event in JSON mode (`warning: `
@@ -78,7 +89,7 @@ pub fn line(text: &str) {
             None => event(serde_json::json!({"event": "info", "message": text})),
         }
     } else {
-        let _ = writeln!(std::io::stderr().lock(), "{text}");
+        say(text);
     }
 }
 
@@ -119,7 +130,7 @@ pub fn error(message: &str, class: ExitClass) {
             "class": class.name(),
         }));
     } else {
-        let _ = writeln!(std::io::stderr().lock(), "error: {message}");
+        say(&format!("error: {message}"));
     }
     openjd(&[format!("openjd_fail: {message}")]);
 }
