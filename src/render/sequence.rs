@@ -515,12 +515,73 @@ const MAX_AUTO_LANES: usize = 8;
 /// 640x480, 230 at 1920x1080 (benches/PERF.md, issue 38, frames in flight).
 const LANE_BYTES_A_PIXEL: u64 = 1200;
 
-/// The memory the system can give without swapping (Linux's `MemAvailable`), if known.
+/// The memory this process can still take without swapping or being killed: Linux's
+/// `MemAvailable`, and no more than its control group's limit leaves (a farm's
+/// scheduler or a container sets one: `--mem` under Slurm); `None` where neither is
+/// known.
 fn available_memory() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let read = |p: &str| std::fs::read_to_string(p).ok();
+    let system = read("/proc/meminfo").and_then(|t| mem_available(&t));
+    let group = read("/proc/self/cgroup").and_then(|own| {
+        let (v2, v1) = cgroup_paths(&own);
+        let room = |limit: String, usage: String| cgroup_room(&read(&limit)?, &read(&usage)?);
+        v2.and_then(|p| {
+            room(
+                format!("/sys/fs/cgroup{p}/memory.max"),
+                format!("/sys/fs/cgroup{p}/memory.current"),
+            )
+        })
+        .or_else(|| {
+            v1.and_then(|p| {
+                room(
+                    format!("/sys/fs/cgroup/memory{p}/memory.limit_in_bytes"),
+                    format!("/sys/fs/cgroup/memory{p}/memory.usage_in_bytes"),
+                )
+            })
+        })
+    });
+    match (system, group) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    }
+}
+
+/// `MemAvailable` of `/proc/meminfo`'s text, in bytes.
+fn mem_available(meminfo: &str) -> Option<u64> {
+    let line = meminfo.lines().find(|l| l.starts_with("MemAvailable:"))?;
     let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     kib.checked_mul(1024)
+}
+
+/// This process's control group in `/proc/self/cgroup`'s text: its path in the unified
+/// hierarchy (v2, `0::PATH`) and in v1's memory controller (`N:memory:PATH`).
+fn cgroup_paths(own: &str) -> (Option<&str>, Option<&str>) {
+    let mut v2 = None;
+    let mut v1 = None;
+    for line in own.lines() {
+        let mut parts = line.splitn(3, ':');
+        let (Some(id), Some(controllers), Some(path)) = (parts.next(), parts.next(), parts.next())
+        else {
+            continue;
+        };
+        if id == "0" && controllers.is_empty() {
+            v2 = Some(path);
+        } else if controllers.split(',').any(|c| c == "memory") {
+            v1 = Some(path);
+        }
+    }
+    (v2, v1)
+}
+
+/// What a control group's memory `limit` leaves over its `usage` (the two files' text):
+/// `None` without a limit (`max` in v2; v1 says so with a number near 2^63).
+fn cgroup_room(limit: &str, usage: &str) -> Option<u64> {
+    let limit: u64 = limit.trim().parse().ok()?;
+    if limit >= 1 << 60 {
+        return None;
+    }
+    let usage: u64 = usage.trim().parse().ok()?;
+    Some(limit.saturating_sub(usage))
 }
 
 impl Frames<'_> {
@@ -982,5 +1043,28 @@ mod tests {
         assert_eq!(lanes(0, 16, px, Some(lane)), 1);
         assert_eq!(lanes(0, 16, px, Some(0)), 1);
         assert_eq!(lanes(0, 16, 3840 * 2160, Some(64 << 30)), 3);
+    }
+
+    #[test]
+    fn the_memory_a_render_may_take_is_the_systems_and_its_control_groups() {
+        let meminfo =
+            "MemTotal:       24105000 kB\nMemFree:  100 kB\nMemAvailable:   20000000 kB\n";
+        assert_eq!(mem_available(meminfo), Some(20_000_000 * 1024));
+        assert_eq!(mem_available("MemTotal: 5 kB\n"), None);
+        // v2 (the unified hierarchy) and v1 (a memory controller's line).
+        let v2 = "0::/system.slice/slurmstepd.scope/job_42\n";
+        assert_eq!(
+            cgroup_paths(v2),
+            (Some("/system.slice/slurmstepd.scope/job_42"), None)
+        );
+        let v1 = "12:pids:/\n4:memory:/slurm/uid_0/job_7\n1:name=systemd:/\n";
+        assert_eq!(cgroup_paths(v1), (None, Some("/slurm/uid_0/job_7")));
+        let both = "5:cpu,memory:/a\n0::/b\n";
+        assert_eq!(cgroup_paths(both), (Some("/b"), Some("/a")));
+        // Limits: a number leaves limit - usage; `max` and v1's "none" are no limit.
+        assert_eq!(cgroup_room("8589934592\n", "1073741824\n"), Some(7 << 30));
+        assert_eq!(cgroup_room("1000\n", "5000\n"), Some(0));
+        assert_eq!(cgroup_room("max\n", "5000\n"), None);
+        assert_eq!(cgroup_room("9223372036854771712\n", "5000\n"), None);
     }
 }
