@@ -25,7 +25,18 @@ fn subfield(args: &[&str]) -> std::process::Output {
 fn demo_writes_everything_and_matches_render() {
     let dir = temp_dir("demo");
     let d = dir.to_str().unwrap();
-    let r = subfield(&["demo", "-o", d, "--frames", "10..13", "--size", "64x48"]);
+    // Three frames at once: the bytes of `render` one at a time (below).
+    let r = subfield(&[
+        "demo",
+        "-o",
+        d,
+        "--frames",
+        "10..13",
+        "--size",
+        "64x48",
+        "--frames-in-flight",
+        "3",
+    ]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     for f in [
         "museum.glb",
@@ -58,6 +69,8 @@ fn demo_writes_everything_and_matches_render() {
         "11..12",
         "--size",
         "64x48",
+        "--frames-in-flight",
+        "1",
         "--quiet",
     ]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
@@ -69,14 +82,14 @@ fn demo_writes_everything_and_matches_render() {
 
     // Bad flags: one line, non-zero, nothing new written.
     let bad = temp_dir("bad");
-    let r = subfield(&["demo", "-o", bad.to_str().unwrap(), "--frames", "5..2"]);
-    assert!(!r.status.success());
-    assert_eq!(
-        String::from_utf8_lossy(&r.stderr)
-            .trim_end()
-            .lines()
-            .count(),
-        1
-    );
-    assert_eq!(std::fs::read_dir(&bad).unwrap().count(), 0);
+    for flags in [["--frames", "5..2"], ["--frames-in-flight", "0"]] {
+        let mut args = vec!["demo", "-o", bad.to_str().unwrap()];
+        args.extend(flags);
+        let r = subfield(&args);
+        assert!(!r.status.success());
+        let e = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(e.trim_end().lines().count(), 1, "{e}");
+        assert!(e.contains(flags[0]), "{e}");
+        assert_eq!(std::fs::read_dir(&bad).unwrap().count(), 0);
+    }
 }

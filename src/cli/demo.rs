@@ -48,6 +48,10 @@ pub struct Args {
     /// Worker threads; 0 or absent: all cores.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Frames rendered at once, as `render --frames-in-flight` (absent: the render's
+    /// choice).
+    #[arg(long, value_name = "N")]
+    pub frames_in_flight: Option<usize>,
     /// No progress or report.
     #[arg(long, short)]
     pub quiet: bool,
@@ -55,6 +59,11 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let frames = a.frames.as_deref().map(parse::parse_frames).transpose()?;
+    if a.frames_in_flight == Some(0) {
+        anyhow::bail!(
+            "--frames-in-flight 0: give 1 or more, or leave it out to let the render choose"
+        );
+    }
     let (width, height) = parse::parse_size(&a.size)?;
     super::set_threads(a.threads)?;
     let dir = &a.output;
@@ -101,6 +110,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         resume: a.resume,
         exposure: a.exposure,
         device: a.device,
+        frames_in_flight: a.frames_in_flight.unwrap_or(0),
         stats: Some(dir.join("stats.csv")),
         plot: Some(dir.join("plot.svg")),
         // The middle frame of the range (of the whole animation: the triangles gathered
