@@ -164,11 +164,11 @@ pub struct Args {
     /// Worker threads; 0 or absent: all cores.
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Frames rendered at once on the CPU, sharing the threads, each with its own
-    /// moving layer and buffers (150-330 MB a frame at 640x480); the same bytes
-    /// whatever N. Absent: one a 4 threads, 2 at least from 2 threads, 8 at most,
-    /// within half the free memory; on the GPU 2 (4 at most: one's kernels run while
-    /// another's CPU side does).
+    /// Frames rendered at once, each with its own moving layer and buffers (on the CPU
+    /// 150-330 MB a frame at 640x480); the same bytes whatever N. Absent: on the CPU
+    /// one a 4 threads, 2 at least from 2 threads, 8 at most, within half the free
+    /// memory; on the GPU 2 (4 at most: one frame's kernels run while another's CPU
+    /// side does).
     #[arg(long, value_name = "N")]
     pub frames_in_flight: Option<usize>,
     /// No progress or report.
