@@ -44,6 +44,54 @@ const PIXEL_BOUND: f32 = 1e-3;
 /// mirror (polished, half metallic), a coloured metal, a glass cube (refraction and
 /// Fresnel reflection), a rough red cube that moves and turns, a point, a spot (with a
 /// range) and a directional light.
+/// The test rooms' view and light: the main camera (node "camera") looking down at the
+/// room from 6 in front, a point light ("bulb") up and to the right, and a sun; their
+/// nodes, to add as roots.
+fn camera_and_lights(b: &mut SceneBuilder) -> [usize; 3] {
+    let cam = b.add_camera(perspective("main", 0.8, None, 0.1, None));
+    let point = b.add_light(LightDef {
+        name: Some("bulb".into()),
+        kind: LightKind::Point,
+        color: Vec3::new(1.0, 0.95, 0.9),
+        intensity: 40.0,
+        range: None,
+        falloff: Falloff::InverseSquare,
+    });
+    let sun = b.add_light(LightDef {
+        name: Some("sun".into()),
+        kind: LightKind::Directional,
+        color: Vec3::ONE,
+        intensity: 1.5,
+        range: None,
+        falloff: Falloff::InverseSquare,
+    });
+    let camera = b.add_node(Node {
+        name: Some("camera".into()),
+        camera: Some(cam),
+        transform: placed(
+            Vec3::new(0.0, 2.0, 6.0),
+            Quat::from_rotation_x(-(2.0f32 / 6.0).atan()),
+        ),
+        ..Default::default()
+    });
+    let bulb = b.add_node(Node {
+        name: Some("bulb".into()),
+        light: Some(point),
+        transform: placed(Vec3::new(2.0, 4.0, 3.0), Quat::IDENTITY),
+        ..Default::default()
+    });
+    let sun_node = b.add_node(Node {
+        name: Some("sun".into()),
+        light: Some(sun),
+        transform: placed(
+            Vec3::ZERO,
+            Quat::from_rotation_x(-1.0) * Quat::from_rotation_y(0.5),
+        ),
+        ..Default::default()
+    });
+    [camera, bulb, sun_node]
+}
+
 fn subset_scene() -> Scene {
     let mut b = SceneBuilder::new();
     let grey = b.add_material(diffuse("floor", Vec4::new(0.7, 0.7, 0.7, 1.0), 0.8));
@@ -87,15 +135,6 @@ fn subset_scene() -> Scene {
     ));
     let glass_cube = b.add_mesh(mesh("glass", vec![cube(Vec3::splat(0.5), glass)]));
     let red_cube = b.add_mesh(mesh("mover", vec![cube(Vec3::new(0.4, 0.4, 0.4), red)]));
-    let cam = b.add_camera(perspective("main", 0.8, None, 0.1, None));
-    let point = b.add_light(LightDef {
-        name: Some("bulb".into()),
-        kind: LightKind::Point,
-        color: Vec3::new(1.0, 0.95, 0.9),
-        intensity: 40.0,
-        range: None,
-        falloff: Falloff::InverseSquare,
-    });
     let spot = b.add_light(LightDef {
         name: Some("spot".into()),
         kind: LightKind::Spot {
@@ -105,14 +144,6 @@ fn subset_scene() -> Scene {
         color: Vec3::new(0.6, 0.8, 1.0),
         intensity: 60.0,
         range: Some(12.0),
-        falloff: Falloff::InverseSquare,
-    });
-    let sun = b.add_light(LightDef {
-        name: Some("sun".into()),
-        kind: LightKind::Directional,
-        color: Vec3::ONE,
-        intensity: 1.5,
-        range: None,
         falloff: Falloff::InverseSquare,
     });
     let room = b.add_node(Node {
@@ -132,21 +163,6 @@ fn subset_scene() -> Scene {
         transform: placed(Vec3::new(1.0, 0.4, 0.5), Quat::IDENTITY),
         ..Default::default()
     });
-    let camera = b.add_node(Node {
-        name: Some("camera".into()),
-        camera: Some(cam),
-        transform: placed(
-            Vec3::new(0.0, 2.0, 6.0),
-            Quat::from_rotation_x(-(2.0f32 / 6.0).atan()),
-        ),
-        ..Default::default()
-    });
-    let bulb = b.add_node(Node {
-        name: Some("bulb".into()),
-        light: Some(point),
-        transform: placed(Vec3::new(2.0, 4.0, 3.0), Quat::IDENTITY),
-        ..Default::default()
-    });
     let spot_node = b.add_node(Node {
         name: Some("spot".into()),
         light: Some(spot),
@@ -157,15 +173,7 @@ fn subset_scene() -> Scene {
         ),
         ..Default::default()
     });
-    let sun_node = b.add_node(Node {
-        name: Some("sun".into()),
-        light: Some(sun),
-        transform: placed(
-            Vec3::ZERO,
-            Quat::from_rotation_x(-1.0) * Quat::from_rotation_y(0.5),
-        ),
-        ..Default::default()
-    });
+    let [camera, bulb, sun_node] = camera_and_lights(&mut b);
     for n in [room, glass_node, mover, camera, bulb, spot_node, sun_node] {
         b.add_root(n);
     }
@@ -712,52 +720,12 @@ fn alpha_scene() -> Scene {
         prims.push(quad(Vec3::new(-0.6, 0.5, z), x * 0.3, y * 0.3, veils));
     }
     let room = b.add_mesh(mesh("room", prims));
-    let cam = b.add_camera(perspective("main", 0.8, None, 0.1, None));
-    let point = b.add_light(LightDef {
-        name: Some("bulb".into()),
-        kind: LightKind::Point,
-        color: Vec3::new(1.0, 0.95, 0.9),
-        intensity: 40.0,
-        range: None,
-        falloff: Falloff::InverseSquare,
-    });
-    let sun = b.add_light(LightDef {
-        name: Some("sun".into()),
-        kind: LightKind::Directional,
-        color: Vec3::ONE,
-        intensity: 1.5,
-        range: None,
-        falloff: Falloff::InverseSquare,
-    });
     let room = b.add_node(Node {
         name: Some("room".into()),
         mesh: Some(room),
         ..Default::default()
     });
-    let camera = b.add_node(Node {
-        name: Some("camera".into()),
-        camera: Some(cam),
-        transform: placed(
-            Vec3::new(0.0, 2.0, 6.0),
-            Quat::from_rotation_x(-(2.0f32 / 6.0).atan()),
-        ),
-        ..Default::default()
-    });
-    let bulb = b.add_node(Node {
-        name: Some("bulb".into()),
-        light: Some(point),
-        transform: placed(Vec3::new(2.0, 4.0, 3.0), Quat::IDENTITY),
-        ..Default::default()
-    });
-    let sun_node = b.add_node(Node {
-        name: Some("sun".into()),
-        light: Some(sun),
-        transform: placed(
-            Vec3::ZERO,
-            Quat::from_rotation_x(-1.0) * Quat::from_rotation_y(0.5),
-        ),
-        ..Default::default()
-    });
+    let [camera, bulb, sun_node] = camera_and_lights(&mut b);
     for n in [room, camera, bulb, sun_node] {
         b.add_root(n);
     }
@@ -958,7 +926,6 @@ fn textured_scene() -> Scene {
     ));
     let glass_cube = b.add_mesh(mesh("glass", vec![cube(Vec3::splat(0.45), glass)]));
     let metal_cube = b.add_mesh(mesh("metal", vec![cube(Vec3::splat(0.4), metal)]));
-    let cam = b.add_camera(perspective("main", 0.8, None, 0.1, None));
     let ortho = b.add_camera(CameraDef {
         name: Some("ortho".into()),
         projection: Projection::Orthographic {
@@ -967,22 +934,6 @@ fn textured_scene() -> Scene {
             znear: 0.1,
             zfar: 100.0,
         },
-    });
-    let point = b.add_light(LightDef {
-        name: Some("bulb".into()),
-        kind: LightKind::Point,
-        color: Vec3::new(1.0, 0.95, 0.9),
-        intensity: 40.0,
-        range: None,
-        falloff: Falloff::InverseSquare,
-    });
-    let sun = b.add_light(LightDef {
-        name: Some("sun".into()),
-        kind: LightKind::Directional,
-        color: Vec3::ONE,
-        intensity: 1.5,
-        range: None,
-        falloff: Falloff::InverseSquare,
     });
     let mut nodes = Vec::new();
     let mut node = |b: &mut SceneBuilder, n: Node| {
@@ -1018,18 +969,6 @@ fn textured_scene() -> Scene {
     node(
         &mut b,
         Node {
-            name: Some("camera".into()),
-            camera: Some(cam),
-            transform: placed(
-                Vec3::new(0.0, 2.0, 6.0),
-                Quat::from_rotation_x(-(2.0f32 / 6.0).atan()),
-            ),
-            ..Default::default()
-        },
-    );
-    node(
-        &mut b,
-        Node {
             name: Some("ortho camera".into()),
             camera: Some(ortho),
             transform: placed(
@@ -1039,27 +978,7 @@ fn textured_scene() -> Scene {
             ..Default::default()
         },
     );
-    node(
-        &mut b,
-        Node {
-            name: Some("bulb".into()),
-            light: Some(point),
-            transform: placed(Vec3::new(2.0, 4.0, 3.0), Quat::IDENTITY),
-            ..Default::default()
-        },
-    );
-    node(
-        &mut b,
-        Node {
-            name: Some("sun".into()),
-            light: Some(sun),
-            transform: placed(
-                Vec3::ZERO,
-                Quat::from_rotation_x(-1.0) * Quat::from_rotation_y(0.5),
-            ),
-            ..Default::default()
-        },
-    );
+    nodes.extend(camera_and_lights(&mut b));
     for n in nodes {
         b.add_root(n);
     }

@@ -183,6 +183,16 @@ pub enum RenderError {
 }
 
 impl RenderError {
+    /// A fault of `--device gpu` outside any one frame (`in_frame` names the frame).
+    #[cfg(feature = "gpu")]
+    pub(crate) fn gpu(source: crate::gpu::GpuError) -> RenderError {
+        RenderError::Gpu {
+            device: "gpu",
+            frame: None,
+            source,
+        }
+    }
+
     /// The error as it stopped the rendering of `frame`: a GPU fault names the frame
     /// (the one line a render prints then says which frame was lost and why).
     pub(crate) fn in_frame(self, frame: u32) -> RenderError {

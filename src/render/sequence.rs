@@ -218,13 +218,7 @@ impl GpuParts {
     fn another(&self) -> Result<GpuParts, RenderError> {
         Ok(GpuParts {
             shared: self.shared.clone(),
-            moving: crate::gpu::GpuMoving::new(&self.shared.dev).map_err(|source| {
-                RenderError::Gpu {
-                    device: "gpu",
-                    frame: None,
-                    source,
-                }
-            })?,
+            moving: crate::gpu::GpuMoving::new(&self.shared.dev).map_err(RenderError::gpu)?,
         })
     }
 }
@@ -291,13 +285,8 @@ fn tracing(
         None => Ok(Tracing::Cpu(Box::new(DynamicLayer::for_triangles(moving)))),
         #[cfg(feature = "gpu")]
         Some(dev) => {
-            let gpu = |source| RenderError::Gpu {
-                device: "gpu",
-                frame: None,
-                source,
-            };
-            let stat = crate::gpu::GpuStatic::upload(&dev, psf).map_err(gpu)?;
-            let moving = crate::gpu::GpuMoving::new(&dev).map_err(gpu)?;
+            let stat = crate::gpu::GpuStatic::upload(&dev, psf).map_err(RenderError::gpu)?;
+            let moving = crate::gpu::GpuMoving::new(&dev).map_err(RenderError::gpu)?;
             let shading = match frame_path {
                 Some((soup, scene, mips)) => Some(
                     crate::gpu::GpuShading::new_textured(
@@ -305,7 +294,7 @@ fn tracing(
                         &super::gpu_frame::surfaces(soup, scene.materials.len()),
                         &super::gpu_frame::textures(scene, mips),
                     )
-                    .map_err(gpu)?,
+                    .map_err(RenderError::gpu)?,
                 ),
                 None => None,
             };
@@ -820,11 +809,7 @@ impl Frames<'_> {
             Tracing::Gpu(g) => g
                 .moving
                 .update(&g.shared.dev, &dyn_soup.positions)
-                .map_err(|source| RenderError::Gpu {
-                    device: "gpu",
-                    frame: None,
-                    source,
-                })?,
+                .map_err(RenderError::gpu)?,
         }
         Ok(())
     }
@@ -892,21 +877,13 @@ impl Frames<'_> {
                     return super::gpu_frame::render_frame_gpu(
                         &parts, scratch, ctx, args, pass, fb, work,
                     )
-                    .map_err(|source| RenderError::Gpu {
-                        device: "gpu",
-                        frame: None,
-                        source,
-                    });
+                    .map_err(RenderError::gpu);
                 }
                 let tracer = crate::gpu::GpuTracer::new(dev, stat, &g.moving);
                 render_pass_with(scratch, fb, work, ctx, &tracer, args, pass);
                 // A batch that failed answered "no hit": the frame is not written.
                 if let Some(source) = tracer.take_error() {
-                    return Err(RenderError::Gpu {
-                        device: "gpu",
-                        frame: None,
-                        source,
-                    });
+                    return Err(RenderError::gpu(source));
                 }
             }
         }
