@@ -21,11 +21,12 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::build::{diffuse, mesh, perspective, placed, SceneBuilder};
+use common::build::{diffuse, mesh, placed, SceneBuilder};
 use common::exr_read::read_exr;
 use common::farm::{ok, ok_with, s, stderr};
 use common::render_scene::{
-    cube, files_under, quad, scene, temp_dir, tumbling, with_textured_lamp, write_scene,
+    camera_and_lights, cube, files_under, quad, scene, temp_dir, tumbling, with_textured_lamp,
+    write_scene,
 };
 use glam::Vec2;
 use glam::{Quat, Vec3, Vec4};
@@ -44,54 +45,6 @@ const PIXEL_BOUND: f32 = 1e-3;
 /// mirror (polished, half metallic), a coloured metal, a glass cube (refraction and
 /// Fresnel reflection), a rough red cube that moves and turns, a point, a spot (with a
 /// range) and a directional light.
-/// The test rooms' view and light: the main camera (node "camera") looking down at the
-/// room from 6 in front, a point light ("bulb") up and to the right, and a sun; their
-/// nodes, to add as roots.
-fn camera_and_lights(b: &mut SceneBuilder) -> [usize; 3] {
-    let cam = b.add_camera(perspective("main", 0.8, None, 0.1, None));
-    let point = b.add_light(LightDef {
-        name: Some("bulb".into()),
-        kind: LightKind::Point,
-        color: Vec3::new(1.0, 0.95, 0.9),
-        intensity: 40.0,
-        range: None,
-        falloff: Falloff::InverseSquare,
-    });
-    let sun = b.add_light(LightDef {
-        name: Some("sun".into()),
-        kind: LightKind::Directional,
-        color: Vec3::ONE,
-        intensity: 1.5,
-        range: None,
-        falloff: Falloff::InverseSquare,
-    });
-    let camera = b.add_node(Node {
-        name: Some("camera".into()),
-        camera: Some(cam),
-        transform: placed(
-            Vec3::new(0.0, 2.0, 6.0),
-            Quat::from_rotation_x(-(2.0f32 / 6.0).atan()),
-        ),
-        ..Default::default()
-    });
-    let bulb = b.add_node(Node {
-        name: Some("bulb".into()),
-        light: Some(point),
-        transform: placed(Vec3::new(2.0, 4.0, 3.0), Quat::IDENTITY),
-        ..Default::default()
-    });
-    let sun_node = b.add_node(Node {
-        name: Some("sun".into()),
-        light: Some(sun),
-        transform: placed(
-            Vec3::ZERO,
-            Quat::from_rotation_x(-1.0) * Quat::from_rotation_y(0.5),
-        ),
-        ..Default::default()
-    });
-    [camera, bulb, sun_node]
-}
-
 fn subset_scene() -> Scene {
     let mut b = SceneBuilder::new();
     let grey = b.add_material(diffuse("floor", Vec4::new(0.7, 0.7, 0.7, 1.0), 0.8));

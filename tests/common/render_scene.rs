@@ -148,24 +148,6 @@ fn scene_of(lamp_on: bool) -> Scene {
     let statics = b.add_mesh(mesh("room", room_quads));
     let glass_cube = b.add_mesh(mesh("glass", vec![cube(Vec3::splat(0.5), glass)]));
     let red_cube = b.add_mesh(mesh("mover", vec![cube(Vec3::new(0.4, 0.4, 0.4), red)]));
-    let cam = b.add_camera(perspective("main", 0.8, None, 0.1, None));
-    let side = b.add_camera(perspective("side", 1.0, Some(1.0), 0.1, None));
-    let point = b.add_light(LightDef {
-        name: Some("bulb".into()),
-        kind: LightKind::Point,
-        color: Vec3::new(1.0, 0.95, 0.9),
-        intensity: 40.0,
-        range: None,
-        falloff: Falloff::InverseSquare,
-    });
-    let sun = b.add_light(LightDef {
-        name: Some("sun".into()),
-        kind: LightKind::Directional,
-        color: Vec3::ONE,
-        intensity: 1.5,
-        range: None,
-        falloff: Falloff::InverseSquare,
-    });
     let room = b.add_node(Node {
         name: Some("room".into()),
         mesh: Some(statics),
@@ -183,36 +165,15 @@ fn scene_of(lamp_on: bool) -> Scene {
         transform: placed(Vec3::new(1.0, 0.4, 0.5), Quat::IDENTITY),
         ..Default::default()
     });
-    let camera = b.add_node(Node {
-        name: Some("camera".into()),
-        camera: Some(cam),
-        transform: placed(
-            Vec3::new(0.0, 2.0, 6.0),
-            Quat::from_rotation_x(-(2.0f32 / 6.0).atan()),
-        ),
-        ..Default::default()
-    });
+    // After the meshes' nodes: tests move `nodes[0]`, the room.
+    let [camera, bulb, sun_node] = camera_and_lights(&mut b);
+    let side = b.add_camera(perspective("side", 1.0, Some(1.0), 0.1, None));
     let side_cam = b.add_node(Node {
         name: Some("side camera".into()),
         camera: Some(side),
         transform: placed(
             Vec3::new(6.0, 1.5, 0.0),
             Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
-        ),
-        ..Default::default()
-    });
-    let bulb = b.add_node(Node {
-        name: Some("bulb".into()),
-        light: Some(point),
-        transform: placed(Vec3::new(2.0, 4.0, 3.0), Quat::IDENTITY),
-        ..Default::default()
-    });
-    let sun_node = b.add_node(Node {
-        name: Some("sun".into()),
-        light: Some(sun),
-        transform: placed(
-            Vec3::ZERO,
-            Quat::from_rotation_x(-1.0) * Quat::from_rotation_y(0.5),
         ),
         ..Default::default()
     });
@@ -240,6 +201,54 @@ fn scene_of(lamp_on: bool) -> Scene {
     });
     b.scene.fps = Some(24.0);
     b.finish()
+}
+
+/// The test rooms' view and light (this file's scene's and `tests/gpu_frames.rs`'s): the main camera (node "camera") looking down at the
+/// room from 6 in front, a point light ("bulb") up and to the right, and a sun; their
+/// nodes, to add as roots.
+pub fn camera_and_lights(b: &mut SceneBuilder) -> [usize; 3] {
+    let cam = b.add_camera(perspective("main", 0.8, None, 0.1, None));
+    let point = b.add_light(LightDef {
+        name: Some("bulb".into()),
+        kind: LightKind::Point,
+        color: Vec3::new(1.0, 0.95, 0.9),
+        intensity: 40.0,
+        range: None,
+        falloff: Falloff::InverseSquare,
+    });
+    let sun = b.add_light(LightDef {
+        name: Some("sun".into()),
+        kind: LightKind::Directional,
+        color: Vec3::ONE,
+        intensity: 1.5,
+        range: None,
+        falloff: Falloff::InverseSquare,
+    });
+    let camera = b.add_node(Node {
+        name: Some("camera".into()),
+        camera: Some(cam),
+        transform: placed(
+            Vec3::new(0.0, 2.0, 6.0),
+            Quat::from_rotation_x(-(2.0f32 / 6.0).atan()),
+        ),
+        ..Default::default()
+    });
+    let bulb = b.add_node(Node {
+        name: Some("bulb".into()),
+        light: Some(point),
+        transform: placed(Vec3::new(2.0, 4.0, 3.0), Quat::IDENTITY),
+        ..Default::default()
+    });
+    let sun_node = b.add_node(Node {
+        name: Some("sun".into()),
+        light: Some(sun),
+        transform: placed(
+            Vec3::ZERO,
+            Quat::from_rotation_x(-1.0) * Quat::from_rotation_y(0.5),
+        ),
+        ..Default::default()
+    });
+    [camera, bulb, sun_node]
 }
 
 /// Writes [`scene_without_emitters`] as `dir/still.glb`.
