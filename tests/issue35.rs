@@ -252,6 +252,47 @@ fn a_blend_file_is_told_to_export_gltf() {
 }
 
 #[test]
+fn a_baked_file_given_as_the_scene_is_told_to_go_with_baked() {
+    let dir = temp_dir("issue35-baked-as-scene");
+    let scene = keyed_cube(&[], true);
+    let glb = dir.join("scene.glb");
+    import::write_gltf(&scene, &glb).unwrap();
+    let psf = dir.join("scene.psf");
+    let o = subfield(&["bake", s(&glb), "-o", s(&psf)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Under its own name and under a scene's.
+    let renamed = dir.join("baked.glb");
+    std::fs::copy(&psf, &renamed).unwrap();
+    for path in [&psf, &renamed] {
+        let err = import::load(path).unwrap_err();
+        assert!(
+            matches!(err, import::ImportError::BakedFile { .. }),
+            "{}: {err}",
+            path.display()
+        );
+        let o = subfield(&["render", s(path), "-o", s(&dir.join("f.#.exr"))]);
+        assert!(!o.status.success());
+        let e = stderr(&o);
+        assert!(e.contains("a baked file") && e.contains("--baked"), "{e}");
+        assert!(!e.contains("not valid glTF JSON"), "{e}");
+    }
+    // Given as it should be, the same file renders.
+    let o = subfield(&[
+        "render",
+        s(&glb),
+        "--baked",
+        s(&psf),
+        "--size",
+        "16x12",
+        "--frames",
+        "0",
+        "-o",
+        s(&dir.join("ok.#.exr")),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
 fn inspect_of_a_gltf_scene_says_to_bake_it_first() {
     let dir = temp_dir("issue35-inspect");
     let scene = keyed_cube(&[], true);

@@ -76,6 +76,11 @@ pub enum ImportError {
     #[error("{path}: a Blender file, which subfield does not read: export the scene from Blender as glTF (File > Export > glTF 2.0, .glb) and render that file")]
     BlendFile { path: PathBuf },
 
+    /// A baked file (`.psf`, from `subfield bake`) given where the scene goes: it holds
+    /// the static part only, and goes beside its scene with `--baked`.
+    #[error("{path}: a baked file (from `subfield bake`), not a scene: give the scene it was baked from, and this file with --baked (subfield render SCENE --baked {path} ...)")]
+    BakedFile { path: PathBuf },
+
     /// The JSON could not be parsed as glTF.
     #[error("{path}: not valid glTF JSON: {reason}")]
     Json { path: PathBuf, reason: String },

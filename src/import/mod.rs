@@ -76,10 +76,23 @@ pub fn load(path: &Path) -> Result<Scene, ImportError> {
             path: path.to_path_buf(),
         });
     }
-    if is_blend(path, ext) {
-        return Err(ImportError::BlendFile {
-            path: path.to_path_buf(),
-        });
+    match magic_of(path) {
+        Some(Magic::Blend) => {
+            return Err(ImportError::BlendFile {
+                path: path.to_path_buf(),
+            })
+        }
+        Some(Magic::Baked) => {
+            return Err(ImportError::BakedFile {
+                path: path.to_path_buf(),
+            })
+        }
+        None if is_blend_name(ext) => {
+            return Err(ImportError::BlendFile {
+                path: path.to_path_buf(),
+            })
+        }
+        None => {}
     }
     gltf_read::load(path)
 }
@@ -91,21 +104,35 @@ fn is_usd(ext: &str) -> bool {
         .any(|u| ext.eq_ignore_ascii_case(u))
 }
 
-/// Whether `path` is a Blender file: named `.blend` (or a backup, `.blend1`, `.blend2`…)
-/// or starting with Blender's magic `BLENDER` (an uncompressed `.blend` under another
-/// name). A file that cannot be read is not judged here: the reader reports it.
-fn is_blend(path: &Path, ext: &str) -> bool {
-    let lower = ext.to_ascii_lowercase();
-    let named = lower
-        .strip_prefix("blend")
-        .is_some_and(|n| n.bytes().all(|c| c.is_ascii_digit()));
-    if named {
-        return true;
+/// A file that is not a scene, known by its first bytes.
+enum Magic {
+    /// Blender's `BLENDER` (an uncompressed `.blend`, whatever its name).
+    Blend,
+    /// The baked file's signature ([`crate::format::MAGIC`]).
+    Baked,
+}
+
+/// What `path`'s first bytes say it is, where they say it is not a scene; a file that
+/// cannot be read is not judged here: the reader reports it.
+fn magic_of(path: &Path) -> Option<Magic> {
+    let mut head = Vec::with_capacity(8);
+    let f = std::fs::File::open(path).ok()?;
+    std::io::Read::read_to_end(&mut std::io::Read::take(f, 8), &mut head).ok()?;
+    if head.starts_with(b"BLENDER") {
+        Some(Magic::Blend)
+    } else if head == crate::format::MAGIC {
+        Some(Magic::Baked)
+    } else {
+        None
     }
-    let mut magic = [0u8; 7];
-    std::fs::File::open(path)
-        .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic))
-        .is_ok_and(|()| &magic == b"BLENDER")
+}
+
+/// Whether the extension names a Blender file: `.blend` or a backup (`.blend1`,
+/// `.blend2`…).
+fn is_blend_name(ext: &str) -> bool {
+    ext.to_ascii_lowercase()
+        .strip_prefix("blend")
+        .is_some_and(|n| n.bytes().all(|c| c.is_ascii_digit()))
 }
 
 /// Imports glTF or GLB bytes; external URIs resolve against `folder`.
