@@ -24,9 +24,9 @@ pub struct Args {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Direction level 0..=4 (4, 10, 34, 130, 514 directions; antipodes share a subfield;
-    /// default: from the triangle count, 1 below 1,024 triangles, 3 below 16,384, 2 below
-    /// 65,536, else 1; these suit camera, shadow and mirror rays, use 2 or 1 for random
-    /// directions).
+    /// default: from the triangle count, 1 below 1,024 triangles, 2 below 65,536, else 1;
+    /// a render's camera, shadow and mirror rays mostly go through point grids, which the
+    /// level does not change; use 2 or 1 for random directions).
     #[arg(long)]
     pub levels: Option<u32>,
     /// Tiles along the longer side of each subfield's grid, 1..=4096 (default: from the
