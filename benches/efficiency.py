@@ -42,6 +42,14 @@ def load(arg):
     threads = {int(r["threads"]) for r in rows if r.get("threads")}
     if len(threads) != 1:
         sys.exit(f"{path}: the threads column is missing or varies ({threads})")
+    # Frames rendered side by side (`--frames-in-flight` above 1, the render's own
+    # choice from 2 threads on) each report their own phases, which then add up to more
+    # than the whole command took: the per-frame figures below would mean nothing.
+    phases = sum(float(r[k]) for r in rows for k in ("update_ms", "trace_ms", "shade_ms")) / 1e3
+    if phases > wall_s * 1.02:
+        sys.exit(f"{path}: its frames overlap (their update + trace + shade add up to {phases:.2f} s "
+                 f"against {wall_s:.2f} s for the whole command): render it with --frames-in-flight 1 "
+                 "(benches/scaling.sh --in-flight 1)")
     return path, threads.pop(), wall_s, rows
 
 

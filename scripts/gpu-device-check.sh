@@ -137,17 +137,19 @@ run)
         echo "scaling (1920x1080): done" || echo "scaling (1920x1080): FAILED"
     tail -n 6 "$out/scaling-hd.md"
     # The rows above render as many frames at once as the render chooses at each thread
-    # count (--frames-in-flight left out); one frame at a time on all cores beside them.
-    timeout 120 bash benches/scaling.sh --threads "$(nproc)" --frames 0:24 --in-flight 1 \
+    # count (--frames-in-flight left out); one frame at a time on 1 and on all cores beside
+    # them, which is also what benches/efficiency.py reads (frames in flight overlap
+    # their phases; it refuses such CSVs): each phase's efficiency from 1 to all cores.
+    timeout 150 bash benches/scaling.sh --threads "1,$(nproc)" --frames 0:24 --in-flight 1 \
         --out /tmp/scaling-one >"$out/scaling-one.md" 2>>"$out/scaling.err" &&
         echo "scaling (one frame in flight): done" || echo "scaling (one frame in flight): FAILED"
-    tail -n 4 "$out/scaling-one.md"
+    tail -n 6 "$out/scaling-one.md"
     for cam in still dolly; do
-        d=/tmp/scaling/frame_${cam}_t
+        d=/tmp/scaling-one/frame_${cam}_t
         python3 benches/efficiency.py --predict "$(nproc)" "$(ls ${d}1/*.subfield.1.csv):$(ls ${d}1/*.subfield.1.wall)" \
-            "$(ls ${d}2/*.subfield.1.csv):$(ls ${d}2/*.subfield.1.wall)" >"$out/efficiency-$cam.md" 2>&1 || true
+            "$(ls ${d}$(nproc)/*.subfield.1.csv):$(ls ${d}$(nproc)/*.subfield.1.wall)" >"$out/efficiency-$cam.md" 2>&1 || true
     done
-    (cd /tmp && find scaling scaling-hd \( -name '*.csv' -o -name '*.wall' -o -name '*.md' \) -print0 |
+    (cd /tmp && find scaling scaling-hd scaling-one \( -name '*.csv' -o -name '*.wall' -o -name '*.md' \) -print0 |
         tar -czf "$out/scaling-runs.tgz" --null -T -) || true
     ;;
 *)
