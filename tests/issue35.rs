@@ -218,6 +218,23 @@ fn glowing(mut scene: Scene) -> Scene {
     scene
 }
 
+/// `path` is refused by the importer with the error `is_it` knows, and by `render` in
+/// a line holding each of `says` (not the glTF reader's "not valid glTF JSON").
+fn refused_as_not_a_scene(
+    path: &std::path::Path,
+    is_it: impl Fn(&import::ImportError) -> bool,
+    says: &[&str],
+) {
+    let err = import::load(path).unwrap_err();
+    assert!(is_it(&err), "{}: {err}", path.display());
+    let out = path.with_file_name("f.#.exr");
+    let o = subfield(&["render", s(path), "-o", s(&out)]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(says.iter().all(|w| e.contains(w)), "{e}");
+    assert!(!e.contains("not valid glTF JSON"), "{e}");
+}
+
 #[test]
 fn a_blend_file_is_told_to_export_gltf() {
     let dir = temp_dir("issue35-blend");
@@ -227,20 +244,11 @@ fn a_blend_file_is_told_to_export_gltf() {
     let renamed = dir.join("shot.glb");
     std::fs::write(&renamed, b"BLENDER-v304RENDH").unwrap();
     for path in [&named, &renamed] {
-        let err = import::load(path).unwrap_err();
-        assert!(
-            matches!(err, import::ImportError::BlendFile { .. }),
-            "{}: {err}",
-            path.display()
+        refused_as_not_a_scene(
+            path,
+            |e| matches!(e, import::ImportError::BlendFile { .. }),
+            &["a Blender file", "File > Export > glTF 2.0"],
         );
-        let o = subfield(&["render", s(path), "-o", s(&dir.join("f.#.exr"))]);
-        assert!(!o.status.success());
-        let e = stderr(&o);
-        assert!(
-            e.contains("a Blender file") && e.contains("File > Export > glTF 2.0"),
-            "{e}"
-        );
-        assert!(!e.contains("not valid glTF JSON"), "{e}");
     }
     // A backup (`.blend1`) too, even when it is empty.
     let backup = dir.join("shot.blend1");
@@ -264,17 +272,11 @@ fn a_baked_file_given_as_the_scene_is_told_to_go_with_baked() {
     let renamed = dir.join("baked.glb");
     std::fs::copy(&psf, &renamed).unwrap();
     for path in [&psf, &renamed] {
-        let err = import::load(path).unwrap_err();
-        assert!(
-            matches!(err, import::ImportError::BakedFile { .. }),
-            "{}: {err}",
-            path.display()
+        refused_as_not_a_scene(
+            path,
+            |e| matches!(e, import::ImportError::BakedFile { .. }),
+            &["a baked file", "--baked"],
         );
-        let o = subfield(&["render", s(path), "-o", s(&dir.join("f.#.exr"))]);
-        assert!(!o.status.success());
-        let e = stderr(&o);
-        assert!(e.contains("a baked file") && e.contains("--baked"), "{e}");
-        assert!(!e.contains("not valid glTF JSON"), "{e}");
     }
     // Given as it should be, the same file renders.
     let o = subfield(&[
