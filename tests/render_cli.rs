@@ -90,8 +90,10 @@ fn frame_of(dir: &Path, sub: &str, k: u32) -> Vec<u8> {
 
 /// Renders `frames` of `scene` through `camera` (96x72, `--max-depth 2`, `--aov aovs`)
 /// into `dir/name` on 2 threads and `dir/name1` on 1, one frame in flight, `dir/name3`
-/// with three frames in flight on 2 threads, and each frame of `check` alone, and
-/// asserts that each of those frames is the same bytes in all four.
+/// with three frames in flight on 2 threads, `dir/namec` in chunks of 1,000 samples (ten
+/// rows: eight chunks a frame, the last a short one; a frame is otherwise one chunk), and
+/// each frame of `check` alone, and asserts that each of those frames is the same bytes
+/// in all five.
 fn sequence_is_its_frames_alone(
     dir: &Path,
     scene: &Path,
@@ -100,7 +102,7 @@ fn sequence_is_its_frames_alone(
     check: &[u32],
     aovs: &str,
 ) {
-    let render = |sub: &str, frames: &str, threads: &str, in_flight: &str| {
+    let render_cut = |sub: &str, frames: &str, threads: &str, in_flight: &str, chunk: &str| {
         let out = dir.join(format!("{sub}/f.##.exr"));
         ok(&[
             "render",
@@ -121,10 +123,18 @@ fn sequence_is_its_frames_alone(
             threads,
             "--frames-in-flight",
             in_flight,
+            "--chunk-samples",
+            chunk,
             "--quiet",
         ]);
     };
+    let render = |sub: &str, frames: &str, threads: &str, in_flight: &str| {
+        render_cut(sub, frames, threads, in_flight, "0");
+    };
     render(name, frames, "2", "1");
+    // Small chunks: the memo's and the replay's slots are found from each chunk's first
+    // pixel, and the AOVs written chunk by chunk.
+    render_cut(&format!("{name}c"), frames, "2", "2", "1000");
     render(&format!("{name}1"), frames, "1", "1");
     // Three frames at once, each lane's frames three apart (what a lane keeps from its
     // last frame is three frames old), on two threads.
@@ -143,6 +153,10 @@ fn sequence_is_its_frames_alone(
         assert!(
             frame_of(dir, name, k) == frame_of(dir, &format!("{name}3"), k),
             "{name} camera: frame {k} differs between one and three frames in flight"
+        );
+        assert!(
+            frame_of(dir, name, k) == frame_of(dir, &format!("{name}c"), k),
+            "{name} camera: frame {k} differs when traced in chunks of 1,000 samples"
         );
     }
 }

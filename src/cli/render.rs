@@ -171,6 +171,10 @@ pub struct Args {
     /// side does).
     #[arg(long, value_name = "N")]
     pub frames_in_flight: Option<usize>,
+    /// Samples the CPU path traces together at most (0 or absent: 2^19); for tests,
+    /// which hold that frames do not depend on it.
+    #[arg(long, value_name = "N", hide = true)]
+    pub chunk_samples: Option<usize>,
     /// No progress or report.
     #[arg(long, short)]
     pub quiet: bool,
@@ -357,6 +361,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
             Some(n) => n,
             None => 0,
         },
+        chunk_samples: a.chunk_samples.unwrap_or(0),
     })
 }
 

@@ -592,6 +592,11 @@ pub struct RenderOptions {
     /// count, [`RenderOptions::lanes`]). Not an option of the pixels: a frame is the same
     /// bytes whichever frames render beside it.
     pub frames_in_flight: usize,
+    /// Samples the CPU path traces together at most (0: the default, 2^19, a 640x480
+    /// frame in one): a smaller chunk takes less memory and pays each batch's set-up
+    /// more often. Not an option of the pixels: the tests render with small chunks to
+    /// hold that a frame is the same bytes however it is cut.
+    pub chunk_samples: usize,
 }
 
 impl Default for RenderOptions {
@@ -624,6 +629,7 @@ impl Default for RenderOptions {
             motion_blur: None,
             cancel: CancelFlag::default(),
             frames_in_flight: 0,
+            chunk_samples: 0,
         }
     }
 }

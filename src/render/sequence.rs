@@ -438,12 +438,12 @@ struct Lane {
 }
 
 impl Lane {
-    fn new(tracing: Tracing) -> Lane {
+    fn new(tracing: Tracing, chunk_samples: usize) -> Lane {
         Lane {
             tracing,
             dyn_soup: TriangleSoup::new(),
             next_soup: TriangleSoup::new(),
-            scratch: FrameScratch::default(),
+            scratch: FrameScratch::with_chunk(chunk_samples),
         }
     }
 
@@ -643,9 +643,9 @@ impl Frames<'_> {
                 #[cfg(feature = "gpu")]
                 Tracing::Gpu(g) => Tracing::Gpu(Box::new(g.another()?)),
             };
-            lanes.push(Lane::new(more));
+            lanes.push(Lane::new(more, opts.chunk_samples));
         }
-        lanes.insert(0, Lane::new(tracing));
+        lanes.insert(0, Lane::new(tracing, opts.chunk_samples));
 
         std::thread::scope(|sc| {
             // A round's frames wait here while the writer writes the round before.

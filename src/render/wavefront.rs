@@ -40,8 +40,13 @@ pub struct AovInputs<'a> {
 
 /// Rays shaded by one task.
 const BLOCK: usize = 1024;
-/// Samples traced together (bounds the wavefront's memory).
-const CHUNK_SAMPLES: usize = 1 << 18;
+/// Samples traced together (bounds the wavefront's memory), unless the options say
+/// otherwise ([`RenderOptions::chunk_samples`](super::RenderOptions::chunk_samples)):
+/// 2^19 traces a 640x480 frame as one chunk. Each chunk's batches pay their own set-up
+/// (the point grids' plans, a few ms a batch): with 2^18 a 640x480 frame was two
+/// chunks, and one chunk made 24-frame renders on 2 threads 6-7 % faster, at 1080p 3 %
+/// (benches/PERF.md, issue 38, round 5; round 3 had found no difference).
+pub(super) const CHUNK_SAMPLES: usize = 1 << 19;
 
 /// A frame's working buffers, kept from one frame to the next by a sequence
 /// ([`render_frame_with`]): their capacity stays, so once the first frame is done a
@@ -76,9 +81,20 @@ pub struct FrameScratch {
     sample_steps: Vec<u8>,
     picked: Vec<u32>,
     crypto_ids: Vec<[Option<u32>; 2]>,
+    /// Samples a chunk traces at most (0: [`CHUNK_SAMPLES`]).
+    chunk_samples: usize,
 }
 
 impl FrameScratch {
+    /// Buffers that trace `chunk_samples` samples at a time at most (0: the default,
+    /// 2^19); the pixels do not depend on it.
+    pub fn with_chunk(chunk_samples: usize) -> FrameScratch {
+        FrameScratch {
+            chunk_samples,
+            ..FrameScratch::default()
+        }
+    }
+
     /// Keeps a written frame's buffers for the next frame of the same size and AOVs.
     pub fn recycle(&mut self, fb: FrameBuffers) {
         self.spare = Some(fb);
@@ -543,6 +559,7 @@ fn trace_pass<T: Intersector>(
         sample_steps,
         picked,
         crypto_ids,
+        chunk_samples,
     } = scratch;
     let layers = tracer.layers();
     // The memo keeps a still camera's rays from frame to frame; a blurred frame's steps
@@ -567,7 +584,12 @@ fn trace_pass<T: Intersector>(
     // hashes of the jitter and the seeds take it (wrapping: the image's own pixels keep
     // the numbers they have without overscan).
     let pixel = |i: u32| i.wrapping_sub(o as u32);
-    let rows_per_chunk = (CHUNK_SAMPLES / (w * spp)).max(1);
+    let chunk = if *chunk_samples > 0 {
+        *chunk_samples
+    } else {
+        CHUNK_SAMPLES
+    };
+    let rows_per_chunk = (chunk / (w * spp)).max(1);
     let mut y0 = 0;
     while y0 < h {
         let y1 = (y0 + rows_per_chunk).min(h);
