@@ -97,7 +97,7 @@ fn bake_then_inspect_then_trace() {
         },
     )
     .unwrap();
-    let params = PsfParams::for_static(soup.len());
+    let params = PsfParams::for_scene(soup.len(), scene.has_parallel_light());
     assert_eq!(*baked.psf.params(), params);
     let mem = Psf::build(&soup.positions, &params).unwrap();
     let mut rng = Rng::new(11);
@@ -462,7 +462,7 @@ fn quality_high_costs_no_more_than_the_default_on_its_sample() {
     let scene = import::load(&scene_path).unwrap();
     let split = scene.split(ClipSelection::All);
     let tris = scene.static_triangles(&split).positions;
-    let auto = PsfParams::for_static(tris.len());
+    let auto = PsfParams::for_scene(tris.len(), scene.has_parallel_light());
     let default = Psf::build(&tris, &auto).unwrap();
     let rays = subfield::render::tuning_rays(&scene, &default);
     // The camera's primary rays and the point light's shadow rays mostly go through
@@ -477,7 +477,7 @@ fn quality_high_costs_no_more_than_the_default_on_its_sample() {
         (again.point, &again.closest, &again.any),
         (rays.point, &rays.closest, &rays.any)
     );
-    let (psf, tuning) = subfield::psf::tune(&tris, &rays, &|_| {}).unwrap();
+    let (psf, tuning) = subfield::psf::tune(&tris, auto, &rays, &|_| {}).unwrap();
     // The costs are what measuring gives, independently of the search: the default's,
     // and the chosen bake's, each with the point grids' rays at the default's mean cost
     // a traced ray.
@@ -514,7 +514,7 @@ fn quality_high_costs_no_more_than_the_default_on_its_sample() {
     );
     assert!(tuning.record.cost < default_cost, "{:?}", tuning.record);
     // Same input, same choice.
-    let (_, again) = subfield::psf::tune(&tris, &rays, &|_| {}).unwrap();
+    let (_, again) = subfield::psf::tune(&tris, auto, &rays, &|_| {}).unwrap();
     assert_eq!(again.record, tuning.record);
     assert_eq!(again.chosen, tuning.chosen);
 }

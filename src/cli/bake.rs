@@ -24,9 +24,10 @@ pub struct Args {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Direction level 0..=4 (4, 10, 34, 130, 514 directions; antipodes share a subfield;
-    /// default: from the triangle count, 1 below 1,024 triangles, 2 below 65,536, else 1;
-    /// a render's camera, shadow and mirror rays mostly go through point grids, which the
-    /// level does not change; use 2 or 1 for random directions).
+    /// default: from the triangle count, 1 below 1,024 triangles, 3 below 16,384 for a scene
+    /// with a directional light or none (else 2), 2 below 65,536, else 1; a render's
+    /// camera rays, point lights' shadow rays and mirror rays mostly go through point
+    /// grids, which the level does not change; use 2 or 1 for random directions).
     #[arg(long)]
     pub levels: Option<u32>,
     /// Tiles along the longer side of each subfield's grid, 1..=4096 (default: from the
@@ -120,7 +121,7 @@ pub fn bake_static(
         eprintln!("{}: {}", label.display(), split.summary());
     }
     let soup = scene.static_triangles(&split);
-    let auto = PsfParams::for_static(soup.len());
+    let auto = PsfParams::for_scene(soup.len(), scene.has_parallel_light());
     let params = PsfParams {
         level: levels.unwrap_or(auto.level),
         tiles: tiles.unwrap_or(auto.tiles),
@@ -148,8 +149,8 @@ pub fn bake_tuned(scene: &Scene, label: &Path, quiet: bool) -> anyhow::Result<(P
     let soup = scene.static_triangles(&split);
     let context = || format!("cannot bake {}", label.display());
     // Any bake finds the sample's hits (they do not depend on the parameters).
-    let first =
-        Psf::build(&soup.positions, &PsfParams::for_static(soup.len())).with_context(context)?;
+    let auto = PsfParams::for_scene(soup.len(), scene.has_parallel_light());
+    let first = Psf::build(&soup.positions, &auto).with_context(context)?;
     let rays = subfield::render::tuning_rays(scene, &first);
     drop(first);
     if !quiet {
@@ -163,7 +164,7 @@ pub fn bake_tuned(scene: &Scene, label: &Path, quiet: bool) -> anyhow::Result<(P
     }
     let n = std::cell::Cell::new(0u32);
     let default_cost = std::cell::Cell::new(0u64);
-    let (psf, tuning) = subfield::psf::tune(&soup.positions, &rays, &|e| {
+    let (psf, tuning) = subfield::psf::tune(&soup.positions, auto, &rays, &|e| {
         if quiet {
             return;
         }

@@ -79,7 +79,10 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("cannot write {}", scene_path.display()))?;
     let scene = import::load(&scene_path)?;
     let statics = scene.static_triangles(&scene.split(ClipSelection::All));
-    let psf = Psf::build(&statics.positions, &PsfParams::for_static(statics.len()))?;
+    let psf = Psf::build(
+        &statics.positions,
+        &PsfParams::for_scene(statics.len(), scene.has_parallel_light()),
+    )?;
     let psf_path = dir.join("museum.psf");
     write_psf(&psf_path, &psf, &WriteOptions::default())
         .with_context(|| format!("cannot write {}", psf_path.display()))?;

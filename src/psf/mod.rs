@@ -98,16 +98,8 @@ impl PsfParams {
     /// counted work on its tuning sample than level 3 with 8 (`examples/tune_weights`,
     /// weighted as `psf::tune::cost`: 1.05M against 1.59M) in a file 10 times smaller
     /// (100 KB against 1.0 MB, zstd), and on CornellBox (36 triangles) 12.9M against
-    /// 13.5M (level 3, 4 tiles) in 46 KB against 184 KB. From 1,024 triangles on, at
-    /// most level 2 (34 subfields): since the point grids take a render's camera rays,
-    /// its shadow rays towards point lights and its reflections off planes, the static
-    /// subfields see only the rays those leave, and level 3 no longer pays for its
-    /// bake. On the museum class (10,284 static triangles) level 2 baked in 0.08 s
-    /// against 0.32 s (one thread), 8 MB against 37 MB, and traced as fast: 167 / 171
-    /// against 168 / 168 ms a frame (dolly), 57 against 57 (still camera), the demo at
-    /// depth 4 218–224 against 226–232, BART museum5 67–68 against 67–70, each the same
-    /// frames (`benches/PERF.md`, issue 38, round 5). The moving triangles' layer keeps
-    /// `for_triangles`.
+    /// 13.5M (level 3, 4 tiles) in 46 KB against 184 KB. The moving triangles' layer
+    /// keeps `for_triangles`.
     pub fn for_static(n: usize) -> PsfParams {
         if n < Self::SMALL {
             PsfParams {
@@ -115,7 +107,30 @@ impl PsfParams {
                 tiles: 16,
             }
         } else {
-            let p = Self::for_triangles(n);
+            Self::for_triangles(n)
+        }
+    }
+
+    /// A scene's default bake ([`for_static`](Self::for_static)), at most level 2 (25
+    /// subfields) unless its renders send parallel shadow rays (`parallel_light`: a
+    /// directional light, or none at all, the default light being one; see
+    /// `Scene::has_parallel_light`). The point grids take a render's camera rays, its
+    /// shadow rays towards point and spot lights and its reflections off planes, so the
+    /// static subfields see only the rays those leave, and there level 3 no longer
+    /// pays for its bake: on the museum class (10,284 static triangles, a point light)
+    /// level 2 baked in 0.08 s against 0.32 s (one thread), 8 MB against 37 MB, and
+    /// traced as fast: 167 / 171 against 168 / 168 ms a frame (dolly), 57 against 57
+    /// (still camera), the demo at depth 4 218–224 against 226–232, BART museum5 67–68
+    /// against 67–70, each the same frames. A directional light's shadow rays are
+    /// parallel, no grid gathers them, and the subfield nearest their direction serves
+    /// them better the more directions there are: the demo museum lit by a sun traced
+    /// 235 ms a frame at level 2 against 213 at level 3 (`benches/PERF.md`, issue 38,
+    /// round 5).
+    pub fn for_scene(n: usize, parallel_light: bool) -> PsfParams {
+        let p = Self::for_static(n);
+        if parallel_light {
+            p
+        } else {
             PsfParams {
                 level: p.level.min(2),
                 ..p
@@ -686,18 +701,32 @@ mod params_tests {
                 tiles: 16
             }
         );
-        assert_eq!(
-            s(1024),
-            PsfParams {
-                level: 2,
-                ..PsfParams::for_triangles(1024)
-            }
-        );
-        assert_eq!(
-            [s(10_284).level, s(16_383).level, s(16_384).level],
-            [2, 2, 2]
-        );
+        assert_eq!(s(1024), PsfParams::for_triangles(1024));
         assert_eq!(s(100_000), PsfParams::for_triangles(100_000));
+        // Without parallel shadow rays level 3 gives way to 2; with them it stays.
+        let lit = |n, sun| PsfParams::for_scene(n, sun).level;
+        assert_eq!(
+            [
+                lit(1023, false),
+                lit(10_284, false),
+                lit(16_384, false),
+                lit(100_000, false)
+            ],
+            [1, 2, 2, 1]
+        );
+        assert_eq!(
+            [
+                lit(1023, true),
+                lit(10_284, true),
+                lit(16_384, true),
+                lit(100_000, true)
+            ],
+            [1, 3, 2, 1]
+        );
+        assert_eq!(
+            PsfParams::for_scene(10_284, false).tiles,
+            PsfParams::for_static(10_284).tiles
+        );
         let l = |n| PsfParams::for_triangles(n).level;
         assert_eq!(
             [

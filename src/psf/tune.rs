@@ -187,7 +187,8 @@ pub struct TuneRecord {
 #[derive(Clone, Debug)]
 pub struct Tuning {
     pub record: TuneRecord,
-    /// The default bake's trial ([`PsfParams::for_static`]), the first.
+    /// The default bake's trial (`tune`'s `default_params`, the scene's
+    /// [`PsfParams::for_scene`]), the first.
     pub default: Trial,
     pub chosen: Trial,
     /// Every trial kept, in the order measured (the default first).
@@ -342,10 +343,10 @@ impl Search<'_> {
 /// kept.
 pub fn tune(
     tris: &[[Vec3; 3]],
+    default_params: PsfParams,
     rays: &SampleRays,
     progress: &dyn Fn(TuneEvent<'_>),
 ) -> Result<(Psf, Tuning), PsfError> {
-    let default_params = PsfParams::for_static(tris.len());
     let default_bsp = BspParams::default();
     let first = Psf::build_with_layout(tris, &default_params, &default_bsp, &|_, _| {})?;
     let stats = measure(&first, rays);

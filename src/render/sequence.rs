@@ -92,7 +92,7 @@ pub fn render_sequence(
     #[cfg(not(feature = "gpu"))]
     let frame_path = false;
     let clock = Instant::now();
-    let psf = static_part(&static_soup, opts)?;
+    let psf = static_part(&static_soup, scene.has_parallel_light(), opts)?;
     let static_seconds = clock.elapsed().as_secs_f64();
 
     // Folders, last of the checks.
@@ -166,8 +166,13 @@ pub fn render_sequence(
 }
 
 /// The static part of a render: opened from `--baked` (refused when stale) or baked in
-/// memory.
-fn static_part(static_soup: &TriangleSoup, opts: &RenderOptions) -> Result<Psf, RenderError> {
+/// memory with the scene's default parameters (`parallel_light`:
+/// [`Scene::has_parallel_light`](crate::scene::Scene::has_parallel_light)).
+fn static_part(
+    static_soup: &TriangleSoup,
+    parallel_light: bool,
+    opts: &RenderOptions,
+) -> Result<Psf, RenderError> {
     Ok(match &opts.baked {
         Some(path) => {
             let hash = format::scene_hash(&static_soup.positions);
@@ -182,7 +187,7 @@ fn static_part(static_soup: &TriangleSoup, opts: &RenderOptions) -> Result<Psf, 
         }
         None => Psf::build(
             &static_soup.positions,
-            &PsfParams::for_static(static_soup.len()),
+            &PsfParams::for_scene(static_soup.len(), parallel_light),
         )?,
     })
 }

@@ -552,6 +552,21 @@ pub struct Animation {
 }
 
 impl Scene {
+    /// Whether a render of this scene sends parallel shadow rays: towards a directional
+    /// light, or towards the default light (directional) that a scene without lights or
+    /// emissive materials gets. No point grid gathers such rays; the bake's default
+    /// keeps more directions for them (`PsfParams::for_scene`).
+    pub fn has_parallel_light(&self) -> bool {
+        let emits = self
+            .materials
+            .iter()
+            .any(|m| m.emissive * m.emissive_strength != Vec3::ZERO);
+        self.lights
+            .iter()
+            .any(|l| matches!(l.kind, LightKind::Directional))
+            || (self.lights.is_empty() && !emits)
+    }
+
     /// Index of the material that primitives without one use; appends it when missing.
     pub fn default_material_index(&mut self) -> u32 {
         if let Some(i) = self
