@@ -638,3 +638,41 @@ impl Scene {
 
 /// Name given to the material appended for primitives that have none.
 pub const DEFAULT_MATERIAL_NAME: &str = "subfield:default";
+
+#[cfg(test)]
+mod parallel_light_tests {
+    use super::*;
+
+    fn light(kind: LightKind) -> LightDef {
+        LightDef {
+            name: None,
+            kind,
+            color: Vec3::ONE,
+            intensity: 1.0,
+            range: None,
+            falloff: Falloff::InverseSquare,
+        }
+    }
+
+    #[test]
+    fn parallel_shadow_rays_come_from_a_sun_or_the_default_light() {
+        let mut scene = Scene::default();
+        // No lights, no emitters: the default light, a directional one.
+        assert!(scene.has_parallel_light());
+        // An emissive material lights the scene instead: no default light.
+        scene.materials.push(Material {
+            emissive: Vec3::ONE,
+            ..Material::default()
+        });
+        assert!(!scene.has_parallel_light());
+        scene.materials.clear();
+        scene.lights.push(light(LightKind::Point));
+        scene.lights.push(light(LightKind::Spot {
+            inner_cone_angle: 0.1,
+            outer_cone_angle: 0.3,
+        }));
+        assert!(!scene.has_parallel_light());
+        scene.lights.push(light(LightKind::Directional));
+        assert!(scene.has_parallel_light());
+    }
+}
