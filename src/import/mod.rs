@@ -76,23 +76,16 @@ pub fn load(path: &Path) -> Result<Scene, ImportError> {
             path: path.to_path_buf(),
         });
     }
-    match magic_of(path) {
-        Some(Magic::Blend) => {
-            return Err(ImportError::BlendFile {
-                path: path.to_path_buf(),
-            })
-        }
-        Some(Magic::Baked) => {
-            return Err(ImportError::BakedFile {
-                path: path.to_path_buf(),
-            })
-        }
-        None if is_blend_name(ext) => {
-            return Err(ImportError::BlendFile {
-                path: path.to_path_buf(),
-            })
-        }
-        None => {}
+    let magic = magic_of(path);
+    if matches!(magic, Some(Magic::Baked)) {
+        return Err(ImportError::BakedFile {
+            path: path.to_path_buf(),
+        });
+    }
+    if matches!(magic, Some(Magic::Blend)) || is_blend_name(ext) {
+        return Err(ImportError::BlendFile {
+            path: path.to_path_buf(),
+        });
     }
     gltf_read::load(path)
 }

@@ -46,7 +46,7 @@ const BLOCK: usize = 1024;
 /// (the point grids' plans, a few ms a batch): with 2^18 a 640x480 frame was two
 /// chunks, and one chunk made 24-frame renders on 2 threads 6-7 % faster, at 1080p 3 %
 /// (benches/PERF.md, issue 38, round 5; round 3 had found no difference).
-pub(super) const CHUNK_SAMPLES: usize = 1 << 19;
+const CHUNK_SAMPLES: usize = 1 << 19;
 
 /// A frame's working buffers, kept from one frame to the next by a sequence
 /// ([`render_frame_with`]): their capacity stays, so once the first frame is done a
