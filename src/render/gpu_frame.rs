@@ -484,6 +484,7 @@ pub(super) fn render_frame_gpu(
         spp,
         max_depth,
         inputs,
+        still_ahead: _,
     } = *args;
     let aovs = inputs.aovs;
     let o = inputs.overscan as usize;

@@ -14,9 +14,9 @@
 //!
 //! Only for one sample a pixel (the sample is the pixel), without the light-path passes
 //! or motion blur, and where the memo of static hits reuses what it kept (a camera that
-//! has not moved since the frame before): a moving camera's rays never repeat, so
-//! keeping them would only cost. So the second frame of a still camera keeps, the
-//! third replays.
+//! has not moved since the frame before), or that fills it with the camera of the
+//! sequence's next frame: a moving camera's rays never repeat, so keeping them would
+//! only cost. So the first frame of a still camera keeps, the second replays.
 //!
 //! Memory: 216 bytes a pixel and level ([`Kept`]) plus 52 a pixel, light and level,
 //! within [`REPLAY_BYTES`] for every level together: the camera rays and the mirror

@@ -457,6 +457,7 @@ impl Lane {
         frames: &Frames<'_>,
         static_bounds: Option<(Vec3, Vec3)>,
         frame: u32,
+        next: Option<u32>,
     ) -> Result<(FrameBuffers, FrameHeader, FrameStats), RenderError> {
         frames.render_one(
             static_bounds,
@@ -465,6 +466,7 @@ impl Lane {
             &mut self.next_soup,
             &mut self.scratch,
             frame,
+            next,
         )
     }
 }
@@ -670,6 +672,8 @@ impl Frames<'_> {
             // The render threads' CPU time a frame, beside its wall time (`--stats`).
             let cpu_clock = super::cpu_clock::CpuClock::of_pool();
             let mut pending = plan.frames.iter().enumerate().peekable();
+            // The frames in order, to look ahead (4 bytes a frame).
+            let order: Vec<u32> = plan.frames.iter().collect();
             'rounds: while pending.peek().is_some() {
                 while let Ok(r) = done_rx.try_recv() {
                     written.finish(r, on_event);
@@ -713,13 +717,22 @@ impl Frames<'_> {
                     lane.scratch.recycle(fb);
                 }
                 let cpu_start = cpu_clock.as_ref().and_then(|c| c.now_ns());
+                // The frame each lane renders next, as far as the plan tells (a frame
+                // resumed later may take its place): where its camera is this frame's,
+                // the lane keeps this frame's shading for it.
+                let step = round.len();
+                let next = |index: usize| order.get(index + step).copied();
                 let rendered: Vec<_> = match round.as_slice() {
                     [] => continue,
-                    [(_, frame, _)] => vec![lanes[0].render(self, static_bounds, *frame)],
+                    [(index, frame, _)] => {
+                        vec![lanes[0].render(self, static_bounds, *frame, next(*index))]
+                    }
                     _ => lanes
                         .par_iter_mut()
                         .zip(round.par_iter())
-                        .map(|(lane, (_, frame, _))| lane.render(self, static_bounds, *frame))
+                        .map(|(lane, (index, frame, _))| {
+                            lane.render(self, static_bounds, *frame, next(*index))
+                        })
                         .collect(),
                 };
                 // The round's CPU time, shared by its frames.
@@ -899,6 +912,7 @@ impl Frames<'_> {
     /// for each time step within the shutter (`MotionBlur`), each step tracing its share
     /// of the samples; the AOVs come from the frame's own time (the middle step when the
     /// step count is odd, else a pass of their own).
+    #[allow(clippy::too_many_arguments)]
     fn render_one(
         &self,
         static_bounds: Option<(Vec3, Vec3)>,
@@ -907,12 +921,19 @@ impl Frames<'_> {
         next_soup: &mut TriangleSoup,
         scratch: &mut FrameScratch,
         frame: u32,
+        next_frame: Option<u32>,
     ) -> Result<(FrameBuffers, FrameHeader, FrameStats), RenderError> {
         let (scene, opts, plan) = (self.scene, self.opts, self.plan);
         let time = plan.time(frame);
         let t = time as f32;
         let clock = Instant::now();
         let camera = self.camera_at(t)?;
+        // Whether the lane's next frame sees through the same camera, to the bit (an
+        // error there is that frame's to report).
+        let still_ahead = next_frame.is_some_and(|n| {
+            self.camera_at(plan.time(n) as f32)
+                .is_ok_and(|c| c.bits() == camera.bits())
+        });
         // The motion AOV: the moving triangles and the camera one frame later.
         let next = if opts.aovs.motion {
             let t1 = plan.time(frame.saturating_add(1)) as f32;
@@ -977,6 +998,7 @@ impl Frames<'_> {
                 spp: opts.spp,
                 max_depth: opts.max_depth,
                 inputs: &inputs,
+                still_ahead,
             };
             self.trace(tracing, scratch, &ctx, &args, pass, &mut fb, &mut work)?;
         }

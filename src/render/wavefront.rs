@@ -273,6 +273,7 @@ pub fn render_frame_with<T: Intersector>(
         spp,
         max_depth,
         inputs,
+        still_ahead: false,
     };
     trace_pass(scratch, &mut fb, &mut work, ctx, tracer, &frame, None);
     (fb, work)
@@ -286,6 +287,10 @@ pub(super) struct FrameArgs<'a> {
     pub spp: u32,
     pub max_depth: u32,
     pub inputs: &'a AovInputs<'a>,
+    /// The camera is the same to the bit at the frame this one's sequence renders
+    /// next: a frame that fills the memo keeps its shading for the replay too, so the
+    /// next frame replays it instead of keeping it (see `trace_pass`).
+    pub still_ahead: bool,
 }
 
 /// One pass of a frame traced in time steps (motion blur, see
@@ -530,6 +535,7 @@ fn trace_pass<T: Intersector>(
         spp,
         max_depth,
         inputs,
+        still_ahead,
     } = *args;
     let aovs = inputs.aovs;
     // The data window: the image and the overscan border (see `FrameScratch::buffers`).
@@ -567,9 +573,13 @@ fn trace_pass<T: Intersector>(
     let mode = memo.begin(camera, spp, w * h, layers.is_some() && pass.is_none());
     // The shading of a still camera's rays, replayed where they repeat (one sample a
     // pixel, as the memo; not with the passes' split). Kept from the second frame of
-    // an unmoved camera on (`Mode::Reuse`): a camera that moves every frame allocates
+    // an unmoved camera on (`Mode::Reuse`), and from the first (`Mode::Fill`) where
+    // the sequence's next frame has the same camera: that frame then replays instead
+    // of keeping, which cost a still camera's second frame 140 ms of CPU at 640x480
+    // (benches/PERF.md, issue 38, round 6). A camera that moves every frame allocates
     // and fills nothing.
-    let replayed = replay.begin(ctx, mode == Mode::Reuse && !light_paths, w * h);
+    let keeps = mode == Mode::Reuse || (mode == Mode::Fill && still_ahead);
+    let replayed = replay.begin(ctx, keeps && !light_paths, w * h);
     let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
     // The centre-ray AOVs: every frame's, or the one pass of a blurred frame that has them.
     let any_aov = aovs.any_centre() && pass.is_none_or(|p| p.aovs);
