@@ -347,6 +347,41 @@ fn kept_grids_serve_later_frames() {
     }
 }
 
+/// Shadow rays towards one light come in a batch at each depth level of a frame: the
+/// grid merged for the first (the static grid kept around the light and the moving
+/// triangles' grid on its tiles) serves the later ones, and an update's triangles get
+/// their own. Every batch, from points all over the room, agrees with brute force
+/// frame after frame as the moving triangles jump about.
+#[test]
+fn a_frames_shadow_batches_share_their_grid_and_the_next_frame_does_not() {
+    let mut rng = Rng::new(29);
+    let (stat, psf) = room(&mut rng, 3000, 0.3);
+    let mut layer = DynamicLayer::new(&psf);
+    let light = Vec3::new(2.0, 7.0, 2.0);
+    for frame in 0..4 {
+        let moving = synth::soup(&mut rng, 400, LO + 1.0, HI - 1.0, 0.8);
+        layer.update(&moving).expect("update");
+        let all: Vec<[Vec3; 3]> = stat.iter().chain(&moving).copied().collect();
+        let brute = BruteForce::new(&all);
+        let both = psf.with_dynamic(&layer);
+        for level in 0..3 {
+            let shadow: Vec<Ray> = (0..6000)
+                .map(|_| {
+                    let o = rng.in_box(LO, HI);
+                    let l = light - o;
+                    Ray::segment(o, l / l.length(), 1e-3, l.length() * (1.0 - 1e-4))
+                })
+                .collect();
+            assert_agrees(
+                &both,
+                &brute,
+                &shadow,
+                &format!("light, frame {frame}, level {level}"),
+            );
+        }
+    }
+}
+
 /// A batch too small to pay for a grid over all the static triangles takes none the
 /// first time; its point seen again, the static grid is built (and kept), and the hits
 /// are brute force's either way.

@@ -388,6 +388,7 @@ impl Psf {
             bounds: self.bounds,
             cache: &self.points,
             within: false,
+            frame: None,
         }
     }
 

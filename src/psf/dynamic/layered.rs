@@ -187,6 +187,7 @@ impl Layered<'_> {
             moving_number: &number,
             cache: &d.moving_points,
             within: true,
+            frame: None,
             ..all
         };
         let bins = self.psf.subfields().len().max(1);
@@ -234,6 +235,7 @@ impl Layered<'_> {
             },
             cache: self.psf.point_cache(),
             within: false,
+            frame: Some(&d.frame_grids),
         }
     }
 

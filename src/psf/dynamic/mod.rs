@@ -40,7 +40,7 @@ use rayon::prelude::*;
 pub use layered::{Layered, Prim};
 
 use super::bsp::LANES;
-use super::point::PointCache;
+use super::point::{FrameGrids, PointCache};
 use super::stats::{Counter, NoCount, RayStats};
 use super::traverse::{block_window, clipped_span, scan_blocks, walk_tiles};
 use super::{
@@ -77,6 +77,9 @@ pub struct DynamicLayer {
     /// ([`Layers`](crate::geometry::Layers)): it keeps none (they move), but planning
     /// needs one.
     pub(super) moving_points: PointCache,
+    /// The point grids this frame's batches built over both layers and share
+    /// ([`FrameGrids`]): emptied by every update.
+    pub(super) frame_grids: FrameGrids,
 }
 
 /// Occupancy and memory of the layer after an update.
@@ -189,6 +192,7 @@ impl DynamicLayer {
                 c.set_capacity(0);
                 c
             },
+            frame_grids: FrameGrids::default(),
         })
     }
 
@@ -214,6 +218,7 @@ impl DynamicLayer {
         // copy too (overwritten in place): the point grids read it, and a frame without
         // moving triangles (or a refused one) must leave none of the last frame's behind.
         self.order.clear();
+        self.frame_grids.clear();
         self.next_generation();
         let bounds = match checked_bounds(tris) {
             Ok(b) => b,

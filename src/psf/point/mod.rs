@@ -90,4 +90,4 @@ mod tests;
 
 pub(crate) use plan::Plan;
 pub(crate) use trace::trace_batch;
-pub(crate) use types::{PointCache, Sources};
+pub(crate) use types::{FrameGrids, PointCache, Sources};

@@ -46,17 +46,35 @@ pub(crate) struct Plan<'a> {
     pub(super) pre: Arc<[TriPre]>,
     /// The grid built for the batch: over the moving triangles beside `fixed`, over
     /// all of them without it.
-    pub(super) batch: Option<BatchGrid<'a>>,
+    pub(super) batch: Option<Held<'a>>,
     /// How far a hit's depth may lie outside its entry's range, and the margin of the
     /// early exit.
     pub(super) depth_margin: f64,
 }
 
 /// A grid built for one batch, its triangles in the test's form and their hit numbers.
-pub(super) struct BatchGrid<'a> {
+pub(crate) struct BatchGrid<'a> {
     pub(super) grid: PointGrid,
     pub(super) tris: Cow<'a, [TriPre]>,
     pub(super) number: Vec<u32>,
+}
+
+/// A plan's batch grid: its own, or a merged grid the frame's batches share
+/// ([`FrameGrids`](super::types::FrameGrids)).
+pub(super) enum Held<'a> {
+    Own(Box<BatchGrid<'a>>),
+    Shared(Arc<BatchGrid<'static>>),
+}
+
+impl<'a> std::ops::Deref for Held<'a> {
+    type Target = BatchGrid<'a>;
+
+    fn deref(&self) -> &BatchGrid<'a> {
+        match self {
+            Held::Own(b) => b,
+            Held::Shared(b) => b,
+        }
+    }
 }
 
 /// Two grids (the static part kept, the moving part built) cost each ray a second
@@ -197,23 +215,35 @@ impl<'a> Plan<'a> {
     /// The plan through `grid`, a grid over all the triangles numbered static ones first:
     /// its triangles in one array, in the test's form, and their hit numbers.
     fn over_all(src: &'a Sources<'a>, at: Around, pre: Arc<[TriPre]>, grid: PointGrid) -> Plan<'a> {
-        let nstat = src.statics.len();
-        let mut tris = Vec::with_capacity(nstat + src.moving_pre.len());
-        tris.extend_from_slice(&pre);
-        tris.extend_from_slice(src.moving_pre);
-        let number = (0..nstat as u32)
-            .chain(src.moving_number.iter().map(|&k| nstat as u32 + k))
-            .collect();
+        let batch = Self::all_of(src, &pre, grid);
+        Self::through(at, pre, Held::Own(Box::new(batch)))
+    }
+
+    /// The plan through `batch`, a grid over all the triangles.
+    fn through(at: Around, pre: Arc<[TriPre]>, batch: Held<'a>) -> Plan<'a> {
         Plan {
             at,
             fixed: None,
             pre,
-            batch: Some(BatchGrid {
-                grid,
-                tris: Cow::Owned(tris),
-                number,
-            }),
+            batch: Some(batch),
             depth_margin: 2.0 * at.allowance(),
+        }
+    }
+
+    /// `grid`, over all the triangles numbered static ones first (`pre` the static
+    /// ones' test form), with its triangles in one array and their hit numbers.
+    fn all_of(src: &Sources<'_>, pre: &[TriPre], grid: PointGrid) -> BatchGrid<'static> {
+        let nstat = src.statics.len();
+        let mut tris = Vec::with_capacity(nstat + src.moving_pre.len());
+        tris.extend_from_slice(pre);
+        tris.extend_from_slice(src.moving_pre);
+        let number = (0..nstat as u32)
+            .chain(src.moving_number.iter().map(|&k| nstat as u32 + k))
+            .collect();
+        BatchGrid {
+            grid,
+            tris: Cow::Owned(tris),
+            number,
         }
     }
 
@@ -315,6 +345,12 @@ impl<'a> Plan<'a> {
         };
         let pre = static_pre(src);
         let at = fixed.at;
+        // A grid merged on this kept grid earlier in the frame (a light's shadow rays
+        // of the level before) serves as it is: 3 ms a frame of the museum-class dolly
+        // at 1 thread (benches/PERF.md, issue 38, round 6).
+        if let Some(b) = src.frame.filter(|_| nmov > 0).and_then(|f| f.get(&fixed)) {
+            return Some(Self::through(at, pre, Held::Shared(b)));
+        }
         let both = fixed.grid.entries.len() as u64 + 32 * n as u64 + 8 * nmov as u64;
         if nmov > 0
             && saves == 12
@@ -327,7 +363,16 @@ impl<'a> Plan<'a> {
                 src.moving_pre[g].vertices()
             })?;
             let grid = PointGrid::merged(&fixed.grid, &moving, nstat as u32);
-            return Some(Self::over_all(src, at, pre, grid));
+            let batch = Self::all_of(src, &pre, grid);
+            let held = match src.frame {
+                Some(f) => {
+                    let b = Arc::new(batch);
+                    f.put(fixed.clone(), b.clone());
+                    Held::Shared(b)
+                }
+                None => Held::Own(Box::new(batch)),
+            };
+            return Some(Self::through(at, pre, held));
         }
         let batch = if nmov == 0 {
             None
@@ -339,7 +384,7 @@ impl<'a> Plan<'a> {
                 |g| src.moving_pre[g].vertices(),
                 0,
             )?;
-            Some(BatchGrid {
+            Some(Held::Own(Box::new(BatchGrid {
                 grid,
                 tris: Cow::Borrowed(src.moving_pre),
                 number: src
@@ -347,7 +392,7 @@ impl<'a> Plan<'a> {
                     .iter()
                     .map(|&k| nstat as u32 + k)
                     .collect(),
-            })
+            })))
         };
         Some(Plan {
             at,

@@ -26,7 +26,7 @@ impl<'a> Plan<'a> {
         if (ray.origin.as_dvec3() - self.at.c).length_squared() > self.at.reach2 {
             return None;
         }
-        match (&self.fixed, &self.batch) {
+        match (&self.fixed, self.batch.as_deref()) {
             (Some(s), None) => {
                 let t = s.grid.faces[f].tile(p)?;
                 let test = |pre: &RayPre, g: u32, ray: &Ray, best: &Option<Hit>| {

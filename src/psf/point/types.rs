@@ -79,6 +79,53 @@ pub(crate) struct Sources<'a> {
     /// walks through them in the parallel subfields, which costs [`WITHIN`] times the
     /// planner's usual figure or more.
     pub within: bool,
+    /// The merged grids built in this frame, shared by its batches (the moving
+    /// triangles do not move within a frame); `None` where none are shared.
+    pub frame: Option<&'a FrameGrids>,
+}
+
+/// A frame's merged grids (a kept static grid and the moving triangles' grid on its
+/// tiles, [`Plan`](super::plan::Plan)'s `MERGE`), each with the kept grid it was built
+/// on: a light's shadow rays come in a batch at each depth level, and the grid one
+/// batch built serves the next. The owner (a dynamic layer) empties it whenever its
+/// triangles change.
+#[derive(Default)]
+pub(crate) struct FrameGrids {
+    grids: Mutex<Vec<(Arc<StaticGrid>, Arc<super::plan::BatchGrid<'static>>)>>,
+}
+
+impl std::fmt::Debug for FrameGrids {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let grids = self.grids.lock().map_or(0, |g| g.len());
+        f.debug_struct("FrameGrids").field("grids", &grids).finish()
+    }
+}
+
+impl FrameGrids {
+    /// The merged grid built this frame on `kept`, if any.
+    pub(super) fn get(
+        &self,
+        kept: &Arc<StaticGrid>,
+    ) -> Option<Arc<super::plan::BatchGrid<'static>>> {
+        let g = self.grids.lock().unwrap_or_else(|e| e.into_inner());
+        g.iter()
+            .find(|(k, _)| Arc::ptr_eq(k, kept))
+            .map(|(_, b)| b.clone())
+    }
+
+    /// Keeps `grid`, built this frame on `kept`.
+    pub(super) fn put(&self, kept: Arc<StaticGrid>, grid: Arc<super::plan::BatchGrid<'static>>) {
+        let mut g = self.grids.lock().unwrap_or_else(|e| e.into_inner());
+        g.push((kept, grid));
+    }
+
+    /// Forgets every grid (the triangles changed).
+    pub(crate) fn clear(&mut self) {
+        self.grids
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+            .clear();
+    }
 }
 
 /// What a ray that meets the (moving) triangles' bounds costs in the parallel subfields,
