@@ -279,18 +279,43 @@ impl PointGrid {
     /// The tiles' lists (`starts` over `total` tiles, and the entries) of `items`, sorted
     /// by depth, on the tiling `faces`.
     fn fill(faces: &[Face; 6], total: usize, items: &[Item]) -> (Vec<u32>, Vec<PEntry>) {
-        // Tiles in ranges, one job a range: each goes through all the items in order
-        // and counts (then writes) the entries of its own tiles.
+        // Tiles in ranges, one job a range: each goes through the items that reach its
+        // tiles, in order, and counts (then writes) the entries of its own tiles. Which
+        // items reach which ranges is one serial pass; each job had gone through every
+        // item, so the count and write passes took as long at any thread count (0.9 ms
+        // for the 16,384 moving triangles around a light, at 1 and 2 threads;
+        // `benches/PERF.md`, issue 38, round 6).
         let jobs = (2 * rayon::current_num_threads()).clamp(1, total.max(1));
         let cut = |k: usize| k * total / jobs;
-        let each_tile = |lo: usize, hi: usize, visit: &mut dyn FnMut(usize, &Item)| {
-            for it in items {
+        // The range holding tile `t`: the last `k` with `cut(k) <= t`.
+        let job_of = |t: usize| {
+            let mut k = (t * jobs / total.max(1)).min(jobs - 1);
+            while k + 1 < jobs && cut(k + 1) <= t {
+                k += 1;
+            }
+            while k > 0 && cut(k) > t {
+                k -= 1;
+            }
+            k
+        };
+        let span = |it: &Item| {
+            let face = &faces[it.face as usize];
+            let first = face.first + it.j0 as usize * face.nu + it.i0 as usize;
+            let last = face.first + it.j1 as usize * face.nu + it.i1 as usize;
+            (first, last)
+        };
+        let mut reach: Vec<Vec<u32>> = vec![Vec::new(); jobs];
+        for (i, it) in items.iter().enumerate() {
+            let (first, last) = span(it);
+            for r in &mut reach[job_of(first)..=job_of(last)] {
+                r.push(i as u32);
+            }
+        }
+        let each_tile = |k: usize, visit: &mut dyn FnMut(usize, &Item)| {
+            let (lo, hi) = (cut(k), cut(k + 1));
+            for &i in &reach[k] {
+                let it = &items[i as usize];
                 let face = &faces[it.face as usize];
-                let first = face.first + it.j0 as usize * face.nu + it.i0 as usize;
-                let last = face.first + it.j1 as usize * face.nu + it.i1 as usize;
-                if last < lo || first >= hi {
-                    continue;
-                }
                 for j in it.j0 as usize..=it.j1 as usize {
                     let row = face.first + j * face.nu;
                     let a = (row + it.i0 as usize).max(lo);
@@ -307,12 +332,12 @@ impl PointGrid {
             let mut rest = &mut starts[1..];
             for k in 0..jobs {
                 let (head, tail) = rest.split_at_mut(cut(k + 1) - cut(k));
-                parts.push((cut(k), head));
+                parts.push((k, head));
                 rest = tail;
             }
-            parts.into_par_iter().for_each(|(lo, counts)| {
-                let hi = lo + counts.len();
-                each_tile(lo, hi, &mut |t, _| counts[t - lo] += 1);
+            parts.into_par_iter().for_each(|(k, counts)| {
+                let lo = cut(k);
+                each_tile(k, &mut |t, _| counts[t - lo] += 1);
             });
         }
         for k in 0..total {
@@ -322,20 +347,98 @@ impl PointGrid {
         {
             let parts = by_tiles(&starts, &mut entries, jobs);
             let starts = &starts;
-            parts.into_par_iter().for_each(|(lo, hi, out)| {
-                let base = starts[lo] as usize;
-                let mut cursor: Vec<u32> = starts[lo..hi].to_vec();
-                each_tile(lo, hi, &mut |t, it| {
-                    let k = &mut cursor[t - lo];
-                    out[*k as usize - base] = PEntry {
-                        zmin: it.zmin,
-                        zmax: it.zmax,
-                        tri: it.tri,
-                    };
-                    *k += 1;
+            parts
+                .into_par_iter()
+                .enumerate()
+                .for_each(|(k, (lo, hi, out))| {
+                    let base = starts[lo] as usize;
+                    let mut cursor: Vec<u32> = starts[lo..hi].to_vec();
+                    each_tile(k, &mut |t, it| {
+                        let c = &mut cursor[t - lo];
+                        out[*c as usize - base] = PEntry {
+                            zmin: it.zmin,
+                            zmax: it.zmax,
+                            tri: it.tri,
+                        };
+                        *c += 1;
+                    });
                 });
-            });
         }
         (starts, entries)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{DVec3, Vec3};
+
+    use super::super::types::{Around, PointGrid, NO_RECT};
+    use super::by_depth;
+    use crate::gen::synth::Rng;
+
+    /// The tiles' lists `fill` writes, whatever the number of jobs (twice the pool's
+    /// threads), are those of one serial pass that lists each item, in depth order, in
+    /// every tile of its rectangle: the jobs' ranges of tiles split the items that
+    /// reach several of them, and no entry is lost or doubled at a range's edge.
+    #[test]
+    fn tiles_are_filled_as_one_serial_pass_fills_them_at_any_job_count() {
+        let mut rng = Rng::new(41);
+        let at = Around {
+            c: DVec3::new(0.2, -0.4, 0.3),
+            r: 0.05,
+            rho_max: 1e-4,
+            reach2: 4.0,
+            margin: 1e-4,
+        };
+        let tris: Vec<[Vec3; 3]> = (0..900)
+            .map(|k| {
+                let a = rng.in_box(Vec3::splat(-6.0), Vec3::splat(6.0));
+                // Some large triangles, which span many tiles and several ranges.
+                let size = if k % 30 == 0 { 8.0 } else { 0.05 + rng.f32() };
+                [a, a + size * rng.unit(), a + size * rng.unit()]
+            })
+            .collect();
+        let mut rects = [NO_RECT; 6];
+        rects[0] = (-0.9, -0.7, 0.8, 0.9, 5000);
+        rects[3] = (-1.0, -1.0, 1.0, 1.0, 3000);
+        rects[4] = (-0.3, -0.2, 0.4, 0.5, 700);
+        let (faces, total) = PointGrid::faces_for(&rects, 0);
+        let items_of = PointGrid::lister(&at, &faces, |g| tris[g]);
+        let (items, _) = PointGrid::gather(tris.len(), items_of);
+        let items = by_depth(items);
+        // The serial pass.
+        let mut lists: Vec<Vec<(u32, u32, u32)>> = vec![Vec::new(); total];
+        for it in &items {
+            let face = &faces[it.face as usize];
+            for j in it.j0 as usize..=it.j1 as usize {
+                for i in it.i0 as usize..=it.i1 as usize {
+                    let t = face.first + j * face.nu + i;
+                    lists[t].push((it.zmin.to_bits(), it.zmax.to_bits(), it.tri));
+                }
+            }
+        }
+        let spanning = items
+            .iter()
+            .filter(|it| it.i1 > it.i0 + 2 && it.j1 > it.j0 + 2)
+            .count();
+        assert!(
+            total > 200 && spanning > 10,
+            "{total} tiles, {spanning} large items"
+        );
+        for threads in [1, 2, 3, 5, 16] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let (starts, entries) = pool.install(|| PointGrid::fill(&faces, total, &items));
+            assert_eq!(starts.len(), total + 1);
+            for (t, want) in lists.iter().enumerate() {
+                let got: Vec<(u32, u32, u32)> = entries[starts[t] as usize..starts[t + 1] as usize]
+                    .iter()
+                    .map(|e| (e.zmin.to_bits(), e.zmax.to_bits(), e.tri))
+                    .collect();
+                assert_eq!(&got, want, "tile {t}, {threads} threads");
+            }
+        }
     }
 }
