@@ -253,6 +253,17 @@ fn view(rng: &mut Rng, n: usize, c: Vec3, axis: Vec3, spread: f32) -> Vec<Ray> {
         .collect()
 }
 
+/// `n` shadow rays towards `light` from points all over the room, stopping short of it.
+fn towards(rng: &mut Rng, n: usize, light: Vec3) -> Vec<Ray> {
+    (0..n)
+        .map(|_| {
+            let o = rng.in_box(LO, HI);
+            let l = light - o;
+            Ray::segment(o, l / l.length(), 1e-3, l.length() * (1.0 - 1e-4))
+        })
+        .collect()
+}
+
 /// The first ray on which `got` and `want` answer differently (closest hit, then any
 /// hit), described; `None` when they agree on every ray.
 fn first_difference(got: &dyn Intersector, want: &dyn Intersector, rs: &[Ray]) -> Option<String> {
@@ -330,13 +341,7 @@ fn kept_grids_serve_later_frames() {
         let primary = view(&mut rng, 4000, c, axis, spread);
         assert!(both.point_grid_for(&primary), "frame {frame}");
         assert_agrees(&both, &brute, &primary, &format!("camera, frame {frame}"));
-        let shadow: Vec<Ray> = (0..4000)
-            .map(|_| {
-                let o = rng.in_box(LO, HI);
-                let l = light - o;
-                Ray::segment(o, l / l.length(), 1e-3, l.length() * (1.0 - 1e-4))
-            })
-            .collect();
+        let shadow = towards(&mut rng, 4000, light);
         assert_agrees(&both, &brute, &shadow, &format!("light, frame {frame}"));
         assert_agrees(
             &psf,
@@ -365,13 +370,7 @@ fn a_frames_shadow_batches_share_their_grid_and_the_next_frame_does_not() {
         let brute = BruteForce::new(&all);
         let both = psf.with_dynamic(&layer);
         for level in 0..3 {
-            let shadow: Vec<Ray> = (0..6000)
-                .map(|_| {
-                    let o = rng.in_box(LO, HI);
-                    let l = light - o;
-                    Ray::segment(o, l / l.length(), 1e-3, l.length() * (1.0 - 1e-4))
-                })
-                .collect();
+            let shadow = towards(&mut rng, 6000, light);
             assert_agrees(
                 &both,
                 &brute,
