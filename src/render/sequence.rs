@@ -471,6 +471,41 @@ impl Lane {
     }
 }
 
+/// A frame plan's frames by position, read ahead as far as asked and forgotten behind
+/// (positions asked for in increasing order; one asked for after a later one is not
+/// known again, `None`).
+struct Ahead<I> {
+    frames: std::iter::Enumerate<I>,
+    /// Read but not yet passed: positions ascending.
+    read: std::collections::VecDeque<(usize, u32)>,
+}
+
+impl<I: Iterator<Item = u32>> Ahead<I> {
+    fn new(frames: I) -> Ahead<I> {
+        Ahead {
+            frames: frames.enumerate(),
+            read: std::collections::VecDeque::new(),
+        }
+    }
+
+    /// The frame at position `at` of the plan, `None` past its end.
+    fn at(&mut self, at: usize) -> Option<u32> {
+        while self.read.front().is_some_and(|&(i, _)| i < at) {
+            self.read.pop_front();
+        }
+        while self.read.back().is_none_or(|&(i, _)| i < at) {
+            let (i, f) = self.frames.next()?;
+            if i >= at {
+                self.read.push_back((i, f));
+            }
+        }
+        self.read
+            .front()
+            .filter(|&&(i, _)| i == at)
+            .map(|&(_, f)| f)
+    }
+}
+
 /// Frames the CPU path renders at once: `asked` (`--frames-in-flight`), or for 0 one a
 /// [`THREADS_A_FRAME`] threads of the pool's `threads`, two at least from two threads
 /// on and [`MAX_AUTO_LANES`] at most, and no more than half the memory `available`
@@ -672,8 +707,9 @@ impl Frames<'_> {
             // The render threads' CPU time a frame, beside its wall time (`--stats`).
             let cpu_clock = super::cpu_clock::CpuClock::of_pool();
             let mut pending = plan.frames.iter().enumerate().peekable();
-            // The frames in order, to look ahead (4 bytes a frame).
-            let order: Vec<u32> = plan.frames.iter().collect();
+            // The frames in order again, read ahead of `pending` as far as a round's
+            // lanes look (planned lazily as `pending` is: a huge range costs nothing).
+            let mut ahead = Ahead::new(plan.frames.iter());
             'rounds: while pending.peek().is_some() {
                 while let Ok(r) = done_rx.try_recv() {
                     written.finish(r, on_event);
@@ -721,17 +757,20 @@ impl Frames<'_> {
                 // resumed later may take its place): where its camera is this frame's,
                 // the lane keeps this frame's shading for it.
                 let step = round.len();
-                let next = |index: usize| order.get(index + step).copied();
+                let next: Vec<Option<u32>> = round
+                    .iter()
+                    .map(|(index, _, _)| ahead.at(index + step))
+                    .collect();
                 let rendered: Vec<_> = match round.as_slice() {
                     [] => continue,
-                    [(index, frame, _)] => {
-                        vec![lanes[0].render(self, static_bounds, *frame, next(*index))]
+                    [(_, frame, _)] => {
+                        vec![lanes[0].render(self, static_bounds, *frame, next[0])]
                     }
                     _ => lanes
                         .par_iter_mut()
-                        .zip(round.par_iter())
-                        .map(|(lane, (index, frame, _))| {
-                            lane.render(self, static_bounds, *frame, next(*index))
+                        .zip(round.par_iter().zip(&next))
+                        .map(|(lane, ((_, frame, _), next))| {
+                            lane.render(self, static_bounds, *frame, *next)
                         })
                         .collect(),
                 };
@@ -1028,6 +1067,28 @@ impl Frames<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_plan_is_read_ahead_by_position() {
+        let frames = [4u32, 5, 7, 9, 10, 12];
+        let mut ahead = Ahead::new(frames.iter().copied());
+        assert_eq!(ahead.at(1), Some(5));
+        assert_eq!(ahead.at(2), Some(7));
+        assert_eq!(ahead.at(2), Some(7));
+        assert_eq!(ahead.at(4), Some(10));
+        // Behind what was passed: forgotten.
+        assert_eq!(ahead.at(3), None);
+        assert_eq!(ahead.at(5), Some(12));
+        assert_eq!(ahead.at(6), None);
+        assert_eq!(ahead.at(9), None);
+        // A huge plan is read only as far as asked.
+        let mut read = 0;
+        let mut huge = Ahead::new((0..u32::MAX).inspect(|_| read += 1));
+        assert_eq!(huge.at(3), Some(3));
+        assert_eq!(huge.at(5), Some(5));
+        drop(huge);
+        assert_eq!(read, 6);
+    }
 
     #[test]
     fn frames_in_flight_follow_the_threads_and_fit_the_memory() {
