@@ -66,8 +66,9 @@ pub(super) type Whole<'a> = &'a dyn Fn(&[Ray], &mut [Option<Hit>]);
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Mode {
     /// The whole traced as one, nothing kept: the structure has no static part of its
-    /// own, pixels take several samples (jittered anew each frame), or the camera has
-    /// just moved (a camera that moves every frame gains nothing).
+    /// own, pixels take several samples (jittered anew each frame), or nothing kept
+    /// would serve (the camera has just moved, and the next frame's is another or
+    /// there is none: a camera that moves every frame gains nothing).
     Off,
     /// The camera rays' static hits traced and kept, the moving part traced apart.
     Fill,
@@ -138,13 +139,18 @@ fn gather(gathered: &mut Vec<Ray>, need: &[u32], rays: &[Ray]) {
 
 impl StaticMemo {
     /// What this frame does: `pixels` of one sample each (`spp`), through a structure
-    /// with (`layered`) or without a static part of its own.
+    /// with (`layered`) or without a static part of its own; `ahead`: the frame the
+    /// sequence renders next (on this memo) has the same camera to the bit. A frame
+    /// fills the memo only then: a camera that moves on, or a last frame, would keep
+    /// what no frame reads (the first frame of a dolly traced its batches twice over,
+    /// 222 ms against 163 at 640x480; `benches/PERF.md`, issue 38, round 6).
     pub(super) fn begin(
         &mut self,
         camera: &CameraModel,
         spp: usize,
         pixels: usize,
         layered: bool,
+        ahead: bool,
     ) -> Mode {
         if !layered || spp != 1 || pixels * std::mem::size_of::<Option<Hit>>() > PRIMARY_BYTES {
             self.camera = None;
@@ -154,9 +160,8 @@ impl StaticMemo {
         let bits = camera.bits();
         let mode = match self.camera {
             Some(b) if b == bits && self.filled && self.primary.len() == pixels => Mode::Reuse,
-            Some(b) if b == bits => Mode::Fill,
-            None => Mode::Fill,
-            Some(_) => Mode::Off,
+            _ if ahead => Mode::Fill,
+            _ => Mode::Off,
         };
         self.camera = Some(bits);
         self.filled = false;
@@ -451,6 +456,49 @@ impl StaticMemo {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A frame fills the memo only where the sequence's next frame has its camera, and
+    /// reuses what it holds whenever its camera is the one that filled it: a still
+    /// stretch fills at its first frame and reuses from the second; a camera that moves
+    /// on, a last frame and a frame rendered alone fill nothing.
+    #[test]
+    fn the_memo_fills_for_the_next_frame_only_and_reuses_while_the_camera_stays() {
+        let cam = |x: f32| CameraModel::framing(Vec3::new(x, 0.0, 0.0), Vec3::ONE, 8, 6);
+        let (a, b, c) = (cam(0.0), cam(0.5), cam(-0.5));
+        let mut memo = StaticMemo::default();
+        let pixels = 48;
+        // (camera, the next frame's camera the same) -> mode
+        let frames = [
+            (a, true, Mode::Fill),
+            (a, true, Mode::Reuse),
+            // The stretch's last frame: what is held still serves it.
+            (a, false, Mode::Reuse),
+            // Moving on.
+            (b, false, Mode::Off),
+            // Stopping here: the next frame has this camera.
+            (c, true, Mode::Fill),
+            (c, true, Mode::Reuse),
+        ];
+        for (k, (camera, ahead, want)) in frames.into_iter().enumerate() {
+            let mode = memo.begin(&camera, 1, pixels, true, ahead);
+            assert_eq!(mode, want, "frame {k}");
+            memo.end(mode);
+        }
+        // Rendered alone: nothing to keep for.
+        assert_eq!(
+            StaticMemo::default().begin(&a, 1, pixels, true, false),
+            Mode::Off
+        );
+        // Several samples a pixel or no static part of its own: never.
+        assert_eq!(
+            StaticMemo::default().begin(&a, 4, pixels, true, true),
+            Mode::Off
+        );
+        assert_eq!(
+            StaticMemo::default().begin(&a, 1, pixels, false, true),
+            Mode::Off
+        );
+    }
 
     /// The budgets the constants' docs state.
     #[test]

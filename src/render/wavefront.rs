@@ -570,16 +570,20 @@ fn trace_pass<T: Intersector>(
     let layers = tracer.layers();
     // The memo keeps a still camera's rays from frame to frame; a blurred frame's steps
     // each trace other samples (and a moving camera other rays), so it stands aside.
-    let mode = memo.begin(camera, spp, w * h, layers.is_some() && pass.is_none());
+    let mode = memo.begin(
+        camera,
+        spp,
+        w * h,
+        layers.is_some() && pass.is_none(),
+        still_ahead,
+    );
     // The shading of a still camera's rays, replayed where they repeat (one sample a
-    // pixel, as the memo; not with the passes' split). Kept from the second frame of
-    // an unmoved camera on (`Mode::Reuse`), and from the first (`Mode::Fill`) where
-    // the sequence's next frame has the same camera: that frame then replays instead
-    // of keeping, which cost a still camera's second frame 140 ms of CPU at 640x480
-    // (benches/PERF.md, issue 38, round 6). A camera that moves every frame allocates
-    // and fills nothing.
-    let keeps = mode == Mode::Reuse || (mode == Mode::Fill && still_ahead);
-    let replayed = replay.begin(ctx, keeps && !light_paths, w * h);
+    // pixel, as the memo; not with the passes' split). Kept wherever the memo is: from
+    // the frame that fills it (the sequence's next frame has the same camera), so that
+    // frame replays instead of keeping, which had cost a still camera's second frame
+    // 140 ms of CPU at 640x480 (benches/PERF.md, issue 38, round 6). A camera that
+    // moves every frame allocates and fills nothing.
+    let replayed = replay.begin(ctx, mode != Mode::Off && !light_paths, w * h);
     let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
     // The centre-ray AOVs: every frame's, or the one pass of a blurred frame that has them.
     let any_aov = aovs.any_centre() && pass.is_none_or(|p| p.aovs);
