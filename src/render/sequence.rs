@@ -471,38 +471,28 @@ impl Lane {
     }
 }
 
-/// A frame plan's frames by position, read ahead as far as asked and forgotten behind
-/// (positions asked for in increasing order; one asked for after a later one is not
-/// known again, `None`).
+/// A frame plan's frames by position, read ahead as far as asked (positions asked for
+/// in increasing order; one behind the last read is not known again, `None`).
 struct Ahead<I> {
     frames: std::iter::Enumerate<I>,
-    /// Read but not yet passed: positions ascending.
-    read: std::collections::VecDeque<(usize, u32)>,
+    /// The last frame read, with its position.
+    last: Option<(usize, u32)>,
 }
 
 impl<I: Iterator<Item = u32>> Ahead<I> {
     fn new(frames: I) -> Ahead<I> {
         Ahead {
             frames: frames.enumerate(),
-            read: std::collections::VecDeque::new(),
+            last: None,
         }
     }
 
     /// The frame at position `at` of the plan, `None` past its end.
     fn at(&mut self, at: usize) -> Option<u32> {
-        while self.read.front().is_some_and(|&(i, _)| i < at) {
-            self.read.pop_front();
+        while self.last.is_none_or(|(i, _)| i < at) {
+            self.last = Some(self.frames.next()?);
         }
-        while self.read.back().is_none_or(|&(i, _)| i < at) {
-            let (i, f) = self.frames.next()?;
-            if i >= at {
-                self.read.push_back((i, f));
-            }
-        }
-        self.read
-            .front()
-            .filter(|&&(i, _)| i == at)
-            .map(|&(_, f)| f)
+        self.last.filter(|&(i, _)| i == at).map(|(_, f)| f)
     }
 }
 

@@ -288,8 +288,8 @@ pub(super) struct FrameArgs<'a> {
     pub max_depth: u32,
     pub inputs: &'a AovInputs<'a>,
     /// The camera is the same to the bit at the frame this one's sequence renders
-    /// next: a frame that fills the memo keeps its shading for the replay too, so the
-    /// next frame replays it instead of keeping it (see `trace_pass`).
+    /// next: only then does a frame fill the memo of static hits and keep its shading
+    /// for the replay, for that frame to reuse (see `trace_pass`).
     pub still_ahead: bool,
 }
 

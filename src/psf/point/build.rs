@@ -287,17 +287,9 @@ impl PointGrid {
         // `benches/PERF.md`, issue 38, round 6).
         let jobs = (2 * rayon::current_num_threads()).clamp(1, total.max(1));
         let cut = |k: usize| k * total / jobs;
+        let cuts: Vec<usize> = (0..=jobs).map(cut).collect();
         // The range holding tile `t`: the last `k` with `cut(k) <= t`.
-        let job_of = |t: usize| {
-            let mut k = (t * jobs / total.max(1)).min(jobs - 1);
-            while k + 1 < jobs && cut(k + 1) <= t {
-                k += 1;
-            }
-            while k > 0 && cut(k) > t {
-                k -= 1;
-            }
-            k
-        };
+        let job_of = |t: usize| cuts.partition_point(|&c| c <= t) - 1;
         let span = |it: &Item| {
             let face = &faces[it.face as usize];
             let first = face.first + it.j0 as usize * face.nu + it.i0 as usize;
