@@ -179,6 +179,60 @@ fn a_still_camera_reuses_static_hits_and_frames_stay_the_same() {
     assert!(frame_of(&dir, "still", 0) != frame_of(&dir, "still", 7));
 }
 
+/// Several frames in flight fill a still camera's memo and replay once: the stretch's
+/// first frame renders alone and the other lanes copy what it kept, so no other frame
+/// says `fill` in the `--stats` CSV's `kept` column (each lane had filled its own); a
+/// camera that moves every frame keeps nothing. The frames are the same bytes as one
+/// frame at a time (checked with the copies in `a_still_camera_reuses_static_hits…`).
+#[test]
+fn frames_in_flight_fill_a_still_camera_once() {
+    let dir = temp_dir("fill-once");
+    let scene = write_scene(&dir);
+    let kept = |camera: &str, in_flight: &str| -> Vec<String> {
+        let sub = format!("{}-{in_flight}", camera.replace(' ', "_"));
+        let stats = dir.join(format!("{sub}.csv"));
+        ok(&[
+            "render",
+            s(&scene),
+            "-o",
+            s(&dir.join(format!("{sub}/f.##.exr"))),
+            "--frames",
+            "0..7",
+            "--size",
+            SIZE,
+            "--camera",
+            camera,
+            "--threads",
+            "2",
+            "--frames-in-flight",
+            in_flight,
+            "--stats",
+            s(&stats),
+            "--quiet",
+        ]);
+        let csv = std::fs::read_to_string(&stats).unwrap();
+        let mut lines = csv.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let col = header
+            .iter()
+            .position(|h| *h == "kept")
+            .expect("a kept column");
+        lines
+            .map(|l| l.split(',').nth(col).unwrap().to_string())
+            .collect()
+    };
+    let words = |v: &[&str]| v.iter().map(|w| w.to_string()).collect::<Vec<_>>();
+    let still = words(&["fill", "reuse", "reuse", "reuse", "reuse", "reuse", "reuse"]);
+    for in_flight in ["1", "2", "3"] {
+        assert_eq!(
+            kept("side camera", in_flight),
+            still,
+            "{in_flight} in flight"
+        );
+    }
+    assert_eq!(kept("main", "3"), words(&["none"; 7]));
+}
+
 /// A still camera at one sample a pixel in a scene without emitters (no random numbers):
 /// from the second frame on, the shading of every camera and mirror ray that repeats
 /// with the same static hit is replayed from the frame before (`render::replay`), not
@@ -511,7 +565,7 @@ fn stats_plot_and_the_default_range() {
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(
         lines[0],
-        "frame,time,update_ms,trace_ms,shade_ms,write_ms,primary_rays,shadow_rays,secondary_rays,cpu_ms,threads"
+        "frame,time,update_ms,trace_ms,shade_ms,write_ms,primary_rays,shadow_rays,secondary_rays,cpu_ms,threads,kept"
     );
     assert_eq!(lines.len(), 8);
     for (i, l) in lines[1..].iter().enumerate() {
@@ -532,6 +586,7 @@ fn stats_plot_and_the_default_range() {
         for v in &f[2..6] {
             assert!(v.parse::<f64>().unwrap() >= 0.0);
         }
+        assert!(["none", "fill", "reuse"].contains(&f[11]), "{l}");
     }
     let svg = std::fs::read_to_string(dir.join("st/plot.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains(">trace<") && svg.contains(">frame<"));

@@ -669,6 +669,7 @@ fn frame_event(f: &render::FrameReport) -> serde_json::Value {
             "secondary": s.rays.secondary,
             "total": s.rays.total(),
         });
+        v["kept"] = s.kept.word().into();
     }
     v
 }

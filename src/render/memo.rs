@@ -137,7 +137,50 @@ fn gather(gathered: &mut Vec<Ray>, need: &[u32], rays: &[Ray]) {
     gathered.par_extend(need.par_iter().map(|&i| rays[i as usize]));
 }
 
+/// `dst` as a copy of `src`, copied on every thread: a still camera's kept answers are
+/// some 70 MB at 640x480, and one thread's copy (its fresh pages zeroed first) held the
+/// other lanes back.
+pub(super) fn copy_par<T: Copy + Send + Sync>(dst: &mut Vec<T>, src: &[T]) {
+    dst.clear();
+    dst.par_extend(src.par_iter().with_min_len(1 << 14).copied());
+}
+
+/// Each of `src`'s lists copied into `dst`'s ([`copy_par`]).
+pub(super) fn copy_all<T: Copy + Send + Sync>(dst: &mut Vec<Vec<T>>, src: &[Vec<T>]) {
+    dst.resize_with(src.len(), Vec::new);
+    for (d, s) in dst.iter_mut().zip(src) {
+        copy_par(d, s);
+    }
+}
+
+/// Whether a frame of `pixels` samples of `spp` a pixel can keep its static hits at
+/// all (one sample a pixel, within [`PRIMARY_BYTES`]); [`StaticMemo::begin`]'s test,
+/// for a sequence deciding ahead of its frames.
+pub(super) fn may_keep(spp: usize, pixels: usize) -> bool {
+    spp == 1 && pixels * std::mem::size_of::<Option<Hit>>() <= PRIMARY_BYTES
+}
+
 impl StaticMemo {
+    /// Whether the memo holds a whole frame's static hits for `camera`'s rays (a frame
+    /// through it would reuse them).
+    pub(super) fn holds(&self, camera: &[u32; CameraModel::BITS]) -> bool {
+        self.filled && self.camera.as_ref() == Some(camera)
+    }
+
+    /// Takes what `from` keeps (its camera's static hits and the deeper levels' and
+    /// shadow rays' answers), as if this memo had filled them: every kept answer is the
+    /// static part's for the ray kept with it, so any frame may read them. Another
+    /// frame in flight copies them instead of filling its own (a fill costs a still
+    /// camera's frame five times a frame that reuses; `benches/PERF.md`, issue 38).
+    /// The working buffers stay this memo's.
+    pub(super) fn copy_kept(&mut self, from: &StaticMemo) {
+        self.camera = from.camera;
+        self.filled = from.filled;
+        copy_par(&mut self.primary, &from.primary);
+        copy_all(&mut self.shadow, &from.shadow);
+        copy_all(&mut self.deeper, &from.deeper);
+    }
+
     /// What this frame does: `pixels` of one sample each (`spp`), through a structure
     /// with (`layered`) or without a static part of its own; `ahead`: the frame the
     /// sequence renders next (on this memo) has the same camera to the bit. A frame
@@ -152,7 +195,7 @@ impl StaticMemo {
         layered: bool,
         ahead: bool,
     ) -> Mode {
-        if !layered || spp != 1 || pixels * std::mem::size_of::<Option<Hit>>() > PRIMARY_BYTES {
+        if !layered || !may_keep(spp, pixels) {
             self.camera = None;
             self.filled = false;
             return Mode::Off;

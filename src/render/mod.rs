@@ -80,7 +80,7 @@ pub use sequence::{check_device, render_sequence};
 pub use shade::{
     CryptoBuffers, FrameBuffers, FrameWork, LightPath, LightPathBuffers, RayCounts, ShadeContext,
 };
-pub use stats::{plot_png, plot_svg, stats_csv, FrameStats, FrameTotals, PLOT_BARS};
+pub use stats::{plot_png, plot_svg, stats_csv, FrameStats, FrameTotals, Kept, PLOT_BARS};
 pub use tuning_rays::tuning_rays;
 pub use wavefront::{render_frame, sample_offset, AovInputs};
 

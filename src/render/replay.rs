@@ -136,6 +136,16 @@ impl ShadeReplay {
         levels
     }
 
+    /// Takes what `from` keeps, as if this replay had kept it: each kept push is tied
+    /// to the ray, item and hit it was shaded for and to the context's key, so any frame
+    /// may replay it (see [`StaticMemo::copy_kept`](super::memo::StaticMemo::copy_kept)).
+    pub(super) fn copy_kept(&mut self, from: &ShadeReplay) {
+        self.key.clone_from(&from.key);
+        super::memo::copy_all(&mut self.kept, &from.kept);
+        super::memo::copy_all(&mut self.shadows, &from.shadows);
+        self.lights = from.lights;
+    }
+
     /// Level `level`'s kept shading and shadow rays, if it keeps any.
     pub(super) fn level(
         &mut self,

@@ -8,6 +8,32 @@ use super::errors::OptionError;
 use super::shade::RayCounts;
 use super::RenderError;
 
+/// What a frame did with the static hits and shading a still camera keeps
+/// (`--stats`' `kept` column).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Kept {
+    /// Nothing kept or reused: a camera that moves, several samples a pixel, motion
+    /// blur, the GPU.
+    #[default]
+    None,
+    /// Traced and kept for the frames after (a still camera's first frame: several
+    /// times the cost of a frame that reuses).
+    Fill,
+    /// Read what an earlier frame kept (of this frame in flight or copied from another).
+    Reuse,
+}
+
+impl Kept {
+    /// The CSV's word for it.
+    pub fn word(self) -> &'static str {
+        match self {
+            Kept::None => "none",
+            Kept::Fill => "fill",
+            Kept::Reuse => "reuse",
+        }
+    }
+}
+
 /// Times (milliseconds, wall clock) and ray counts of one rendered frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FrameStats {
@@ -28,17 +54,19 @@ pub struct FrameStats {
     pub cpu_ms: Option<f64>,
     /// How many threads `cpu_ms` counts (0 with it `None`).
     pub threads: usize,
+    /// What the frame did with what a still camera keeps.
+    pub kept: Kept,
 }
 
 /// The CSV's first line.
 pub(crate) const CSV_HEADER: &str =
-    "frame,time,update_ms,trace_ms,shade_ms,write_ms,primary_rays,shadow_rays,secondary_rays,cpu_ms,threads\n";
+    "frame,time,update_ms,trace_ms,shade_ms,write_ms,primary_rays,shadow_rays,secondary_rays,cpu_ms,threads,kept\n";
 
 /// One CSV row (with its line end).
 pub(crate) fn csv_row(f: &FrameStats) -> String {
     let cpu = f.cpu_ms.map_or(String::new(), |c| format!("{c:.3}"));
     format!(
-        "{},{:.6},{:.3},{:.3},{:.3},{:.3},{},{},{},{cpu},{}\n",
+        "{},{:.6},{:.3},{:.3},{:.3},{:.3},{},{},{},{cpu},{},{}\n",
         f.frame,
         f.time,
         f.update_ms,
@@ -48,7 +76,8 @@ pub(crate) fn csv_row(f: &FrameStats) -> String {
         f.rays.primary,
         f.rays.shadow,
         f.rays.secondary,
-        f.threads
+        f.threads,
+        f.kept.word()
     )
 }
 
@@ -524,6 +553,7 @@ mod tests {
                 },
                 cpu_ms: (i != 1).then_some(30.0),
                 threads: 2,
+                kept: [Kept::Fill, Kept::Reuse, Kept::None][i as usize],
             })
             .collect()
     }
@@ -535,10 +565,14 @@ mod tests {
         assert_eq!(lines.len(), 4);
         assert_eq!(
             lines[1],
-            "0,0.000000,1.000,10.000,5.000,2.500,100,50,7,30.000,2"
+            "0,0.000000,1.000,10.000,5.000,2.500,100,50,7,30.000,2,fill"
         );
         // No CPU time known: an empty field.
-        assert_eq!(lines[2], "1,0.041667,1.000,11.000,5.000,2.500,100,50,7,,2");
+        assert_eq!(
+            lines[2],
+            "1,0.041667,1.000,11.000,5.000,2.500,100,50,7,,2,reuse"
+        );
+        assert!(lines[3].ends_with(",2,none"), "{}", lines[3]);
     }
 
     /// However many frames, the plot keeps at most PLOT_BARS bars, each the mean of

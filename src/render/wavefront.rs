@@ -18,6 +18,7 @@ use super::shade::{
     BlockOut, Cone, CryptoBuffers, FrameBuffers, FrameWork, Item, LightPathBuffers, ShadeContext,
     Split,
 };
+use super::stats::Kept;
 use crate::geometry::{Hit, Intersector, Ray};
 use crate::psf::Prim;
 use crate::scene::TriangleSoup;
@@ -93,6 +94,18 @@ impl FrameScratch {
             chunk_samples,
             ..FrameScratch::default()
         }
+    }
+
+    /// Whether this scratch keeps a whole frame's static hits for `camera`'s rays.
+    pub(super) fn keeps_for(&self, camera: &CameraModel) -> bool {
+        self.memo.holds(&camera.bits())
+    }
+
+    /// Takes the static hits and the shading `from` keeps (another frame in flight's),
+    /// so that a frame through the same camera reuses them without filling its own.
+    pub(super) fn copy_kept(&mut self, from: &FrameScratch) {
+        self.memo.copy_kept(&from.memo);
+        self.replay.copy_kept(&from.replay);
     }
 
     /// Keeps a written frame's buffers for the next frame of the same size and AOVs.
@@ -1049,6 +1062,11 @@ fn trace_pass<T: Intersector>(
         y0 = y1;
     }
     memo.end(mode);
+    work.kept = match mode {
+        Mode::Off => Kept::None,
+        Mode::Fill => Kept::Fill,
+        Mode::Reuse => Kept::Reuse,
+    };
 }
 
 /// Samples a task of [`add_unblocked`] owns.

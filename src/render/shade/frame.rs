@@ -157,4 +157,6 @@ pub struct FrameWork {
     /// Wall time making rays and shading (everything else of the frame's pixels).
     pub shade: Duration,
     pub rays: RayCounts,
+    /// What the frame did with what a still camera keeps (its last pass's).
+    pub kept: super::super::stats::Kept,
 }
