@@ -145,6 +145,14 @@ pub(super) fn copy_par<T: Copy + Send + Sync>(dst: &mut Vec<T>, src: &[T]) {
     dst.par_extend(src.par_iter().with_min_len(1 << 14).copied());
 }
 
+/// `v` as `n` copies of `x`, written on every thread: a still camera's first frame
+/// sets up some 240 MB of kept slots at 640x480, and one thread's fill (the kernel
+/// zeroing each fresh page first) was 90 ms of a frame that the others waited for.
+pub(super) fn fill_par<T: Copy + Send + Sync>(v: &mut Vec<T>, n: usize, x: T) {
+    v.clear();
+    v.par_extend(rayon::iter::repeat_n(x, n).with_min_len(1 << 14));
+}
+
 /// Each of `src`'s lists copied into `dst`'s ([`copy_par`]).
 pub(super) fn copy_all<T: Copy + Send + Sync>(dst: &mut Vec<Vec<T>>, src: &[Vec<T>]) {
     dst.resize_with(src.len(), Vec::new);
@@ -209,8 +217,7 @@ impl StaticMemo {
         self.camera = Some(bits);
         self.filled = false;
         if mode == Mode::Fill {
-            self.primary.clear();
-            self.primary.resize(pixels, None);
+            fill_par(&mut self.primary, pixels, None);
         }
         mode
     }
@@ -304,8 +311,7 @@ impl StaticMemo {
         }
         let kept = &mut self.deeper[level - 1];
         if kept.len() != pixels {
-            kept.clear();
-            kept.resize(pixels, (EMPTY.0, None));
+            fill_par(kept, pixels, (EMPTY.0, None));
         }
         let slot = |i: usize| base + sample(i) as usize;
         // One pass over the kept slots: a kept ray's static hit into `hits` and its
@@ -422,8 +428,7 @@ impl StaticMemo {
         }
         let kept = &mut self.shadow[bank];
         if kept.len() != pixels {
-            kept.clear();
-            kept.resize(pixels, EMPTY);
+            fill_par(kept, pixels, EMPTY);
         }
         // Each ray's kept static answer, and the rays that have none, in one pass over
         // the kept slots.

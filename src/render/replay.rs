@@ -26,6 +26,7 @@
 
 use glam::Vec3;
 
+use super::memo::fill_par;
 use super::shade::{BlockOut, Item, ShadeContext, REPLAY_LIGHTS};
 use crate::geometry::{same_words, Hit, Ray};
 use crate::psf::Prim;
@@ -130,8 +131,17 @@ impl ShadeReplay {
         if !fits {
             self.key = key;
             self.lights = lights;
-            self.kept = vec![vec![EMPTY; samples]; levels];
-            self.shadows = vec![vec![None; samples * lights]; levels];
+            // Set up on every thread (`memo::fill_par`).
+            self.kept.resize_with(levels, Vec::new);
+            self.kept.truncate(levels);
+            for k in &mut self.kept {
+                fill_par(k, samples, EMPTY);
+            }
+            self.shadows.resize_with(levels, Vec::new);
+            self.shadows.truncate(levels);
+            for k in &mut self.shadows {
+                fill_par(k, samples * lights, None);
+            }
         }
         levels
     }
