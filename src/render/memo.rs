@@ -146,8 +146,12 @@ pub(super) fn copy_par<T: Copy + Send + Sync>(dst: &mut Vec<T>, src: &[T]) {
 }
 
 /// `v` as `n` copies of `x`, written on every thread: a still camera's first frame
-/// sets up some 240 MB of kept slots at 640x480, and one thread's fill (the kernel
-/// zeroing each fresh page first) was 90 ms of a frame that the others waited for.
+/// sets up some 170 MB of kept slots at 640x480 before it traces (the replay's and the
+/// camera rays'), and one thread's fill (the kernel zeroing each fresh page first) was
+/// 90 ms of a frame that the other threads waited for. (The deeper levels' and shadow
+/// rays' slots, set up inside the trace, stay one thread's: filled this way, the frames
+/// that reuse them traced 8 ms slower at 1 thread, for no reason found;
+/// `benches/PERF.md`, issue 38, round 7.)
 pub(super) fn fill_par<T: Copy + Send + Sync>(v: &mut Vec<T>, n: usize, x: T) {
     v.clear();
     v.par_extend(rayon::iter::repeat_n(x, n).with_min_len(1 << 14));
@@ -311,7 +315,8 @@ impl StaticMemo {
         }
         let kept = &mut self.deeper[level - 1];
         if kept.len() != pixels {
-            fill_par(kept, pixels, (EMPTY.0, None));
+            kept.clear();
+            kept.resize(pixels, (EMPTY.0, None));
         }
         let slot = |i: usize| base + sample(i) as usize;
         // One pass over the kept slots: a kept ray's static hit into `hits` and its
@@ -428,7 +433,8 @@ impl StaticMemo {
         }
         let kept = &mut self.shadow[bank];
         if kept.len() != pixels {
-            fill_par(kept, pixels, EMPTY);
+            kept.clear();
+            kept.resize(pixels, EMPTY);
         }
         // Each ray's kept static answer, and the rays that have none, in one pass over
         // the kept slots.
