@@ -222,14 +222,16 @@ fn frames_in_flight_fill_a_still_camera_once() {
             .collect()
     };
     let words = |v: &[&str]| v.iter().map(|w| w.to_string()).collect::<Vec<_>>();
-    let still = words(&["fill", "reuse", "reuse", "reuse", "reuse", "reuse", "reuse"]);
-    for in_flight in ["1", "2", "3"] {
+    let once = words(&["fill", "reuse", "reuse", "reuse", "reuse", "reuse", "reuse"]);
+    for in_flight in ["1", "3", "4"] {
         assert_eq!(
             kept("side camera", in_flight),
-            still,
+            once,
             "{in_flight} in flight"
         );
     }
+    let each = words(&["fill", "fill", "reuse", "reuse", "reuse", "reuse", "reuse"]);
+    assert_eq!(kept("side camera", "2"), each, "2 in flight");
     assert_eq!(kept("main", "3"), words(&["none"; 7]));
 }
 

@@ -471,28 +471,33 @@ impl Lane {
     }
 }
 
-/// A frame plan's frames by position, read ahead as far as asked (positions asked for
-/// in increasing order; one behind the last read is not known again, `None`).
+/// A frame plan's frames by position, read ahead as far as asked; the last `keep`
+/// frames read are known again, none further back (`None`).
 struct Ahead<I> {
     frames: std::iter::Enumerate<I>,
-    /// The last frame read, with its position.
-    last: Option<(usize, u32)>,
+    /// The last frames read, with their positions, oldest first.
+    read: std::collections::VecDeque<(usize, u32)>,
+    keep: usize,
 }
 
 impl<I: Iterator<Item = u32>> Ahead<I> {
-    fn new(frames: I) -> Ahead<I> {
+    fn new(frames: I, keep: usize) -> Ahead<I> {
         Ahead {
             frames: frames.enumerate(),
-            last: None,
+            read: std::collections::VecDeque::with_capacity(keep.max(1) + 1),
+            keep: keep.max(1),
         }
     }
 
-    /// The frame at position `at` of the plan, `None` past its end.
+    /// The frame at position `at` of the plan, `None` past its end (or too far behind).
     fn at(&mut self, at: usize) -> Option<u32> {
-        while self.last.is_none_or(|(i, _)| i < at) {
-            self.last = Some(self.frames.next()?);
+        while self.read.back().is_none_or(|&(i, _)| i < at) {
+            self.read.push_back(self.frames.next()?);
+            if self.read.len() > self.keep {
+                self.read.pop_front();
+            }
         }
-        self.last.filter(|&(i, _)| i == at).map(|(_, f)| f)
+        self.read.iter().find(|&&(i, _)| i == at).map(|&(_, f)| f)
     }
 }
 
@@ -524,6 +529,12 @@ pub(super) fn lanes(asked: usize, threads: usize, pixels: u64, available: Option
 /// the pixels back, the AOVs) runs beside them (at most [`crate::gpu::ROOMS`]).
 #[cfg(feature = "gpu")]
 const GPU_LANES: usize = 2;
+
+/// Frames in flight from which a still stretch is filled once and copied to the other
+/// lanes ([`Frames::starts_still`]). 24 still frames at 640x480 on 2 threads: four in
+/// flight 2.08 → 1.84 s with it; two in flight no faster (1.69 s either way), and a
+/// stretch of three frames slower (0.59 → 0.65 s) (benches/PERF.md, issue 38, round 7).
+const SEED_LANES: usize = 3;
 
 /// The threads a frame in flight gets when `--frames-in-flight` is left to the render.
 const THREADS_A_FRAME: usize = 4;
@@ -699,7 +710,9 @@ impl Frames<'_> {
             let mut pending = plan.frames.iter().enumerate().peekable();
             // The frames in order again, read ahead of `pending` as far as a round's
             // lanes look (planned lazily as `pending` is: a huge range costs nothing).
-            let mut ahead = Ahead::new(plan.frames.iter());
+            // A round asks as far as its first frame plus the lanes and two (a still
+            // stretch's test), and then the frames a lane's width after its own.
+            let mut ahead = Ahead::new(plan.frames.iter(), lanes.len() + 3);
             'rounds: while pending.peek().is_some() {
                 while let Ok(r) = done_rx.try_recv() {
                     written.finish(r, on_event);
@@ -717,6 +730,8 @@ impl Frames<'_> {
                 // resumed before them skipped.
                 let mut round: Vec<(usize, u32, PathBuf)> = Vec::with_capacity(lanes.len());
                 let mut room = lanes.len();
+                // A still stretch's first frame, rendered alone: the frame after it.
+                let mut seed_next = None;
                 while round.len() < room {
                     let Some((index, frame)) = pending.next() else {
                         break;
@@ -740,11 +755,12 @@ impl Frames<'_> {
                         // A still camera from here on: this frame alone, on every
                         // thread, fills what it keeps, and the other lanes copy it
                         // (below) rather than each filling its own.
-                        if round.len() == 1
-                            && room > 1
-                            && self.starts_still(&lanes, frame, ahead.at(index + 1))
-                        {
-                            room = 1;
+                        if round.len() == 1 && room >= SEED_LANES {
+                            let after = [ahead.at(index + 1), ahead.at(index + room + 2)];
+                            if self.starts_still(&lanes, frame, after) {
+                                room = 1;
+                                seed_next = Some(after[0]);
+                            }
                         }
                     }
                 }
@@ -758,10 +774,14 @@ impl Frames<'_> {
                 // resumed later may take its place): where its camera is this frame's,
                 // the lane keeps this frame's shading for it.
                 let step = round.len();
-                let next: Vec<Option<u32>> = round
-                    .iter()
-                    .map(|(index, _, _)| ahead.at(index + step))
-                    .collect();
+                let next: Vec<Option<u32>> = match seed_next {
+                    // Read already (the look-ahead keeps only the furthest frame read).
+                    Some(n) => vec![n],
+                    None => round
+                        .iter()
+                        .map(|(index, _, _)| ahead.at(index + step))
+                        .collect(),
+                };
                 let rendered: Vec<_> = match round.as_slice() {
                     [] => continue,
                     [(_, frame, _)] => {
@@ -836,13 +856,17 @@ impl Frames<'_> {
         })
     }
 
-    /// Whether `frame` starts a still stretch that several lanes would each fill the
-    /// kept static hits and shading of: its camera is `next`'s (the plan's next frame)
-    /// to the bit, the memo can keep it (one sample a pixel, no motion blur, the CPU
-    /// path), and no lane keeps it already. A fill costs a still camera's frame about
-    /// five times a frame that reuses (469 against 82-93 ms of CPU at 640x480): one lane
-    /// fills, on every thread, and the others copy ([`Frames::share_kept`]).
-    fn starts_still(&self, lanes: &[Lane], frame: u32, next: Option<u32>) -> bool {
+    /// Whether `frame` starts a still stretch that three lanes or more would each fill
+    /// the kept static hits and shading of: its camera is that of `after` (the plan's
+    /// next frame, and the one that lane 2's second frame would be) to the bit, the
+    /// memo can keep it (one sample a pixel, no motion blur, the CPU path), and no lane
+    /// keeps it already. A fill costs a still camera's frame about five times a frame
+    /// that reuses (437 against 75-90 ms of CPU at 640x480): one lane fills, on every
+    /// thread, and the others copy ([`Frames::share_kept`]). With two lanes, or a
+    /// shorter stretch, that was no faster (two fills) or slower (one fill and a
+    /// frame that keeps nothing, side by side, against a lone fill and a copy; see
+    /// [`SEED_LANES`]).
+    fn starts_still(&self, lanes: &[Lane], frame: u32, after: [Option<u32>; 2]) -> bool {
         let opts = self.opts;
         let pixels =
             u64::from(opts.width + 2 * opts.overscan) * u64::from(opts.height + 2 * opts.overscan);
@@ -854,12 +878,13 @@ impl Frames<'_> {
             return false;
         }
         let camera = |f: u32| self.camera_at(self.plan.time(f) as f32).ok();
-        match (camera(frame), next.and_then(camera)) {
-            (Some(a), Some(b)) => {
-                a.bits() == b.bits() && !lanes.iter().any(|l| l.scratch.keeps_for(&a))
-            }
-            _ => false,
-        }
+        let Some(a) = camera(frame) else {
+            return false;
+        };
+        after
+            .iter()
+            .all(|f| f.and_then(camera).is_some_and(|b| b.bits() == a.bits()))
+            && !lanes.iter().any(|l| l.scratch.keeps_for(&a))
     }
 
     /// Before a round: each lane whose frame's camera another lane keeps the static
@@ -1125,20 +1150,23 @@ mod tests {
     #[test]
     fn the_plan_is_read_ahead_by_position() {
         let frames = [4u32, 5, 7, 9, 10, 12];
-        let mut ahead = Ahead::new(frames.iter().copied());
+        let mut ahead = Ahead::new(frames.iter().copied(), 2);
         assert_eq!(ahead.at(1), Some(5));
         assert_eq!(ahead.at(2), Some(7));
         assert_eq!(ahead.at(2), Some(7));
         assert_eq!(ahead.at(4), Some(10));
-        // Behind what was passed: forgotten.
-        assert_eq!(ahead.at(3), None);
+        // Within the last two read: known again; further behind: forgotten.
+        assert_eq!(ahead.at(3), Some(9));
+        assert_eq!(ahead.at(2), None);
         assert_eq!(ahead.at(5), Some(12));
+        assert_eq!(ahead.at(4), Some(10));
         assert_eq!(ahead.at(6), None);
         assert_eq!(ahead.at(9), None);
+        assert_eq!(ahead.at(5), Some(12));
         // A huge plan is read only as far as asked.
         let mut read = 0;
         {
-            let mut huge = Ahead::new((0..u32::MAX).inspect(|_| read += 1));
+            let mut huge = Ahead::new((0..u32::MAX).inspect(|_| read += 1), 4);
             assert_eq!(huge.at(3), Some(3));
             assert_eq!(huge.at(5), Some(5));
         }
