@@ -268,6 +268,10 @@ fn the_json_log_is_one_object_a_line_and_its_hashes_are_the_files() {
         assert!(f["times_ms"]["trace"].as_f64().unwrap() >= 0.0, "{f}");
         assert!(f["rays"]["primary"].as_u64().unwrap() >= 48 * 36, "{f}");
         assert!(f["peak_memory_bytes"].as_u64().unwrap() > 1 << 20, "{f}");
+        assert!(
+            ["none", "fill", "reuse"].contains(&f["kept"].as_str().unwrap()),
+            "{f}"
+        );
     }
     let end = ev.last().unwrap();
     assert_eq!(end["event"], "end", "{end}");
