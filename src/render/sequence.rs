@@ -730,8 +730,6 @@ impl Frames<'_> {
                 // resumed before them skipped.
                 let mut round: Vec<(usize, u32, PathBuf)> = Vec::with_capacity(lanes.len());
                 let mut room = lanes.len();
-                // A still stretch's first frame, rendered alone: the frame after it.
-                let mut seed_next = None;
                 while round.len() < room {
                     let Some((index, frame)) = pending.next() else {
                         break;
@@ -759,7 +757,6 @@ impl Frames<'_> {
                             let after = [ahead.at(index + 1), ahead.at(index + room + 2)];
                             if self.starts_still(&lanes, frame, after) {
                                 room = 1;
-                                seed_next = Some(after[0]);
                             }
                         }
                     }
@@ -774,14 +771,10 @@ impl Frames<'_> {
                 // resumed later may take its place): where its camera is this frame's,
                 // the lane keeps this frame's shading for it.
                 let step = round.len();
-                let next: Vec<Option<u32>> = match seed_next {
-                    // Read already (the look-ahead keeps only the furthest frame read).
-                    Some(n) => vec![n],
-                    None => round
-                        .iter()
-                        .map(|(index, _, _)| ahead.at(index + step))
-                        .collect(),
-                };
+                let next: Vec<Option<u32>> = round
+                    .iter()
+                    .map(|(index, _, _)| ahead.at(index + step))
+                    .collect();
                 let rendered: Vec<_> = match round.as_slice() {
                     [] => continue,
                     [(_, frame, _)] => {
