@@ -26,7 +26,7 @@
 
 use glam::Vec3;
 
-use super::memo::fill_par;
+use super::memo::{copy_all, fill_par};
 use super::shade::{BlockOut, Item, ShadeContext, REPLAY_LIGHTS};
 use crate::geometry::{same_words, Hit, Ray};
 use crate::psf::Prim;
@@ -133,12 +133,10 @@ impl ShadeReplay {
             self.lights = lights;
             // Set up on every thread (`memo::fill_par`).
             self.kept.resize_with(levels, Vec::new);
-            self.kept.truncate(levels);
             for k in &mut self.kept {
                 fill_par(k, samples, EMPTY);
             }
             self.shadows.resize_with(levels, Vec::new);
-            self.shadows.truncate(levels);
             for k in &mut self.shadows {
                 fill_par(k, samples * lights, None);
             }
@@ -151,8 +149,8 @@ impl ShadeReplay {
     /// may replay it (see [`StaticMemo::copy_kept`](super::memo::StaticMemo::copy_kept)).
     pub(super) fn copy_kept(&mut self, from: &ShadeReplay) {
         self.key.clone_from(&from.key);
-        super::memo::copy_all(&mut self.kept, &from.kept);
-        super::memo::copy_all(&mut self.shadows, &from.shadows);
+        copy_all(&mut self.kept, &from.kept);
+        copy_all(&mut self.shadows, &from.shadows);
         self.lights = from.lights;
     }
 
