@@ -8,6 +8,9 @@
 #   scripts/gpu-device-check.sh prepare   # here: release builds of both into .device/gpu/
 #   scripts/gpu-device-check.sh run       # there: runs them, figures to $OUT (or .device/out)
 #
+# `run` keeps to DEVICE_SECONDS (540 by default) in all, under the device's 600 s a
+# command: give the device call a timeout_s of 600.
+#
 # `prepare` builds on this machine (the GPU machine may have no crates to build from);
 # `run` needs a Vulkan loader there: unpack Debian's libvulkan1 first, as
 # ../shared/peers/README.md shows (.device/gl/*.deb). Ignore .device/ in git
@@ -54,16 +57,25 @@ for l in sys.stdin:
     ;;
 run)
     out="${OUT:-.device/out}"
+    # One budget for the whole run (the device's `run` allows 600 s a command): each
+    # step's timeout is what it asks for or what is left, so a slow step shortens the
+    # later ones instead of the run being cut off mid-step; the figures so far are in
+    # $out either way. DEVICE_SECONDS sets the budget.
+    end=$((SECONDS + ${DEVICE_SECONDS:-540}))
+    t() {
+        local left=$((end - SECONDS))
+        if ((left < 10)); then echo 1; elif (($1 < left)); then echo "$1"; else echo "$left"; fi
+    }
     mkdir -p "$out"
     for f in .device/gl/*.deb; do [ -e "$f" ] && dpkg -x "$f" /; done
     ldconfig 2>/dev/null || true
     export XDG_RUNTIME_DIR=/tmp CI=1
     nvidia-smi -L >"$out/gpu.txt" 2>&1 || true
     # Exactness first: with CI set, no adapter is a failure, not a skip.
-    timeout 240 .device/gpu/gpu_vs_brute --test-threads 1 >"$out/exactness.txt" 2>&1 &&
+    timeout "$(t 240)" .device/gpu/gpu_vs_brute --test-threads 1 >"$out/exactness.txt" 2>&1 &&
         echo "exactness: passed" || echo "exactness: FAILED (see $out/exactness.txt)"
     # Then the figures: the museum class and 1M moving, a 1024x1024 camera (1 M rays).
-    timeout 200 .device/gpu/gpu_bench --size 1024x1024 --moving 16384,1048576 --frames 5 \
+    timeout "$(t 200)" .device/gpu/gpu_bench --size 1024x1024 --moving 16384,1048576 --frames 5 \
         >"$out/bench.md" 2>&1 && echo "bench: done" || echo "bench: FAILED"
     tail -n 20 "$out/bench.md"
     # The peers' museum file: Embree's harness and the same rays on both tracers.
@@ -72,11 +84,11 @@ run)
     mkdir -p /tmp/peer && cp .device/libtrace_helper.so /tmp/peer/
     python3 .device/peers/gen_scene.py --static-tris 10284 --dynamic-tris 16384 \
         --frames 300 --fps 30 --seed 1 --out /tmp/museum.glb >/dev/null
-    timeout 120 python3 .device/peers/embree_anchor.py /tmp/museum.glb --frames 0:50:10 \
+    timeout "$(t 120)" python3 .device/peers/embree_anchor.py /tmp/museum.glb --frames 0:50:10 \
         --width 1024 --height 1024 --threads "$(nproc)" >"$out/embree.jsonl" 2>&1 &&
         echo "embree: done" || echo "embree: FAILED"
     tail -n 1 "$out/embree.jsonl"
-    timeout 120 .device/gpu/gpu_bench --scene /tmp/museum.glb --size 1024x1024 --frames 5 \
+    timeout "$(t 120)" .device/gpu/gpu_bench --scene /tmp/museum.glb --size 1024x1024 --frames 5 \
         --step 10 >"$out/bench-museum.md" 2>&1 && echo "bench (museum.glb): done" ||
         echo "bench (museum.glb): FAILED"
     tail -n 8 "$out/bench-museum.md"
@@ -92,7 +104,7 @@ run)
             t0=$(date +%s.%N)
             inflight=()
             case "$dev" in gpu1) inflight=(--frames-in-flight 1) ;; gpu4) inflight=(--frames-in-flight 4) ;; esac
-            timeout 150 .device/gpu/subfield render /tmp/museum-hm.glb -o "/tmp/frames-$dev-$size/f.####.exr" \
+            timeout "$(t 150)" .device/gpu/subfield render /tmp/museum-hm.glb -o "/tmp/frames-$dev-$size/f.####.exr" \
                 --frames 0..60 --size "$size" --max-depth 1 --device "${dev%[14]}" "${inflight[@]}" \
                 --stats "$out/whole-$dev-$size.csv" >"$out/whole-$dev-$size.log" 2>&1 &&
                 echo "whole frames, $dev, $size: $(echo "$(date +%s.%N) $t0" | awk '{printf "%.1f ms a frame", ($1-$2)*1000/60}')" ||
@@ -108,7 +120,7 @@ run)
     for lv in 2 3; do
         .device/gpu/subfield bake /tmp/museum-hm.glb -o "/tmp/museum-l$lv.psf" --levels "$lv" -q || true
         t0=$(date +%s.%N)
-        timeout 90 .device/gpu/subfield render /tmp/museum-hm.glb --baked "/tmp/museum-l$lv.psf" \
+        timeout "$(t 90)" .device/gpu/subfield render /tmp/museum-hm.glb --baked "/tmp/museum-l$lv.psf" \
             -o "/tmp/frames-l$lv/f.####.exr" --frames 0..60 --size 1920x1080 --max-depth 1 \
             --device gpu --stats "$out/level-$lv.csv" >"$out/level-$lv.log" 2>&1 &&
             echo "level $lv on the GPU, 1920x1080: $(echo "$(date +%s.%N) $t0" | awk '{printf "%.1f ms a frame", ($1-$2)*1000/60}')" ||
@@ -118,7 +130,7 @@ run)
     # 60 frames at 640x480, on each device.
     for dev in gpu cpu; do
         t0=$(date +%s.%N)
-        timeout 90 .device/gpu/subfield demo -o "/tmp/demo-$dev" --frames 0..60 --device "$dev" \
+        timeout "$(t 90)" .device/gpu/subfield demo -o "/tmp/demo-$dev" --frames 0..60 --device "$dev" \
             >"$out/demo-$dev.log" 2>&1 &&
             echo "demo, $dev: $(echo "$(date +%s.%N) $t0" | awk '{printf "%.1f ms a frame", ($1-$2)*1000/60}')" ||
             echo "demo, $dev: FAILED (see $out/demo-$dev.log)"
@@ -128,11 +140,11 @@ run)
     # threads at 640x480, 1 and 16 at 1920x1080, both cameras; benches/efficiency.py on
     # the 1- and 2-thread runs says where the cores wait.
     export SUBFIELD=.device/gpu/subfield PEERS=.device/peers
-    timeout 300 bash benches/scaling.sh --threads "1,2,4,8,$(nproc)" --frames 0:24 \
+    timeout "$(t 300)" bash benches/scaling.sh --threads "1,2,4,8,$(nproc)" --frames 0:24 \
         --out /tmp/scaling >"$out/scaling.md" 2>"$out/scaling.err" &&
         echo "scaling: done" || echo "scaling: FAILED (see $out/scaling.err)"
     cat "$out/scaling.md"
-    timeout 200 bash benches/scaling.sh --threads "1,$(nproc)" --frames 0:12 --size 1920x1080 \
+    timeout "$(t 200)" bash benches/scaling.sh --threads "1,$(nproc)" --frames 0:12 --size 1920x1080 \
         --out /tmp/scaling-hd >"$out/scaling-hd.md" 2>>"$out/scaling.err" &&
         echo "scaling (1920x1080): done" || echo "scaling (1920x1080): FAILED"
     tail -n 6 "$out/scaling-hd.md"
@@ -140,7 +152,7 @@ run)
     # count (--frames-in-flight left out); one frame at a time on 1 and on all cores beside
     # them, which is also what benches/efficiency.py reads (frames in flight overlap
     # their phases; it refuses such CSVs): each phase's efficiency from 1 to all cores.
-    timeout 150 bash benches/scaling.sh --threads "1,$(nproc)" --frames 0:24 --in-flight 1 \
+    timeout "$(t 150)" bash benches/scaling.sh --threads "1,$(nproc)" --frames 0:24 --in-flight 1 \
         --out /tmp/scaling-one >"$out/scaling-one.md" 2>>"$out/scaling.err" &&
         echo "scaling (one frame in flight): done" || echo "scaling (one frame in flight): FAILED"
     tail -n 6 "$out/scaling-one.md"
