@@ -6,32 +6,40 @@ use glam::{DVec3, Vec3};
 
 use crate::geometry::Ray;
 
-/// `x` rounded to an `f32` no greater than it.
+/// `a` where `keep`, else `b`, without a branch (a mask over the bits).
+#[inline(always)]
+fn pick(keep: bool, a: f32, b: f32) -> f32 {
+    let m = (keep as u32).wrapping_neg();
+    f32::from_bits((a.to_bits() & m) | (b.to_bits() & !m))
+}
+
+/// `x` rounded to an `f32` no greater than it. Every outcome is computed and one picked
+/// without a branch: whether rounding to nearest went up is a coin toss, and branching
+/// on it was mispredicted about every other call (twice a ray in a query's depth
+/// window, `benches/PERF.md`, issue 38, round 8).
 #[inline]
 pub(super) fn down(x: f64) -> f32 {
     let y = x as f32;
-    if y as f64 <= x || x.is_nan() {
-        y
-    } else if y.is_infinite() {
-        f32::MAX
-    } else {
-        // At least one unit in the last place below `y`, which rounding to nearest put
-        // at most that far above `x`.
-        y - (y.abs() * f32::EPSILON).max(f32::MIN_POSITIVE)
-    }
+    // Otherwise at least one unit in the last place below `y`, which rounding to
+    // nearest put at most that far above `x`; `f32::MAX` below an infinite `y`.
+    let below = pick(
+        y.is_infinite(),
+        f32::MAX,
+        y - (y.abs() * f32::EPSILON).max(f32::MIN_POSITIVE),
+    );
+    pick(y as f64 <= x || x.is_nan(), y, below)
 }
 
-/// `x` rounded to an `f32` no less than it.
+/// `x` rounded to an `f32` no less than it (branch-free, as [`down`]).
 #[inline]
 pub(super) fn up(x: f64) -> f32 {
     let y = x as f32;
-    if y as f64 >= x || x.is_nan() {
-        y
-    } else if y.is_infinite() {
-        f32::MIN
-    } else {
-        y + (y.abs() * f32::EPSILON).max(f32::MIN_POSITIVE)
-    }
+    let above = pick(
+        y.is_infinite(),
+        f32::MIN,
+        y + (y.abs() * f32::EPSILON).max(f32::MIN_POSITIVE),
+    );
+    pick(y as f64 >= x || x.is_nan(), y, above)
 }
 
 /// Face `f` (axis `f / 2`, negative when `f` is odd) coordinates `(u, v, z)` of `x`.
