@@ -19,6 +19,31 @@ fn rounding_goes_outwards() {
     }
     assert_eq!(down(1e300), f32::MAX);
     assert_eq!(up(-1e300), f32::MIN);
+    // Values an f32 holds stay as they are; NaN and the infinities pass through.
+    for x in [
+        0.0,
+        1.0,
+        -2.5,
+        1e-3f32 as f64,
+        f32::MAX as f64,
+        f32::MIN_POSITIVE as f64,
+    ] {
+        assert_eq!((down(x) as f64, up(x) as f64), (x, x), "{x}");
+    }
+    assert!(down(f64::NAN).is_nan() && up(f64::NAN).is_nan());
+    assert_eq!(up(1e300), f32::INFINITY);
+    assert_eq!(down(-1e300), f32::NEG_INFINITY);
+    assert_eq!(down(f64::INFINITY), f32::INFINITY);
+    assert_eq!(up(f64::NEG_INFINITY), f32::NEG_INFINITY);
+    // Under f32's normal range: still outwards, within the smallest normal.
+    for _ in 0..1_000 {
+        let x = (rng.f32() as f64 - 0.5) * 1e-37 * 10f64.powi(-(rng.below(8) as i32));
+        assert!((down(x) as f64) <= x && (up(x) as f64) >= x, "{x:e}");
+        assert!(
+            (x - down(x) as f64).abs() <= 2.0 * f32::MIN_POSITIVE as f64,
+            "{x:e}"
+        );
+    }
 }
 
 #[test]
