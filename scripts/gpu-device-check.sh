@@ -78,10 +78,14 @@ run)
     # step's timeout is what it asks for or what is left, so a slow step shortens the
     # later ones instead of the run being cut off mid-step. DEVICE_SECONDS sets it.
     end=$((SECONDS + ${DEVICE_SECONDS:-540}))
+    # `t WANT [KEEP]`: WANT seconds, or what is left after KEEP for the steps after it.
+    # The GPU's steps keep RESERVE (180 s) for issue 38's CPU scaling runs, which
+    # come last and need about that on 16 cores.
     t() {
-        local left=$((end - SECONDS))
+        local left=$((end - SECONDS - ${2:-0}))
         if ((left < 10)); then echo 1; elif (($1 < left)); then echo "$1"; else echo "$left"; fi
     }
+    keep=${RESERVE:-180}
     # QUICK=1: a rehearsal of every step at small sizes, on any Vulkan driver (lavapipe
     # here), to find a broken step before the device's one run.
     if [ -n "${QUICK:-}" ]; then
@@ -103,12 +107,12 @@ run)
     { nvidia-smi -L; echo "VK_DRIVER_FILES=${VK_DRIVER_FILES:-}"; nproc; } >"$out/gpu.txt" 2>&1 || true
     cat "$out/gpu.txt"
     # Exactness first: with CI set, no adapter is a failure, not a skip.
-    timeout "$(t 240)" .device/gpu/gpu_vs_brute --test-threads 1 >"$out/exactness.txt" 2>&1 &&
+    timeout "$(t 240 "$keep")" .device/gpu/gpu_vs_brute --test-threads 1 >"$out/exactness.txt" 2>&1 &&
         echo "exactness: passed" || echo "exactness: FAILED (see exactness.txt)"
     tail -n 3 "$out/exactness.txt"
     pack
     # Then the figures: the museum class and 1M moving, a 1024x1024 camera (1 M rays).
-    timeout "$(t 200)" .device/gpu/gpu_bench --size "$bench_size" --moving "$moving" --frames 5 \
+    timeout "$(t 200 "$keep")" .device/gpu/gpu_bench --size "$bench_size" --moving "$moving" --frames 5 \
         >"$out/bench.md" 2>&1 && echo "bench: done" || echo "bench: FAILED"
     tail -n 20 "$out/bench.md"
     pack
@@ -119,11 +123,11 @@ run)
     mkdir -p /tmp/peer && cp .device/libtrace_helper.so /tmp/peer/
     python3 .device/peers/gen_scene.py --static-tris 10284 --dynamic-tris 16384 \
         --frames 300 --fps 30 --seed 1 --out /tmp/museum.glb >/dev/null
-    timeout "$(t 120)" python3 .device/peers/embree_anchor.py /tmp/museum.glb --frames 0:50:10 \
+    timeout "$(t 120 "$keep")" python3 .device/peers/embree_anchor.py /tmp/museum.glb --frames 0:50:10 \
         --width "${bench_size%x*}" --height "${bench_size#*x}" --threads "$(nproc)" >"$out/embree.jsonl" 2>&1 &&
         echo "embree: done" || echo "embree: FAILED"
     tail -n 1 "$out/embree.jsonl"
-    timeout "$(t 120)" .device/gpu/gpu_bench --scene /tmp/museum.glb --size "$bench_size" --frames 5 \
+    timeout "$(t 120 "$keep")" .device/gpu/gpu_bench --scene /tmp/museum.glb --size "$bench_size" --frames 5 \
         --step 10 >"$out/bench-museum.md" 2>&1 && echo "bench (museum.glb): done" ||
         echo "bench (museum.glb): FAILED"
     tail -n 8 "$out/bench-museum.md"
@@ -140,7 +144,7 @@ run)
             t0=$(date +%s.%N)
             inflight=()
             case "$dev" in gpu1) inflight=(--frames-in-flight 1) ;; gpu4) inflight=(--frames-in-flight 4) ;; esac
-            timeout "$(t 150)" .device/gpu/subfield render /tmp/museum-hm.glb -o "/tmp/frames-$dev-$size/f.####.exr" \
+            timeout "$(t 150 "$keep")" .device/gpu/subfield render /tmp/museum-hm.glb -o "/tmp/frames-$dev-$size/f.####.exr" \
                 --frames "$frames" --size "$size" --max-depth 1 --device "${dev%[14]}" "${inflight[@]}" \
                 --stats "$out/whole-$dev-$size.csv" >"$out/whole-$dev-$size.log" 2>&1 &&
                 echo "whole frames, $dev, $size: $(echo "$(date +%s.%N) $t0 $nframes" | awk '{printf "%.1f ms a frame", ($1-$2)*1000/$3}')" ||
@@ -157,7 +161,7 @@ run)
     for lv in 2 3; do
         .device/gpu/subfield bake /tmp/museum-hm.glb -o "/tmp/museum-l$lv.psf" --levels "$lv" -q >"$out/bake-$lv.log" 2>&1 || true
         t0=$(date +%s.%N)
-        timeout "$(t 90)" .device/gpu/subfield render /tmp/museum-hm.glb --baked "/tmp/museum-l$lv.psf" \
+        timeout "$(t 90 "$keep")" .device/gpu/subfield render /tmp/museum-hm.glb --baked "/tmp/museum-l$lv.psf" \
             -o "/tmp/frames-l$lv/f.####.exr" --frames "$frames" --size "$hd" --max-depth 1 \
             --device gpu --stats "$out/level-$lv.csv" >"$out/level-$lv.log" 2>&1 &&
             echo "level $lv on the GPU, $hd: $(echo "$(date +%s.%N) $t0 $nframes" | awk '{printf "%.1f ms a frame", ($1-$2)*1000/$3}')" ||
@@ -168,7 +172,7 @@ run)
     # 60 frames at 640x480, on each device.
     for dev in gpu cpu; do
         t0=$(date +%s.%N)
-        timeout "$(t 90)" .device/gpu/subfield demo -o "/tmp/demo-$dev" --frames "$demo_frames" --device "$dev" \
+        timeout "$(t 90 "$keep")" .device/gpu/subfield demo -o "/tmp/demo-$dev" --frames "$demo_frames" --device "$dev" \
             >"$out/demo-$dev.log" 2>&1 &&
             echo "demo, $dev: $(echo "$(date +%s.%N) $t0 $ndemo" | awk '{printf "%.1f ms a frame", ($1-$2)*1000/$3}')" ||
             echo "demo, $dev: FAILED (see demo-$dev.log)"
