@@ -2,7 +2,7 @@
 //! weights, the capped Blinn-Phong glint for lights) and the rays they send on: mirror
 //! and GGX reflection, refraction, the diffuse bounce, the pass-through of alpha.
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 use super::block::{BlockOut, Item};
 use super::frame::split_one;
@@ -63,14 +63,14 @@ pub(super) struct Lobes {
     /// Whether a reflection ray is traced (roughness under [`GLOSSY_LIMIT`]).
     pub(super) reflects: bool,
     /// Towards the viewer.
-    pub(super) v: Vec3,
-    pub(super) f0: Vec3,
+    pub(super) v: Vec3A,
+    pub(super) f0: Vec3A,
     /// The ratio of the indices of refraction across the surface, as the ray crosses it.
     pub(super) eta: f32,
     /// Reflected, transmitted and diffuse weights.
-    pub(super) kr: Vec3,
-    pub(super) kt: Vec3,
-    pub(super) kd: Vec3,
+    pub(super) kr: Vec3A,
+    pub(super) kt: Vec3A,
+    pub(super) kd: Vec3A,
 }
 
 /// On through a surface of coverage `alpha`, same direction, same depth.
@@ -85,7 +85,7 @@ pub(super) fn pass_through(
     let w = item.weight * (1.0 - alpha);
     if w.max_element() > MIN_WEIGHT || item.coverage > 0.0 {
         out.next(
-            Ray::new(s.point - s.ng * eps, s.dir),
+            Ray::new((s.point - s.ng * eps).into(), s.dir.into()),
             Item {
                 sample: item.sample,
                 weight: w,
@@ -109,17 +109,17 @@ pub(super) fn secondary(
     s: &Surface,
     lobes: &Lobes,
     item: &Item,
-    weight: Vec3,
+    weight: Vec3A,
     eps: f32,
-    origin: Vec3,
+    origin: Vec3A,
     cone: Cone,
     random: bool,
     out: &mut BlockOut,
 ) {
     let (eta, kt, mut kr) = (lobes.eta, lobes.kt, lobes.kr);
-    let next = |w: Vec3, kind: u64, spread: f32| Item {
+    let next = |w: Vec3A, kind: u64, spread: f32| Item {
         sample: item.sample,
-        weight: w,
+        weight: w.into(),
         coverage: 0.0,
         depth: item.depth + 1,
         passes: item.passes,
@@ -148,7 +148,7 @@ pub(super) fn secondary(
         match refract(s.dir, s.ns, eta).or_else(|| refract(s.dir, s.ng, eta)) {
             Some(t) if t.dot(s.ng) < 0.0 => {
                 out.next(
-                    Ray::new(s.point - s.ng * eps, t),
+                    Ray::new((s.point - s.ng * eps).into(), t.into()),
                     next(kt_w, 1, cone.spread),
                 );
             }
@@ -165,13 +165,21 @@ pub(super) fn secondary(
             if r.dot(s.ng) <= 0.0 {
                 r = reflect(s.dir, s.ng);
             }
-            out.next(Ray::new(origin, r), next(kr_w, 0, cone.spread));
+            out.next(
+                Ray::new(origin.into(), r.into()),
+                next(kr_w, 0, cone.spread),
+            );
         }
         Some(alpha) => {
             // One direction from the visible normals: the estimator's weight is
             // F · G2/G1(v), with Smith's separable G2 that is F · G1(l).
-            let m = sample_ggx_vndf(lobes.v, s.ns, alpha, item.seed.get(Purpose::Glossy, 0));
-            let r = reflect(s.dir, m);
+            let m = sample_ggx_vndf(
+                lobes.v.into(),
+                s.ns.into(),
+                alpha,
+                item.seed.get(Purpose::Glossy, 0),
+            );
+            let r = reflect(s.dir, m.into());
             let cos_l = r.dot(s.ns);
             if cos_l <= 0.0 || r.dot(s.ng) <= 0.0 {
                 return; // into the surface: this sample reflects nothing
@@ -179,7 +187,10 @@ pub(super) fn secondary(
             let w = kr_w * smith_g1(cos_l, alpha);
             if w.max_element() > MIN_WEIGHT {
                 // The lobe's width widens the cone (for the texture level of detail).
-                out.next(Ray::new(origin, r), next(w, 0, cone.spread + alpha));
+                out.next(
+                    Ray::new(origin.into(), r.into()),
+                    next(w, 0, cone.spread + alpha),
+                );
             }
         }
     }
@@ -194,8 +205,8 @@ pub(super) fn diffuse_bounce(
     s: &Surface,
     lobes: &Lobes,
     item: &Item,
-    weight: Vec3,
-    origin: Vec3,
+    weight: Vec3A,
+    origin: Vec3A,
     cone: Cone,
     out: &mut BlockOut,
 ) {
@@ -203,15 +214,18 @@ pub(super) fn diffuse_bounce(
     if w.max_element() <= MIN_WEIGHT {
         return;
     }
-    let dir = sample_cosine(s.ns, item.seed.get(Purpose::Diffuse, 0));
+    let dir = Vec3A::from(sample_cosine(
+        s.ns.into(),
+        item.seed.get(Purpose::Diffuse, 0),
+    ));
     if dir.dot(s.ng) <= 0.0 {
         return; // below the geometric surface (a bent shading normal): no light there
     }
     out.next(
-        Ray::new(origin, dir),
+        Ray::new(origin.into(), dir.into()),
         Item {
             sample: item.sample,
-            weight: w,
+            weight: w.into(),
             coverage: 0.0,
             depth: item.depth + 1,
             passes: item.passes,
@@ -228,13 +242,13 @@ pub(super) fn diffuse_bounce(
     );
 }
 
-pub(super) fn reflect(d: Vec3, n: Vec3) -> Vec3 {
+pub(super) fn reflect(d: Vec3A, n: Vec3A) -> Vec3A {
     d - 2.0 * d.dot(n) * n
 }
 
 /// Refraction of unit `d` through unit `n` (facing against `d`), `eta = n1 / n2`;
 /// `None` on total internal reflection.
-pub(super) fn refract(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
+pub(super) fn refract(d: Vec3A, n: Vec3A, eta: f32) -> Option<Vec3A> {
     let cos_i = -d.dot(n);
     let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
     if k < 0.0 {
@@ -259,7 +273,7 @@ pub(super) fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
 impl ShadeContext<'_> {
     /// The material's lobes at `s`: metallic and roughness (textured), Fresnel, and the
     /// reflected, transmitted and diffuse weights.
-    pub(super) fn lobes(&self, m: &Material, s: &Surface, albedo: Vec3) -> Lobes {
+    pub(super) fn lobes(&self, m: &Material, s: &Surface, albedo: Vec3A) -> Lobes {
         let (mut metallic, mut roughness) = (m.metallic, m.roughness);
         if let Some(t) = self.texture(m.metallic_roughness_texture, s.uv, s.lod, false) {
             metallic *= t.z;
@@ -271,7 +285,7 @@ impl ShadeContext<'_> {
         let gloss = (1.0 - roughness) * (1.0 - roughness);
         let v = -s.dir;
         let cos_o = s.ns.dot(v).clamp(0.0, 1.0);
-        let f0 = Vec3::splat(0.04).lerp(albedo, metallic);
+        let f0 = Vec3A::splat(0.04).lerp(albedo, metallic);
         let ior = if m.ior.is_finite() && m.ior >= 1.0 {
             m.ior
         } else {
@@ -280,16 +294,16 @@ impl ShadeContext<'_> {
         let eta = if s.entering { 1.0 / ior } else { ior };
         // Fresnel: exact dielectric for transmissive surfaces, Schlick otherwise.
         let fresnel = if transmission > 0.0 {
-            Vec3::splat(fresnel_dielectric(cos_o, eta))
+            Vec3A::splat(fresnel_dielectric(cos_o, eta))
         } else {
             // `x⁵` as `f32::powi(x, 5)` multiplies, inlined (it was a call).
             let x = 1.0 - cos_o;
             let x2 = x * x;
-            f0 + (Vec3::ONE - f0) * (x * (x2 * x2))
+            f0 + (Vec3A::ONE - f0) * (x * (x2 * x2))
         };
         let reflects = roughness < GLOSSY_LIMIT;
         let alpha = roughness * roughness;
-        let kt = (Vec3::ONE - fresnel) * transmission * albedo;
+        let kt = (Vec3A::ONE - fresnel) * transmission * albedo;
         let (kr, kd) = if reflects {
             (
                 fresnel,
@@ -297,7 +311,7 @@ impl ShadeContext<'_> {
             )
         } else {
             (
-                Vec3::ZERO,
+                Vec3A::ZERO,
                 albedo
                     * ((1.0 - metallic)
                         * (1.0 - transmission)
@@ -334,7 +348,7 @@ impl ShadeContext<'_> {
     /// Diffuse plus (when `highlight`) the capped Blinn–Phong glint, for light arriving
     /// from `to_light`.
     #[inline]
-    pub(super) fn brdf(lobes: &Lobes, s: &Surface, to_light: Vec3, highlight: bool) -> Vec3 {
+    pub(super) fn brdf(lobes: &Lobes, s: &Surface, to_light: Vec3A, highlight: bool) -> Vec3A {
         let mut brdf = lobes.kd * std::f32::consts::FRAC_1_PI;
         if highlight {
             if let Some(g) = Self::glint(lobes, s, to_light) {
@@ -347,7 +361,7 @@ impl ShadeContext<'_> {
     /// The capped Blinn–Phong glint for light arriving from `to_light`; `None` for a
     /// surface too rough to have one.
     #[inline]
-    pub(super) fn glint(lobes: &Lobes, s: &Surface, to_light: Vec3) -> Option<Vec3> {
+    pub(super) fn glint(lobes: &Lobes, s: &Surface, to_light: Vec3A) -> Option<Vec3A> {
         let shininess = Self::shininess(lobes.roughness);
         if shininess <= 0.0 {
             return None;
@@ -373,19 +387,19 @@ impl ShadeContext<'_> {
     pub(super) fn split_light(
         lobes: &Lobes,
         s: &Surface,
-        to_light: Vec3,
+        to_light: Vec3A,
         highlight: bool,
-        e: Vec3,
+        e: Vec3A,
         path: Option<LightPath>,
     ) -> Split {
         let d = e * (lobes.kd * std::f32::consts::FRAC_1_PI);
         let g = match highlight.then(|| Self::glint(lobes, s, to_light)).flatten() {
             Some(g) => e * g,
-            None => Vec3::ZERO,
+            None => Vec3A::ZERO,
         };
         match path {
-            Some(p) => split_one(p, d + g),
-            None => [d, g, Vec3::ZERO, Vec3::ZERO],
+            Some(p) => split_one(p, (d + g).into()),
+            None => [d.into(), g.into(), Vec3::ZERO, Vec3::ZERO],
         }
     }
 }
@@ -415,8 +429,8 @@ mod tests {
 
     #[test]
     fn refraction_and_fresnel() {
-        let n = Vec3::Y;
-        let d = Vec3::new(1.0, -1.0, 0.0).normalize();
+        let n = Vec3A::Y;
+        let d = Vec3A::new(1.0, -1.0, 0.0).normalize();
         // Into glass: bends towards the normal (Snell).
         let t = refract(d, n, 1.0 / 1.5).unwrap();
         let sin_t = t.x;
@@ -426,6 +440,6 @@ mod tests {
         assert_eq!(fresnel_dielectric(d.dot(-n).abs(), 1.5), 1.0);
         // Normal incidence: ((n1-n2)/(n1+n2))^2 = 0.04.
         assert!((fresnel_dielectric(1.0, 1.0 / 1.5) - 0.04).abs() < 1e-6);
-        assert!(reflect(d, n).abs_diff_eq(Vec3::new(d.x, -d.y, 0.0), 1e-6));
+        assert!(reflect(d, n).abs_diff_eq(Vec3A::new(d.x, -d.y, 0.0), 1e-6));
     }
 }

@@ -2,7 +2,7 @@
 //! samples of the emissive triangles (area lights), each carrying what it adds when
 //! unblocked.
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 use super::block::{BlockOut, Item};
 use super::bsdf::Lobes;
@@ -67,11 +67,11 @@ impl PreLight {
 /// directional light) and the irradiance it brings there (range and cone applied);
 /// `None` at the light itself or where the numbers overflow.
 #[inline]
-pub(super) fn light_at(l: &PreLight, origin: Vec3) -> Option<(Vec3, f32, Vec3)> {
+pub(super) fn light_at(l: &PreLight, origin: Vec3A) -> Option<(Vec3A, f32, Vec3A)> {
     Some(match l.kind {
-        LightKind::Directional => (-l.direction, f32::INFINITY, l.power),
+        LightKind::Directional => (-Vec3A::from(l.direction), f32::INFINITY, l.power.into()),
         LightKind::Point | LightKind::Spot { .. } => {
-            let d = l.position - origin;
+            let d = Vec3A::from(l.position) - origin;
             let d2 = d.length_squared();
             if d2 <= 0.0 || !d2.is_finite() {
                 return None;
@@ -92,10 +92,10 @@ pub(super) fn light_at(l: &PreLight, origin: Vec3) -> Option<(Vec3, f32, Vec3)> 
             {
                 let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
                 let scale = 1.0 / (ci - co).max(1e-3);
-                let cd = l.direction.dot(-to);
+                let cd = Vec3A::from(l.direction).dot(-to);
                 att *= ((cd - co) * scale).clamp(0.0, 1.0).powi(2);
             }
-            (to, dist, l.power * att)
+            (to, dist, Vec3A::from(l.power) * att)
         }
     })
 }
@@ -108,8 +108,8 @@ impl ShadeContext<'_> {
         &self,
         s: &Surface,
         lobes: &Lobes,
-        weight: Vec3,
-        origin: Vec3,
+        weight: Vec3A,
+        origin: Vec3A,
         item: &Item,
         out: &mut BlockOut,
     ) {
@@ -127,11 +127,11 @@ impl ShadeContext<'_> {
                 continue;
             }
             let shadow = if dist.is_finite() {
-                Ray::segment(origin, to_light, 0.0, dist * (1.0 - 1e-4))
+                Ray::segment(origin.into(), to_light.into(), 0.0, dist * (1.0 - 1e-4))
             } else {
-                Ray::new(origin, to_light)
+                Ray::new(origin.into(), to_light.into())
             };
-            out.shadow(shadow, li, item.sample, c, || {
+            out.shadow(shadow, li, item.sample, c.into(), || {
                 let e = weight * irradiance * cos_i;
                 Self::split_light(lobes, s, to_light, true, e, item.path)
             });
@@ -145,8 +145,8 @@ impl ShadeContext<'_> {
         &self,
         s: &Surface,
         lobes: &Lobes,
-        weight: Vec3,
-        origin: Vec3,
+        weight: Vec3A,
+        origin: Vec3A,
         item: &Item,
         n: u32,
         spp: u32,
@@ -179,7 +179,7 @@ impl ShadeContext<'_> {
             if lp.tri == s.tri {
                 continue;
             }
-            let d = lp.point - origin;
+            let d = Vec3A::from(lp.point) - origin;
             let d2 = d.length_squared();
             if !(d2 > 0.0 && d2.is_finite()) {
                 continue;
@@ -190,7 +190,7 @@ impl ShadeContext<'_> {
             if cos_i <= 0.0 || s.ng.dot(to) <= 0.0 {
                 continue;
             }
-            let mut cos_l = -lp.normal.dot(to);
+            let mut cos_l = -Vec3A::from(lp.normal).dot(to);
             if lp.two_sided {
                 cos_l = cos_l.abs();
             }
@@ -200,17 +200,17 @@ impl ShadeContext<'_> {
             let Some(m) = self.material(lp.material) else {
                 continue;
             };
-            let le = self.emission(m, self.uv_at(lp.tri, lp.bary), f32::NEG_INFINITY);
+            let le = Vec3A::from(self.emission(m, self.uv_at(lp.tri, lp.bary), f32::NEG_INFINITY));
             let brdf = Self::brdf(lobes, s, to, !lobes.reflects);
             let c = weight * brdf * le * (cos_i * cos_l / (d2 * lp.pdf_area * n as f32));
             if c.max_element() <= MIN_WEIGHT * 1e-2 || !c.is_finite() {
                 continue;
             }
             out.shadow(
-                Ray::segment(origin, to, 0.0, dist * (1.0 - 1e-3)),
+                Ray::segment(origin.into(), to.into(), 0.0, dist * (1.0 - 1e-3)),
                 batch,
                 item.sample,
-                c,
+                c.into(),
                 || {
                     let e = weight * le * (cos_i * cos_l / (d2 * lp.pdf_area * n as f32));
                     Self::split_light(lobes, s, to, !lobes.reflects, e, item.path)

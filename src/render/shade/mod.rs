@@ -66,7 +66,7 @@ mod direct;
 mod frame;
 mod surface;
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 use super::camera::CameraModel;
 use super::lights::AreaLights;
@@ -214,7 +214,7 @@ impl<'a> ShadeContext<'a> {
 
     /// Offset for secondary ray origins at `p`: relative to the position's magnitude
     /// (float spacing) and to the scene's size.
-    fn eps(&self, p: Vec3) -> f32 {
+    fn eps(&self, p: Vec3A) -> f32 {
         1e-4 * p.abs().max_element().max(1e-3 * self.extent)
     }
 
@@ -229,7 +229,7 @@ impl<'a> ShadeContext<'a> {
         CentreAov {
             normal: s.ns.to_array(),
             albedo: albedo.to_array(),
-            point: s.point,
+            point: s.point.into(),
         }
     }
 
@@ -286,33 +286,36 @@ impl<'a> ShadeContext<'a> {
             return;
         }
         out.cover(item.sample, item.coverage * alpha);
-        let weight = item.weight * alpha;
-        let lobes = self.lobes(m, &s, base.truncate());
+        let weight = Vec3A::from(item.weight) * alpha;
+        let lobes = self.lobes(m, &s, base.truncate().into());
 
         // Emission (front face; both when double-sided) and ambient.
         let emitted = if (s.entering || m.double_sided) && !item.diffuse {
-            self.emission(m, s.uv, s.lod)
+            Vec3A::from(self.emission(m, s.uv, s.lod))
         } else {
-            Vec3::ZERO
+            Vec3A::ZERO
         };
         // The ambient light is reflected with the diffuse colour, or with the material's
         // own ambient colour (AFF) times its base colour texture.
         let ambient = match m.ambient {
             None => lobes.kd,
-            Some(a) => {
+            Some(a) => Vec3A::from(
                 a * self
                     .texture(m.base_color_texture, s.uv, s.lod, true)
-                    .map_or(Vec3::ONE, |t| t.truncate())
-            }
+                    .map_or(Vec3::ONE, |t| t.truncate()),
+            ),
         };
+        let ambient_light = Vec3A::from(self.options.ambient);
         out.add_split(
             item.sample,
-            weight * (emitted + ambient * self.options.ambient),
+            (weight * (emitted + ambient * ambient_light)).into(),
             || {
-                let mut split =
-                    split_one(item.path.unwrap_or(LightPath::Emission), weight * emitted);
+                let mut split = split_one(
+                    item.path.unwrap_or(LightPath::Emission),
+                    (weight * emitted).into(),
+                );
                 split[item.path.unwrap_or(LightPath::Diffuse) as usize] +=
-                    weight * (ambient * self.options.ambient);
+                    Vec3::from(weight * (ambient * ambient_light));
                 split
             },
         );

@@ -1,7 +1,7 @@
 //! The surface a ray meets: the hit's point, normals (normal maps), uvs, texture level of
 //! detail, and the textured factors of its material read there.
 
-use glam::{Vec2, Vec3, Vec4};
+use glam::{Vec2, Vec3, Vec3A, Vec3Swizzles, Vec4};
 
 use super::ShadeContext;
 use crate::geometry::{Hit, Ray};
@@ -9,14 +9,18 @@ use crate::psf::Prim;
 use crate::scene::{AlphaMode, Material, TextureRef};
 
 /// A hit made into a surface: where, which way it faces, and what its material reads.
+///
+/// Its vectors are `Vec3A`, as is shading's arithmetic: SSE lanes doing the operations
+/// of `Vec3` in the same order (so the same bits), in fewer instructions (shading was
+/// some 1,300 instructions a hit; benches/PERF.md, issue 38, round 9).
 pub(super) struct Surface {
-    pub(super) point: Vec3,
+    pub(super) point: Vec3A,
     /// Geometric normal, facing the incoming ray.
-    pub(super) ng: Vec3,
+    pub(super) ng: Vec3A,
     /// Shading normal, on the side of `ng`.
-    pub(super) ns: Vec3,
+    pub(super) ns: Vec3A,
     /// Unit ray direction.
-    pub(super) dir: Vec3,
+    pub(super) dir: Vec3A,
     pub(super) entering: bool,
     pub(super) uv: Vec2,
     /// Texture level of detail for a unit texture: a `w × h` texture adds
@@ -25,6 +29,13 @@ pub(super) struct Surface {
     pub(super) material: u32,
     /// Hit number of the triangle.
     pub(super) tri: u32,
+}
+
+/// `a × b` as `Vec3::cross` computes it (`Vec3A::cross` fuses its products where the
+/// build has FMA, which would make an `x86-64-v3` build's frames differ).
+#[inline(always)]
+pub(super) fn cross(a: Vec3A, b: Vec3A) -> Vec3A {
+    a.yzx() * b.zxy() - a.zxy() * b.yzx()
 }
 
 /// The material's coverage at a point of base colour `base`.
@@ -82,11 +93,12 @@ impl ShadeContext<'_> {
         let material = soup.material.get(i).copied().unwrap_or(u32::MAX);
         let (u, v) = (hit.u, hit.v);
         let w = 1.0 - u - v;
-        let point = p[0] * w + p[1] * u + p[2] * v;
-        let cross = (p[1] - p[0]).cross(p[2] - p[0]);
-        let mut ng = cross.normalize_or_zero();
-        let dir = ray.dir.normalize_or_zero();
-        if ng == Vec3::ZERO {
+        let (p0, p1, p2) = (Vec3A::from(p[0]), Vec3A::from(p[1]), Vec3A::from(p[2]));
+        let point = p0 * w + p1 * u + p2 * v;
+        let face = cross(p1 - p0, p2 - p0);
+        let mut ng = face.normalize_or_zero();
+        let dir = Vec3A::from(ray.dir).normalize_or_zero();
+        if ng == Vec3A::ZERO {
             ng = -dir;
         }
         let front = ng;
@@ -96,9 +108,12 @@ impl ShadeContext<'_> {
             ng = -ng;
         }
         let mut ns = nrm
-            .map(|n| (n[0] * w + n[1] * u + n[2] * v).normalize_or_zero())
-            .unwrap_or(Vec3::ZERO);
-        if ns == Vec3::ZERO || !ns.is_finite() {
+            .map(|n| {
+                (Vec3A::from(n[0]) * w + Vec3A::from(n[1]) * u + Vec3A::from(n[2]) * v)
+                    .normalize_or_zero()
+            })
+            .unwrap_or(Vec3A::ZERO);
+        if ns == Vec3A::ZERO || !ns.is_finite() {
             ns = front;
         }
         let uv = uvs.map_or(Vec2::ZERO, |t| t[0] * w + t[1] * u + t[2] * v);
@@ -114,7 +129,7 @@ impl ShadeContext<'_> {
         let lod = match uvs {
             Some(t) if textured && width > 0.0 => {
                 let uv_area = (t[1] - t[0]).perp_dot(t[2] - t[0]).abs();
-                let world_area = cross.length();
+                let world_area = face.length();
                 let cos = ng.dot(dir).abs().max(1e-4);
                 if uv_area > 0.0 && world_area > 0.0 {
                     (width / cos).log2() + 0.5 * (uv_area / world_area).log2()
@@ -126,7 +141,9 @@ impl ShadeContext<'_> {
         };
         if let (Some(m), Some(t)) = (self.material(material), uvs) {
             if m.normal_texture.is_some() {
-                ns = self.normal_mapped(m, ns, p, t, uv, lod).unwrap_or(ns);
+                ns = self
+                    .normal_mapped(m, ns.into(), p, t, uv, lod)
+                    .map_or(ns, Vec3A::from);
             }
         }
         if ns.dot(ng) < 0.0 {
@@ -216,5 +233,36 @@ impl ShadeContext<'_> {
         uvs.map_or(Vec2::ZERO, |t| {
             t[0] * (1.0 - b.x - b.y) + t[1] * b.x + t[2] * b.y
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn bits(v: Vec3) -> [u32; 3] {
+        v.to_array().map(f32::to_bits)
+    }
+
+    proptest! {
+        /// Shading's arithmetic in `Vec3A` lanes gives `Vec3`'s bits: the frames do not
+        /// change with it, nor with a build whose target has FMA (`cross`).
+        #[test]
+        fn lanes_give_vec3s_bits(
+            a in prop::array::uniform3(-1e4f32..1e4),
+            b in prop::array::uniform3(-1e4f32..1e4),
+            s in 0f32..1.0,
+        ) {
+            let (a3, b3) = (Vec3::from(a), Vec3::from(b));
+            let (aa, ba) = (Vec3A::from(a), Vec3A::from(b));
+            prop_assert_eq!(bits(cross(aa, ba).into()), bits(a3.cross(b3)));
+            prop_assert_eq!(aa.dot(ba).to_bits(), a3.dot(b3).to_bits());
+            prop_assert_eq!(aa.length().to_bits(), a3.length().to_bits());
+            prop_assert_eq!(bits(aa.normalize_or_zero().into()), bits(a3.normalize_or_zero()));
+            prop_assert_eq!(bits(aa.lerp(ba, s).into()), bits(a3.lerp(b3, s)));
+            prop_assert_eq!(aa.max_element().to_bits(), a3.max_element().to_bits());
+            prop_assert_eq!(bits((aa * s + ba / 3.0 - aa * ba).into()), bits(a3 * s + b3 / 3.0 - a3 * b3));
+        }
     }
 }
