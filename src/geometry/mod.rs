@@ -182,3 +182,67 @@ pub fn closest_of(a: Option<Hit>, b: Option<Hit>) -> Option<Hit> {
         (a, b) => a.or(b),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn valid_rays_are_finite_with_a_direction() {
+        let ok = Ray::segment(
+            Vec3::new(1.0, -2.0, 3.0),
+            Vec3::new(0.0, 0.0, -1.0),
+            0.0,
+            5.0,
+        );
+        assert!(ok.is_valid());
+        assert!(Ray {
+            t_max: f32::INFINITY,
+            ..ok
+        }
+        .is_valid());
+        assert!(
+            Ray { t_min: 7.0, ..ok }.is_valid(),
+            "an empty interval is still a ray"
+        );
+        for (i, bad) in [
+            Ray {
+                origin: Vec3::new(f32::NAN, 0.0, 0.0),
+                ..ok
+            },
+            Ray {
+                origin: Vec3::new(0.0, 0.0, f32::INFINITY),
+                ..ok
+            },
+            Ray {
+                dir: Vec3::new(0.0, f32::NEG_INFINITY, 1.0),
+                ..ok
+            },
+            Ray {
+                dir: Vec3::new(0.0, 0.0, f32::NAN),
+                ..ok
+            },
+            Ray {
+                dir: Vec3::ZERO,
+                ..ok
+            },
+            Ray {
+                dir: Vec3::new(-0.0, 0.0, -0.0),
+                ..ok
+            },
+            Ray {
+                t_min: f32::NAN,
+                ..ok
+            },
+            Ray {
+                t_max: f32::NAN,
+                ..ok
+            },
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            assert!(!bad.is_valid(), "ray {i}: {bad:?}");
+        }
+    }
+}

@@ -3,10 +3,27 @@ use glam::{DVec3, Vec3};
 use super::build::{by_depth, RAYS_PER_TILE};
 use super::center::center;
 use super::plan::SAMPLE;
-use super::project::{aim, down, passes, up, EPS_P};
+use super::project::{aim, down, face_coords, passes, up, EPS_P};
 use super::types::{Around, Item, PointGrid, NO_RECT};
 use crate::gen::synth::Rng;
 use crate::geometry::Ray;
+
+/// Each face's coordinates are the axes after the face's own (`u`, `v`), and its own
+/// axis, negated for the odd faces (`z`): the rule the grids were built by.
+#[test]
+fn face_coordinates_follow_the_axes() {
+    let x = DVec3::new(1.5, -2.25, 3.125);
+    let a = x.to_array();
+    for f in 0..6 {
+        let k = f / 2;
+        let z = if f % 2 == 0 { a[k] } else { -a[k] };
+        assert_eq!(
+            face_coords(f, x),
+            (a[(k + 1) % 3], a[(k + 2) % 3], z),
+            "face {f}"
+        );
+    }
+}
 
 #[test]
 fn rounding_goes_outwards() {
