@@ -8,6 +8,66 @@ use super::types::{Around, Item, PointGrid, NO_RECT};
 use crate::gen::synth::Rng;
 use crate::geometry::Ray;
 
+/// `passes` answers `None` for every ray `Ray::is_valid` refuses (a non-finite origin
+/// or direction, a zero direction, NaN bounds) without asking it, and for inverted
+/// bounds; a ray with bounds in order and finite numbers is judged on its line.
+#[test]
+fn passes_refuses_what_is_not_a_ray() {
+    let special = [
+        0.0,
+        -0.0,
+        1.0,
+        -2.5,
+        1e-30,
+        -3e38,
+        f32::MIN_POSITIVE / 8.0,
+        f32::MAX,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+    ];
+    let mut some = 0;
+    for seed in 0..20_000u64 {
+        let mut rng = Rng::new(seed);
+        // A ray aimed at `c` (so that it qualifies when its numbers allow), then one of
+        // its twelve numbers made special.
+        let c = DVec3::new(rng.range(-1.0, 1.0) as f64, 0.25, 0.0);
+        let origin = Vec3::new(
+            rng.range(-4.0, 4.0),
+            rng.range(-4.0, 4.0),
+            rng.range(-4.0, 4.0),
+        );
+        let dir = (c.as_vec3() - origin) * rng.range(0.1, 3.0);
+        let t = [rng.range(-1.0, 0.5), rng.range(0.5, 2.0)];
+        let mut f = [
+            origin.x, origin.y, origin.z, dir.x, dir.y, dir.z, t[0], t[1],
+        ];
+        if rng.below(4) != 0 {
+            let k = rng.below(f.len());
+            f[k] = special[rng.below(special.len())];
+        }
+        if rng.below(8) == 0 {
+            f[3..6].fill(if rng.below(2) == 0 { 0.0 } else { -0.0 });
+        }
+        let ray = Ray {
+            origin: Vec3::new(f[0], f[1], f[2]),
+            dir: Vec3::new(f[3], f[4], f[5]),
+            t_min: f[6],
+            t_max: f[7],
+        };
+        let got = passes(c, 0.01, 1e-5, &ray);
+        if !ray.is_valid() || ray.t_min > ray.t_max {
+            assert_eq!(got, None, "seed {seed}: {ray:?}");
+        } else {
+            some += usize::from(got.is_some());
+        }
+    }
+    assert!(
+        some > 1_000,
+        "only {some} rays aimed at the point qualified"
+    );
+}
+
 /// Each face's coordinates are the axes after the face's own (`u`, `v`), and its own
 /// axis, negated for the odd faces (`z`): the rule the grids were built by.
 #[test]
