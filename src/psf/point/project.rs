@@ -74,7 +74,8 @@ pub(super) fn passes(c: DVec3, r: f64, rho_max: f64, ray: &Ray) -> Option<bool> 
     // against a finite bound, or 0 < 0), so `Ray::is_valid` need not be asked: it was
     // 2.7 % of a dolly frame's instructions, once for every grid a ray tries
     // (benches/PERF.md, issue 38, round 9; a test holds the two to the same answers).
-    if !(ray.t_min <= ray.t_max) {
+    let ordered = ray.t_min <= ray.t_max; // false when either is NaN
+    if !ordered {
         return None;
     }
     let o = ray.origin.as_dvec3() - c;
