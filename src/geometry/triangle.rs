@@ -142,9 +142,10 @@ impl TriPre {
 /// the same order, lane by lane (a product by the shear's 0 and 1 entries and a sum with
 /// 0 are exact in both), so the two agree on every ray and triangle; the property test
 /// below checks it. On the museum-class scene it traced 3.7% faster than the plain
-/// layout in both layers (`benches/PERF.md`, step 11). The dynamic layer uses it; the
-/// static PSF keeps the baked file's vertices, as its share (about 2%) did not pay for 48
-/// bytes a triangle built on every file open.
+/// layout in both layers (`benches/PERF.md`, step 11). The dynamic layer uses it, and
+/// since issue 38's round 9 the static PSF too (its copy made on first use, 48 bytes a
+/// triangle, which the point grids had made already): its share of a dolly frame's
+/// instructions had grown to some 5 %.
 #[inline]
 pub fn intersect_pre(r: &RayPre, tri: &TriPre, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
     let (x, y, z) = (tri.x - r.org4[0], tri.y - r.org4[1], tri.z - r.org4[2]);

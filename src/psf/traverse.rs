@@ -4,16 +4,14 @@
 //! over the ray's depth interval there, and stop as soon as the best hit lies before the
 //! exit of the current tile.
 
-use glam::{DVec3, Vec3, Vec4};
+use glam::{DVec3, Vec4};
 
 use super::batch::binned;
 use super::bsp::{depth_mask, Block, LANES};
 use super::point::{trace_batch, Plan, Sources};
 use super::stats::{Counter, NoCount, RayStats};
 use super::{GridFrame, Psf};
-use crate::geometry::{
-    intersect_pre, intersect_triangle, Aabb, Hit, Intersector, Ray, RayPre, TriPre,
-};
+use crate::geometry::{intersect_pre, Aabb, Hit, Intersector, Ray, RayPre, TriPre};
 
 /// Walks the tiles of `frame` that the line `o + t d`, `t` in `[t0, t1]`, passes through,
 /// in order of `t`, calling `visit(tile, t_enter, t_exit)` until it returns `false`.
@@ -88,18 +86,11 @@ pub(crate) fn clipped_span(clip: &Aabb, ray: &Ray) -> Option<(DVec3, DVec3, f64,
     Some((o, d, t0, t1))
 }
 
-/// A triangle as a query stores it: the static PSF's as plain vertices (as the baked
-/// file holds them, so opening a file builds nothing), the dynamic layer's as
-/// [`TriPre`] (built every update, in the Morton order).
+/// A triangle as a query tests it: both layers' in [`TriPre`] form (the static PSF's
+/// made on first use and kept in its point cache, the dynamic layer's built every update,
+/// in the Morton order).
 pub(crate) trait Candidate {
     fn intersect(&self, pre: &RayPre, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)>;
-}
-
-impl Candidate for [Vec3; 3] {
-    #[inline(always)]
-    fn intersect(&self, pre: &RayPre, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
-        intersect_triangle(pre, self, t_min, t_max)
-    }
 }
 
 impl Candidate for TriPre {
@@ -238,7 +229,7 @@ impl Psf {
             &*sf.slab_starts,
             &*sf.entries,
             &*sf.blocks,
-            &*self.triangles,
+            &**self.points.pre_of(&self.triangles),
         );
         let margin = self.margin;
         // How far (in t) a computed hit may sit from where the line truly meets its

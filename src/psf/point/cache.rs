@@ -7,12 +7,13 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::types::{Around, CacheState, PointCache, Sources, StaticGrid, KEPT};
+use glam::Vec3;
+
 use crate::geometry::TriPre;
 
 impl Default for CacheState {
     fn default() -> Self {
         CacheState {
-            pre: None,
             grids: Vec::new(),
             stamp: 0,
             seen: Vec::new(),
@@ -59,8 +60,8 @@ impl PointCache {
         }
     }
 
-    /// Drops every kept grid, the points seen and the static triangles' copy in the
-    /// test's form; the capacity stays.
+    /// Drops every kept grid and the points seen; the capacity stays, and so does the
+    /// static triangles' copy in the test's form (the parallel subfields' walk reads it).
     pub(crate) fn clear(&self) {
         let mut st = self.lock();
         let capacity = st.capacity;
@@ -79,14 +80,24 @@ impl PointCache {
 
 /// The static triangles in the test's form, made once and kept in the cache.
 pub(super) fn static_pre(src: &Sources) -> Arc<[TriPre]> {
-    if let Some(p) = &src.cache.lock().pre {
-        if p.len() == src.statics.len() {
-            return p.clone();
+    src.cache.pre_of(src.statics).clone()
+}
+
+impl PointCache {
+    /// `statics` (the static triangles this cache's PSF holds, always the same) in the
+    /// test's form, made on first use (in parallel) and kept: the point grids test
+    /// them so, and so does the parallel subfields' walk, where `intersect_pre` on
+    /// them took fewer instructions than `intersect_triangle` on the plain vertices,
+    /// with the same bits (benches/PERF.md, issue 38, round 9).
+    pub(crate) fn pre_of(&self, statics: &[[Vec3; 3]]) -> &Arc<[TriPre]> {
+        if let Some(p) = self.pre.get() {
+            return p;
         }
+        // Made outside any lock: two threads that both find it missing make equal
+        // copies, and the one set first is kept.
+        let p: Arc<[TriPre]> = statics.par_iter().map(TriPre::new).collect();
+        self.pre.get_or_init(|| p)
     }
-    let p: Arc<[TriPre]> = src.statics.par_iter().map(TriPre::new).collect();
-    src.cache.lock().pre = Some(p.clone());
-    p
 }
 
 /// What a batch's grids leave in the cache for later batches.

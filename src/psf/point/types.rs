@@ -2,7 +2,7 @@
 //! is built around, the rectangles a batch's rays project into, and the triangles a grid
 //! is built over. Nothing here uses the sibling files but [`project`](super::project).
 
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::{DVec3, Vec3};
 
@@ -247,11 +247,13 @@ impl PointGrid {
 /// Grids over a PSF's static triangles kept from batch to batch, so that a camera or a
 /// light that stays put has the static part of its grid built once; a batch then builds
 /// a grid over the moving triangles only and scans both. At most [`KEPT`] grids (or the capacity set), the
-/// least recently used dropped first, and one copy of the static triangles in the
-/// test's form (48 bytes a triangle), made with the first grid.
+/// least recently used dropped first; and one copy of the static triangles in the
+/// test's form (48 bytes a triangle), made on first use, which the grids and the
+/// parallel subfields' walk share ([`PointCache::pre_of`]).
 #[derive(Default)]
 pub(crate) struct PointCache {
     pub(super) state: Mutex<CacheState>,
+    pub(super) pre: OnceLock<Arc<[TriPre]>>,
 }
 
 /// Static grids kept at most by default (and points seen that took no grid).
@@ -259,7 +261,6 @@ pub(super) const KEPT: usize = 8;
 
 /// What the cache holds, behind its lock.
 pub(super) struct CacheState {
-    pub(super) pre: Option<Arc<[TriPre]>>,
     /// Grids with the stamp of their last use.
     pub(super) grids: Vec<(u64, Arc<StaticGrid>)>,
     pub(super) stamp: u64,
