@@ -2,7 +2,7 @@
 //! block of rays' shading hands on ([`BlockOut`]): contributions, shadow rays a light at
 //! a time, and the next level's rays.
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 use super::LightPath;
 use super::{Cone, Split};
@@ -147,9 +147,10 @@ impl BlockOut {
     /// `c` to the beauty of `sample` and, when the passes are traced, `split()` (`c`
     /// split over them) to the passes; nothing when `c` is 0 or not finite.
     #[inline]
-    pub(super) fn add_split(&mut self, sample: u32, c: Vec3, split: impl FnOnce() -> Split) {
-        if c != Vec3::ZERO && c.is_finite() {
-            self.add.push((sample, c));
+    pub(super) fn add_split(&mut self, sample: u32, c: Vec3A, split: impl FnOnce() -> Split) {
+        // `c != 0` (NaN included) and finite, in lanes, without a branch between them.
+        if c.cmpne(Vec3A::ZERO).any() & c.is_finite() {
+            self.add.push((sample, c.into()));
             if self.light_paths {
                 self.split.push((sample, split()));
             }

@@ -261,7 +261,7 @@ impl<'a> ShadeContext<'a> {
                 None => self.options.background,
             };
             let c = item.weight * seen;
-            out.add_split(item.sample, c, || {
+            out.add_split(item.sample, c.into(), || {
                 split_one(item.path.unwrap_or(LightPath::Emission), c)
             });
             return;
@@ -308,7 +308,7 @@ impl<'a> ShadeContext<'a> {
         let ambient_light = Vec3A::from(self.options.ambient);
         out.add_split(
             item.sample,
-            (weight * (emitted + ambient * ambient_light)).into(),
+            weight * (emitted + ambient * ambient_light),
             || {
                 let mut split = split_one(
                     item.path.unwrap_or(LightPath::Emission),
