@@ -4,11 +4,10 @@
 
 use std::sync::Arc;
 
+use glam::Vec3;
 use rayon::prelude::*;
 
 use super::types::{Around, CacheState, PointCache, Sources, StaticGrid, KEPT};
-use glam::Vec3;
-
 use crate::geometry::TriPre;
 
 impl Default for CacheState {
