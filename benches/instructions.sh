@@ -1,0 +1,122 @@
+#!/usr/bin/env bash
+# Instructions one frame takes, counted by callgrind: exact and the same run after run,
+# where wall times on a shared machine drift by several per cent within the hour
+# (benches/PERF.md, issue 38, round 9). Compare two builds by their counts first, then
+# time the one that counts fewer. Each instruction is put on the innermost line of this
+# crate it was inlined from, and the lines and files that ran the most are listed.
+#
+#   benches/instructions.sh [--binary B] [--scene S.glb] [--camera still|dolly]
+#                           [--size WxH] [--frame N] [--only PATTERN] [--top K]
+#
+# Defaults: target/release/subfield; the museum class in half mirrors with a dollying
+# camera (written as benches/scaling.sh writes it, by ../shared/peers, if missing);
+# 320x240 (a quarter of 640x480: the trace and shading scale with the pixels, the grids'
+# builds do not); frame 5, rendered alone, --max-depth 1, 1 thread; the render pass
+# (PATTERN `*render_pass_with*`; `*ShadeContext*shade*` counts shading alone); the top 30
+# lines. Needs valgrind (Debian's `valgrind`), addr2line (binutils) and python3.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+die() { echo "benches/instructions.sh: $*" >&2; exit 1; }
+
+BIN=target/release/subfield; SCENE=""; CAMERA=dolly; SIZE=320x240; FRAME=5
+ONLY='*render_pass_with*'; TOP=30
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --binary) BIN=${2:?--binary needs a path}; shift ;;
+        --scene) SCENE=${2:?--scene needs a file}; shift ;;
+        --camera) CAMERA=${2:?--camera needs still or dolly}; shift ;;
+        --size) SIZE=${2:?--size needs WxH}; shift ;;
+        --frame) FRAME=${2:?--frame needs a number}; shift ;;
+        --only) ONLY=${2:?--only needs a pattern}; shift ;;
+        --top) TOP=${2:?--top needs a number}; shift ;;
+        -h|--help) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        *) die "unknown option $1 (see --help)" ;;
+    esac
+    shift
+done
+[[ "$CAMERA" =~ ^(still|dolly)$ ]] || die "--camera takes still or dolly (got $CAMERA)"
+[[ "$SIZE" =~ ^[1-9][0-9]*x[1-9][0-9]*$ ]] || die "--size takes WxH (got $SIZE)"
+[[ "$FRAME" =~ ^[0-9]+$ ]] || die "--frame takes a whole number (got $FRAME)"
+[[ "$TOP" =~ ^[1-9][0-9]*$ ]] || die "--top takes a whole number (got $TOP)"
+[ -x "$BIN" ] || die "no binary at $BIN (cargo build --release, or --binary)"
+command -v valgrind >/dev/null || die "valgrind is not installed (apt-get install valgrind)"
+command -v addr2line >/dev/null || die "addr2line is not installed (apt-get install binutils)"
+
+if [ -z "$SCENE" ]; then
+    PEERS=${PEERS:-../shared/peers}
+    SCENE=target/scaling-bench/instructions/gen_10284_16384_s1_${CAMERA}_halfmirror.glb
+    if [ ! -f "$SCENE" ]; then
+        [ -f "$PEERS/gen_scene.py" ] || die "no scene given and no $PEERS/gen_scene.py to write one"
+        mkdir -p "$(dirname "$SCENE")"
+        python3 "$PEERS/gen_scene.py" --static-tris 10284 --dynamic-tris 16384 --frames 300 \
+            --fps 30 --seed 1 --camera-path "$CAMERA" --out "$SCENE.tmp.glb" >/dev/null
+        python3 "$PEERS/glb_material.py" "$SCENE.tmp.glb" 0.5 0.0 >/dev/null
+        mv "$SCENE.tmp.glb" "$SCENE"
+    fi
+fi
+[ -f "$SCENE" ] || die "no scene at $SCENE"
+
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+valgrind --tool=callgrind --dump-instr=yes --toggle-collect="$ONLY" \
+    --callgrind-out-file="$work/cg.out" "$BIN" render "$SCENE" -o "$work/f.####.exr" \
+    --frames "$FRAME..$((FRAME + 1))" --size "$SIZE" --max-depth 1 --threads 1 \
+    >"$work/render.log" 2>&1 || { tail -n 5 "$work/render.log" >&2; die "the render failed under valgrind"; }
+
+echo "# Instructions: $BIN, $(basename "$SCENE"), frame $FRAME, $SIZE, --max-depth 1, 1 thread, counting $ONLY"
+python3 - "$work/cg.out" "$BIN" "$TOP" "$(pwd)/src/" <<'EOF'
+import collections, re, subprocess, sys
+
+out, binary, top, ours = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4]
+# Callgrind's format with --dump-instr: "fn=(id) name" opens a function's costs,
+# "calls=" lines are followed by the call's inclusive cost (skipped: self costs only),
+# cost lines are "ADDR LINE Ir" with addresses absolute, relative (+n, -n) or "*".
+cost = collections.Counter()
+names, last, skip = {}, 0, False
+with open(out) as f:
+    for line in f:
+        m = re.match(r"^(c?fn)=\((\d+)\)(?: (.*))?$", line.rstrip("\n"))
+        if m:
+            kind, i, name = m.groups()
+            if name:
+                names[i] = name
+            continue
+        if line.startswith("calls="):
+            skip = True
+            continue
+        m = re.match(r"^(0x[0-9a-f]+|[+-]\d+|\*)\s+\S+\s+(\d+)", line)
+        if not m:
+            continue
+        a = m.group(1)
+        last = int(a, 16) if a.startswith("0x") else last + int(a) if a[0] in "+-" else last
+        if skip:
+            skip = False
+            continue
+        cost[last] += int(m.group(2))
+total = sum(cost.values())
+addrs = sorted(cost)
+lines = subprocess.run(["addr2line", "-e", binary, "-i", "-a"], input="\n".join(hex(a) for a in addrs),
+                       capture_output=True, text=True, check=True).stdout.splitlines()
+by_line, by_file = collections.Counter(), collections.Counter()
+chain, at = [], None
+def settle():
+    if at is None:
+        return
+    place = next((c for c in chain if c.startswith(ours)), chain[0] if chain else "?")
+    place = re.sub(r" \(discriminator \d+\)", "", place).replace(ours, "src/")
+    by_line[place] += cost[at]
+    by_file[place.rsplit(":", 1)[0]] += cost[at]
+for l in lines:
+    if l.startswith("0x"):
+        settle()
+        at, chain = int(l, 16), []
+    else:
+        chain.append(l)
+settle()
+print(f"\n{total:,} instructions\n\n| share | instructions | file |\n|---|---|---|")
+for k, v in by_file.most_common(12):
+    print(f"| {100 * v / total:.1f} % | {v:,} | {k} |")
+print("\n| share | instructions | line (innermost of this crate) |\n|---|---|---|")
+for k, v in by_line.most_common(top):
+    print(f"| {100 * v / total:.2f} % | {v:,} | {k} |")
+EOF
