@@ -39,6 +39,21 @@ impl std::fmt::Debug for PointCache {
 }
 
 impl PointCache {
+    /// `statics` (the static triangles this cache's PSF holds, always the same) in the
+    /// test's form, made on first use (in parallel) and kept: the point grids test
+    /// them so, and so does the parallel subfields' walk, where `intersect_pre` on
+    /// them took fewer instructions than `intersect_triangle` on the plain vertices,
+    /// with the same bits (benches/PERF.md, issue 38, round 9).
+    pub(crate) fn pre_of(&self, statics: &[[Vec3; 3]]) -> &Arc<[TriPre]> {
+        if let Some(p) = self.pre.get() {
+            return p;
+        }
+        // Made outside any lock: two threads that both find it missing make equal
+        // copies, and the one set first is kept.
+        let p: Arc<[TriPre]> = statics.par_iter().map(TriPre::new).collect();
+        self.pre.get_or_init(|| p)
+    }
+
     /// The grids kept now.
     pub(crate) fn len(&self) -> usize {
         self.lock().grids.len()
@@ -80,23 +95,6 @@ impl PointCache {
 /// The static triangles in the test's form, made once and kept in the cache.
 pub(super) fn static_pre(src: &Sources) -> Arc<[TriPre]> {
     src.cache.pre_of(src.statics).clone()
-}
-
-impl PointCache {
-    /// `statics` (the static triangles this cache's PSF holds, always the same) in the
-    /// test's form, made on first use (in parallel) and kept: the point grids test
-    /// them so, and so does the parallel subfields' walk, where `intersect_pre` on
-    /// them took fewer instructions than `intersect_triangle` on the plain vertices,
-    /// with the same bits (benches/PERF.md, issue 38, round 9).
-    pub(crate) fn pre_of(&self, statics: &[[Vec3; 3]]) -> &Arc<[TriPre]> {
-        if let Some(p) = self.pre.get() {
-            return p;
-        }
-        // Made outside any lock: two threads that both find it missing make equal
-        // copies, and the one set first is kept.
-        let p: Arc<[TriPre]> = statics.par_iter().map(TriPre::new).collect();
-        self.pre.get_or_init(|| p)
-    }
 }
 
 /// What a batch's grids leave in the cache for later batches.
