@@ -6,20 +6,24 @@
 # crate it was inlined from, and the lines and files that ran the most are listed.
 #
 #   benches/instructions.sh [--binary B] [--scene S.glb] [--camera still|dolly]
-#                           [--size WxH] [--frame N] [--only PATTERN] [--top K]
+#                           [--size WxH] [--frame N] [--only PATTERN] [--top K] [--sim]
 #
 # Defaults: target/release/subfield; the museum class in half mirrors with a dollying
 # camera (written as benches/scaling.sh writes it, by ../shared/peers, if missing);
 # 320x240 (a quarter of 640x480: the trace and shading scale with the pixels, the grids'
 # builds do not); frame 5, rendered alone, --max-depth 1, 1 thread; the render pass
 # (PATTERN `*render_pass_with*`; `*ShadeContext*shade*` counts shading alone); the top 30
-# lines. Needs valgrind (Debian's `valgrind`), addr2line (binutils) and python3.
+# lines. `--sim` adds callgrind's branch and cache simulation and prints their totals
+# (mispredicted conditional branches, first-level data misses): a change can run fewer
+# instructions and take longer (benches/PERF.md, issue 38, round 10), and these models
+# of a simple predictor and cache say why only roughly, so time it either way.
+# Needs valgrind (Debian's `valgrind`), addr2line (binutils) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 die() { echo "benches/instructions.sh: $*" >&2; exit 1; }
 
 BIN=target/release/subfield; SCENE=""; CAMERA=dolly; SIZE=320x240; FRAME=5
-ONLY='*render_pass_with*'; TOP=30
+ONLY='*render_pass_with*'; TOP=30; SIM=()
 while [ $# -gt 0 ]; do
     case "$1" in
         --binary) BIN=${2:?--binary needs a path}; shift ;;
@@ -29,7 +33,8 @@ while [ $# -gt 0 ]; do
         --frame) FRAME=${2:?--frame needs a number}; shift ;;
         --only) ONLY=${2:?--only needs a pattern}; shift ;;
         --top) TOP=${2:?--top needs a number}; shift ;;
-        -h|--help) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        --sim) SIM=(--branch-sim=yes --cache-sim=yes) ;;
+        -h|--help) sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) die "unknown option $1 (see --help)" ;;
     esac
     shift
@@ -58,12 +63,16 @@ fi
 
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-valgrind --tool=callgrind --dump-instr=yes --toggle-collect="$ONLY" \
+valgrind --tool=callgrind --dump-instr=yes --toggle-collect="$ONLY" "${SIM[@]}" \
     --callgrind-out-file="$work/cg.out" "$BIN" render "$SCENE" -o "$work/f.####.exr" \
     --frames "$FRAME..$((FRAME + 1))" --size "$SIZE" --max-depth 1 --threads 1 \
     >"$work/render.log" 2>&1 || { tail -n 5 "$work/render.log" >&2; die "the render failed under valgrind"; }
 
 echo "# Instructions: $BIN, $(basename "$SCENE"), frame $FRAME, $SIZE, --max-depth 1, 1 thread, counting $ONLY"
+if [ ${#SIM[@]} -gt 0 ]; then
+    echo
+    grep -E "(Branches|Mispredicts|D1  misses|LLd misses):" "$work/render.log" | sed 's/^==[0-9]*== */    /'
+fi
 python3 - "$work/cg.out" "$BIN" "$TOP" "$(pwd)/src/" <<'EOF'
 import collections, re, subprocess, sys
 
