@@ -6,7 +6,9 @@ mod triangle;
 
 pub use aabb::Aabb;
 pub use brute::BruteForce;
-pub use triangle::{intersect_pre, intersect_triangle, is_degenerate, RayPre, Shear, TriPre};
+pub use triangle::{
+    intersect_pre, intersect_pre4, intersect_triangle, is_degenerate, RayPre, Shear, TriPre,
+};
 
 use glam::Vec3;
 use rayon::prelude::*;

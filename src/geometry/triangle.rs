@@ -5,7 +5,7 @@
 //! one of them. Where an edge function is exactly zero in f32 it is recomputed in f64,
 //! as the paper prescribes.
 
-use glam::{Mat3A, Vec3, Vec3A, Vec4, Vec4Swizzles};
+use glam::{Mat3A, Mat4, Vec3, Vec3A, Vec4, Vec4Swizzles};
 
 /// What the test needs from a ray, computed once per ray: the origin and the shear,
 /// as a matrix whose rows pick and shear the coordinates, `(x, y, z)' = (p[kx] - sx
@@ -119,6 +119,14 @@ pub struct TriPre {
 }
 
 impl TriPre {
+    /// Three vertices at the origin: no ray meets it (a stand-in where a group of four
+    /// has fewer).
+    pub const NONE: TriPre = TriPre {
+        x: Vec4::ZERO,
+        y: Vec4::ZERO,
+        z: Vec4::ZERO,
+    };
+
     pub fn new(t: &[Vec3; 3]) -> TriPre {
         TriPre {
             x: Vec4::new(t[0].x, t[1].x, t[2].x, 0.0),
@@ -172,6 +180,75 @@ pub fn intersect_pre(r: &RayPre, tri: &TriPre, t_min: f32, t_max: f32) -> Option
         return None;
     }
     Some((t, v * inv, w * inv))
+}
+
+/// [`intersect_pre`] on four triangles at once, calling `hit(lane, (t, u, v))` for each
+/// of lanes `0..n` whose triangle the ray meets, in lane order: the answers of four
+/// calls of [`intersect_pre`], bit for bit (the property test below holds it). The
+/// triangles' vertices go across the lanes (a transpose of their rows), and each lane
+/// does the scalar test's products and sums in its order; a lane with an edge function
+/// exactly zero, which the scalar test recomputes in f64, is handed to
+/// [`intersect_pre`] itself. One branch decides the four where the scalar test takes
+/// one each, a coin toss for a candidate a ray may or may not meet.
+#[inline]
+pub fn intersect_pre4(
+    r: &RayPre,
+    tris: [&TriPre; 4],
+    n: usize,
+    t_min: f32,
+    t_max: f32,
+    mut hit: impl FnMut(usize, (f32, f32, f32)),
+) {
+    let across = |f: fn(&TriPre) -> Vec4| {
+        Mat4::from_cols(f(tris[0]), f(tris[1]), f(tris[2]), f(tris[3])).transpose()
+    };
+    let (xs, ys, zs) = (across(|t| t.x), across(|t| t.y), across(|t| t.z));
+    let m = &r.rows4;
+    // Vertex `k` of the four triangles, sheared: the scalar test's lane `k`.
+    let sheared = |k: usize| {
+        let (x, y, z) = (
+            xs.col(k) - r.org4[0],
+            ys.col(k) - r.org4[1],
+            zs.col(k) - r.org4[2],
+        );
+        (
+            x * m[0] + y * m[1] + z * m[2],
+            x * m[3] + y * m[4] + z * m[5],
+            x * m[6] + y * m[7] + z * m[8],
+        )
+    };
+    let ((ax, ay, az), (bx, by, bz), (cx, cy, cz)) = (sheared(0), sheared(1), sheared(2));
+    let (u, v, w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
+    let zero = Vec4::ZERO;
+    let lanes = (1u32 << n.min(4)) - 1;
+    let exact = (u.cmpeq(zero) | v.cmpeq(zero) | w.cmpeq(zero)).bitmask() & lanes;
+    let neg = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
+    let pos = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
+    let det = u + v + w;
+    let t_scaled = u * az + v * bz + w * cz;
+    let inv = Vec4::ONE / det;
+    let t = t_scaled * inv;
+    let met = !(neg & pos)
+        & det.cmpne(zero)
+        & det.abs().cmplt(Vec4::INFINITY)
+        & t.cmpge(Vec4::splat(t_min))
+        & t.cmple(Vec4::splat(t_max));
+    let mut todo = (met.bitmask() & lanes) | exact;
+    if todo == 0 {
+        return;
+    }
+    let (ts, vs, ws) = (t.to_array(), (v * inv).to_array(), (w * inv).to_array());
+    while todo != 0 {
+        let k = todo.trailing_zeros() as usize;
+        todo &= todo - 1;
+        if exact & (1 << k) != 0 {
+            if let Some(h) = intersect_pre(r, tris[k], t_min, t_max) {
+                hit(k, h);
+            }
+        } else if !is_degenerate(&tris[k].vertices()) {
+            hit(k, (ts[k], vs[k], ws[k]));
+        }
+    }
 }
 
 /// Intersects one triangle; returns `(t, u, v)` with `t` in `[t_min, t_max]` (both
@@ -419,6 +496,38 @@ mod tests {
             let bits = |h: Option<(f32, f32, f32)>| h.map(|(t, u, v)| [t.to_bits(), u.to_bits(), v.to_bits()]);
             prop_assert_eq!(bits(got), bits(want));
             prop_assert_eq!(TriPre::new(&tri).vertices(), tri);
+        }
+
+        /// Four triangles at once give the answers of four single tests, lane by lane
+        /// and bit for bit, whichever lanes are in use; on rays aimed at one of them
+        /// (so that lanes hit, some through an edge or a vertex) and on any ray.
+        #[test]
+        fn four_at_once_agree_bit_for_bit(
+            tris in proptest::collection::vec((vec3(), vec3(), vec3()), 4),
+            o in vec3(), d in vec3(),
+            aim in prop_oneof![Just(None), (0usize..4, 0.0f32..0.5, 0.0f32..0.5, 0.5f32..4.0).prop_map(Some)],
+            n in 1usize..=4,
+            t_max in prop_oneof![Just(f32::INFINITY), 0.0f32..20.0],
+        ) {
+            let tris: Vec<TriPre> = tris.iter().map(|&(a, b, c)| TriPre::new(&[a, b, c])).collect();
+            let o = match aim {
+                Some((k, u, v, back)) => {
+                    let [a, b, c] = tris[k].vertices();
+                    a + (b - a) * u + (c - a) * v - d * back
+                }
+                None => o,
+            };
+            let pre = RayPre::new(o, d);
+            let bits = |h: Option<(f32, f32, f32)>| h.map(|(t, u, v)| [t.to_bits(), u.to_bits(), v.to_bits()]);
+            let mut got = [None; 4];
+            intersect_pre4(&pre, [&tris[0], &tris[1], &tris[2], &tris[3]], n, 0.0, t_max, |k, h| {
+                assert!(got[k].is_none(), "lane {k} reported twice");
+                got[k] = Some(h);
+            });
+            for k in 0..4 {
+                let want = if k < n { intersect_pre(&pre, &tris[k], 0.0, t_max) } else { None };
+                prop_assert_eq!(bits(got[k]), bits(want), "lane {}", k);
+            }
         }
 
         /// The same on rays aimed at a point of the triangle (most of them hit, some

@@ -4,7 +4,7 @@
 use super::plan::{BatchGrid, Plan};
 use super::project::{down, face_coords, up};
 use super::types::{PointGrid, StaticGrid};
-use crate::geometry::{intersect_pre, Hit, Ray, RayPre};
+use crate::geometry::{intersect_pre4, Hit, Ray, RayPre, TriPre};
 
 /// Keeps `hit` in `best` when it is closer; `true` when that answers the query (any
 /// hit will do).
@@ -29,17 +29,12 @@ impl<'a> Plan<'a> {
         match (&self.fixed, self.batch.as_deref()) {
             (Some(s), None) => {
                 let t = s.grid.faces[f].tile(p)?;
-                let test = |pre: &RayPre, g: u32, ray: &Ray, best: &Option<Hit>| {
-                    self.test_static(pre, g, ray, best)
-                };
-                Some(self.trace_one::<ANY>(ray, f, &s.grid, t, test))
+                Some(self.trace_one::<ANY>(ray, f, &s.grid, t, &self.pre, |g| g))
             }
             (None, Some(m)) => {
                 let t = m.grid.faces[f].tile(p)?;
-                let test = |pre: &RayPre, g: u32, ray: &Ray, best: &Option<Hit>| {
-                    Self::test_batch(m, pre, g, ray, best)
-                };
-                Some(self.trace_one::<ANY>(ray, f, &m.grid, t, test))
+                let number = |g: u32| m.number[g as usize];
+                Some(self.trace_one::<ANY>(ray, f, &m.grid, t, &m.tris, number))
             }
             (Some(s), Some(m)) => {
                 let a = s.grid.faces[f].tile(p)?;
@@ -48,36 +43,6 @@ impl<'a> Plan<'a> {
             }
             (None, None) => None,
         }
-    }
-
-    /// Static triangle `g`'s hit, if closer than `best`.
-    #[inline]
-    fn test_static(&self, pre: &RayPre, g: u32, ray: &Ray, best: &Option<Hit>) -> Option<Hit> {
-        let t_max = best.map_or(ray.t_max, |b| b.t);
-        intersect_pre(pre, &self.pre[g as usize], ray.t_min, t_max).map(|(t, u, v)| Hit {
-            t,
-            tri: g,
-            u,
-            v,
-        })
-    }
-
-    /// The hit of triangle `g` of the batch's grid, if closer than `best`.
-    #[inline]
-    fn test_batch(
-        m: &BatchGrid,
-        pre: &RayPre,
-        g: u32,
-        ray: &Ray,
-        best: &Option<Hit>,
-    ) -> Option<Hit> {
-        let t_max = best.map_or(ray.t_max, |b| b.t);
-        intersect_pre(pre, &m.tris[g as usize], ray.t_min, t_max).map(|(t, u, v)| Hit {
-            t,
-            tri: m.number[g as usize],
-            u,
-            v,
-        })
     }
 
     /// The depth window of a ray on face `f` up to `t_far`, as a function of `t_far`, and
@@ -99,8 +64,9 @@ impl<'a> Plan<'a> {
         (window, m / d.length())
     }
 
-    /// The ray's hit among `grid`'s near list and tile `tile` (tested by `test`),
-    /// scanned near to far.
+    /// The ray's hit among `grid`'s near list and tile `tile`, scanned near to far, the
+    /// candidates tested four at a time ([`Group`]); `tris` holds the grid's triangles
+    /// and `number` gives the hit number of each.
     #[inline]
     fn trace_one<const ANY: bool>(
         &self,
@@ -108,7 +74,8 @@ impl<'a> Plan<'a> {
         f: usize,
         grid: &PointGrid,
         tile: usize,
-        test: impl Fn(&RayPre, u32, &Ray, &Option<Hit>) -> Option<Hit>,
+        tris: &[TriPre],
+        number: impl Fn(u32) -> u32,
     ) -> Option<Hit> {
         // The shear is made only for a ray that tests a triangle: over the moving
         // triangles alone most rays land in an empty tile, or stop before its first
@@ -118,14 +85,24 @@ impl<'a> Plan<'a> {
             return None;
         }
         let mut shear: Option<RayPre> = None;
+        let new = || RayPre::new(ray.origin, ray.dir);
         let mut best: Option<Hit> = None;
+        let mut group = Group::default();
         for &g in &grid.near {
-            let pre = shear.get_or_insert_with(|| RayPre::new(ray.origin, ray.dir));
-            if let Some(hit) = test(pre, g, ray, &best) {
-                if take::<ANY>(&mut best, hit) {
-                    return best;
-                }
+            if group.push(&tris[g as usize], number(g))
+                && group
+                    .test::<ANY>(shear.get_or_insert_with(new), ray, &mut best)
+                    .0
+            {
+                return best;
             }
+        }
+        if group.n > 0
+            && group
+                .test::<ANY>(shear.get_or_insert_with(new), ray, &mut best)
+                .0
+        {
+            return best;
         }
         let (window, slack) = self.window(ray, f);
         let (mut lo, mut hi) = window(best.map_or(ray.t_max as f64, |b| b.t as f64 + slack));
@@ -136,13 +113,19 @@ impl<'a> Plan<'a> {
             if e.zmax < lo {
                 continue;
             }
-            let pre = shear.get_or_insert_with(|| RayPre::new(ray.origin, ray.dir));
-            if let Some(hit) = test(pre, e.tri, ray, &best) {
-                if take::<ANY>(&mut best, hit) {
+            if group.push(&tris[e.tri as usize], number(e.tri)) {
+                let (answered, met) =
+                    group.test::<ANY>(shear.get_or_insert_with(new), ray, &mut best);
+                if answered {
                     return best;
                 }
-                (lo, hi) = window(best.map_or(hit.t, |b| b.t) as f64 + slack);
+                if let (true, Some(b)) = (met, best) {
+                    (lo, hi) = window(b.t as f64 + slack);
+                }
             }
+        }
+        if group.n > 0 {
+            group.test::<ANY>(shear.get_or_insert_with(new), ray, &mut best);
         }
         best
     }
@@ -161,18 +144,24 @@ impl<'a> Plan<'a> {
     ) -> Option<Hit> {
         let pre = RayPre::new(ray.origin, ray.dir);
         let mut best: Option<Hit> = None;
+        let mut group = Group::default();
+        // Triangle `g` of the static grid (`stat`) or of the batch's, and its number.
+        let tri = |stat: bool, g: u32| {
+            if stat {
+                (&self.pre[g as usize], g)
+            } else {
+                (&m.tris[g as usize], m.number[g as usize])
+            }
+        };
         let near = s.grid.near.iter().map(|&g| (true, g));
         for (stat, g) in near.chain(m.grid.near.iter().map(|&g| (false, g))) {
-            let hit = if stat {
-                self.test_static(&pre, g, ray, &best)
-            } else {
-                Self::test_batch(m, &pre, g, ray, &best)
-            };
-            if let Some(hit) = hit {
-                if take::<ANY>(&mut best, hit) {
-                    return best;
-                }
+            let (t, number) = tri(stat, g);
+            if group.push(t, number) && group.test::<ANY>(&pre, ray, &mut best).0 {
+                return best;
             }
+        }
+        if group.n > 0 && group.test::<ANY>(&pre, ray, &mut best).0 {
+            return best;
         }
         let (window, slack) = self.window(ray, f);
         let (mut lo, mut hi) = window(best.map_or(ray.t_max as f64, |b| b.t as f64 + slack));
@@ -198,18 +187,87 @@ impl<'a> Plan<'a> {
             if e.zmax < lo {
                 continue;
             }
-            let hit = if from_a {
-                self.test_static(&pre, e.tri, ray, &best)
-            } else {
-                Self::test_batch(m, &pre, e.tri, ray, &best)
-            };
-            if let Some(hit) = hit {
-                if take::<ANY>(&mut best, hit) {
+            let (t, number) = tri(from_a, e.tri);
+            if group.push(t, number) {
+                let (answered, met) = group.test::<ANY>(&pre, ray, &mut best);
+                if answered {
                     return best;
                 }
-                (lo, hi) = window(best.map_or(hit.t, |b| b.t) as f64 + slack);
+                if let (true, Some(b)) = (met, best) {
+                    (lo, hi) = window(b.t as f64 + slack);
+                }
             }
         }
+        if group.n > 0 {
+            group.test::<ANY>(&pre, ray, &mut best);
+        }
         best
+    }
+}
+
+/// Up to four candidates waiting for their test, with the hit number each reports: a
+/// scan tests its candidates four at a time ([`intersect_pre4`]), one branch for four
+/// where a test each had one, about as often taken as not.
+///
+/// The hits are those of testing one at a time. The closest hit is the least by
+/// [`Hit::is_closer_than`], a total order, whichever order the candidates are tested
+/// in. A group may test up to three candidates that a scan one at a time would have
+/// passed over, once a hit had narrowed its depth window: no such triangle is met
+/// closer than that hit (the early exit's argument), so they change nothing. An
+/// any-hit query takes the first hit it finds, as before.
+struct Group<'t> {
+    tris: [&'t TriPre; 4],
+    number: [u32; 4],
+    n: usize,
+}
+
+impl Default for Group<'_> {
+    fn default() -> Self {
+        Group {
+            tris: [&TriPre::NONE; 4],
+            number: [0; 4],
+            n: 0,
+        }
+    }
+}
+
+impl<'t> Group<'t> {
+    /// Adds a candidate; `true` when the group is full.
+    #[inline(always)]
+    fn push(&mut self, tri: &'t TriPre, number: u32) -> bool {
+        // `n < 4` here (a full group is tested and emptied at once); the mask tells
+        // the compiler so.
+        let k = self.n & 3;
+        self.tris[k] = tri;
+        self.number[k] = number;
+        self.n = k + 1;
+        self.n == 4
+    }
+
+    /// Tests the candidates, keeping the closest hit in `best` (any hit for `ANY`), and
+    /// empties the group: (whether an any-hit query is answered, whether a triangle
+    /// was met).
+    #[inline(always)]
+    fn test<const ANY: bool>(
+        &mut self,
+        pre: &RayPre,
+        ray: &Ray,
+        best: &mut Option<Hit>,
+    ) -> (bool, bool) {
+        let t_max = best.map_or(ray.t_max, |b| b.t);
+        let (mut answered, mut met) = (false, false);
+        let number = self.number;
+        intersect_pre4(pre, self.tris, self.n, ray.t_min, t_max, |k, (t, u, v)| {
+            met = true;
+            let hit = Hit {
+                t,
+                tri: number[k],
+                u,
+                v,
+            };
+            answered |= take::<ANY>(best, hit);
+        });
+        self.n = 0;
+        (answered, met)
     }
 }
