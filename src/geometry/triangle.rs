@@ -183,7 +183,8 @@ pub fn intersect_pre(r: &RayPre, tri: &TriPre, t_min: f32, t_max: f32) -> Option
 }
 
 /// [`intersect_pre`] on four triangles at once, calling `hit(lane, (t, u, v))` for each
-/// of lanes `0..n` whose triangle the ray meets, in lane order: the answers of four
+/// lane of the mask `lanes` (bit `k`: lane `k`) whose triangle the ray meets, in lane
+/// order: the answers of four
 /// calls of [`intersect_pre`], bit for bit (the property test below holds it). The
 /// triangles' vertices go across the lanes (a transpose of their rows), and each lane
 /// does the scalar test's products and sums in its order; a lane with an edge function
@@ -194,7 +195,7 @@ pub fn intersect_pre(r: &RayPre, tri: &TriPre, t_min: f32, t_max: f32) -> Option
 pub fn intersect_pre4(
     r: &RayPre,
     tris: [&TriPre; 4],
-    n: usize,
+    lanes: u32,
     t_min: f32,
     t_max: f32,
     mut hit: impl FnMut(usize, (f32, f32, f32)),
@@ -220,7 +221,7 @@ pub fn intersect_pre4(
     let ((ax, ay, az), (bx, by, bz), (cx, cy, cz)) = (sheared(0), sheared(1), sheared(2));
     let (u, v, w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
     let zero = Vec4::ZERO;
-    let lanes = (1u32 << n.min(4)) - 1;
+    let lanes = lanes & 15;
     let exact = (u.cmpeq(zero) | v.cmpeq(zero) | w.cmpeq(zero)).bitmask() & lanes;
     let neg = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
     let pos = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
@@ -506,7 +507,7 @@ mod tests {
             tris in proptest::collection::vec((vec3(), vec3(), vec3()), 4),
             o in vec3(), d in vec3(),
             aim in prop_oneof![Just(None), (0usize..4, 0.0f32..0.5, 0.0f32..0.5, 0.5f32..4.0).prop_map(Some)],
-            n in 1usize..=4,
+            lanes in 0u32..16,
             t_max in prop_oneof![Just(f32::INFINITY), 0.0f32..20.0],
         ) {
             let tris: Vec<TriPre> = tris.iter().map(|&(a, b, c)| TriPre::new(&[a, b, c])).collect();
@@ -520,12 +521,12 @@ mod tests {
             let pre = RayPre::new(o, d);
             let bits = |h: Option<(f32, f32, f32)>| h.map(|(t, u, v)| [t.to_bits(), u.to_bits(), v.to_bits()]);
             let mut got = [None; 4];
-            intersect_pre4(&pre, [&tris[0], &tris[1], &tris[2], &tris[3]], n, 0.0, t_max, |k, h| {
+            intersect_pre4(&pre, [&tris[0], &tris[1], &tris[2], &tris[3]], lanes, 0.0, t_max, |k, h| {
                 assert!(got[k].is_none(), "lane {k} reported twice");
                 got[k] = Some(h);
             });
             for k in 0..4 {
-                let want = if k < n { intersect_pre(&pre, &tris[k], 0.0, t_max) } else { None };
+                let want = if lanes & (1 << k) != 0 { intersect_pre(&pre, &tris[k], 0.0, t_max) } else { None };
                 prop_assert_eq!(bits(got[k]), bits(want), "lane {}", k);
             }
         }

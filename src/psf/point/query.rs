@@ -4,7 +4,7 @@
 use super::plan::{BatchGrid, Plan};
 use super::project::{down, face_coords, up};
 use super::types::{PointGrid, StaticGrid};
-use crate::geometry::{intersect_pre4, Hit, Ray, RayPre, TriPre};
+use crate::geometry::{intersect_pre, intersect_pre4, Hit, Ray, RayPre, TriPre};
 
 /// Keeps `hit` in `best` when it is closer; `true` when that answers the query (any
 /// hit will do).
@@ -206,8 +206,9 @@ impl<'a> Plan<'a> {
 }
 
 /// Up to four candidates waiting for their test, with the hit number each reports: a
-/// scan tests its candidates four at a time ([`intersect_pre4`]), one branch for four
-/// where a test each had one, about as often taken as not.
+/// closest-hit scan tests its candidates four at a time ([`intersect_pre4`]), one
+/// branch for four where a test each had one, about as often taken as not. A group part
+/// full (a scan's last few) and an any-hit query's candidates are tested one at a time.
 ///
 /// The hits are those of testing one at a time. The closest hit is the least by
 /// [`Hit::is_closer_than`], a total order, whichever order the candidates are tested
@@ -257,7 +258,7 @@ impl<'t> Group<'t> {
         let t_max = best.map_or(ray.t_max, |b| b.t);
         let (mut answered, mut met) = (false, false);
         let number = self.number;
-        intersect_pre4(pre, self.tris, self.n, ray.t_min, t_max, |k, (t, u, v)| {
+        let mut keep = |best: &mut Option<Hit>, k: usize, (t, u, v): (f32, f32, f32)| {
             met = true;
             let hit = Hit {
                 t,
@@ -266,7 +267,25 @@ impl<'t> Group<'t> {
                 v,
             };
             answered |= take::<ANY>(best, hit);
-        });
+        };
+        if self.n == 4 && !ANY {
+            intersect_pre4(pre, self.tris, 15, ray.t_min, t_max, |k, h| {
+                keep(best, k, h)
+            });
+        } else {
+            // One at a time: a scan's last few (a group part full costs more than its
+            // tests), and any-hit queries (shadow rays; grouped, a still camera's
+            // frames traced 10 % slower: benches/PERF.md, issue 38, round 10).
+            for k in 0..self.n.min(4) {
+                let t_max = best.map_or(ray.t_max, |b| b.t);
+                if let Some(h) = intersect_pre(pre, self.tris[k], ray.t_min, t_max) {
+                    keep(best, k, h);
+                    if ANY {
+                        break;
+                    }
+                }
+            }
+        }
         self.n = 0;
         (answered, met)
     }
