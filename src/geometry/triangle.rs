@@ -183,9 +183,8 @@ pub fn intersect_pre(r: &RayPre, tri: &TriPre, t_min: f32, t_max: f32) -> Option
 }
 
 /// [`intersect_pre`] on four triangles at once, calling `hit(lane, (t, u, v))` for each
-/// lane of the mask `lanes` (bit `k`: lane `k`) whose triangle the ray meets, in lane
-/// order: the answers of four
-/// calls of [`intersect_pre`], bit for bit (the property test below holds it). The
+/// lane whose triangle the ray meets, in lane order: the answers of four calls of
+/// [`intersect_pre`], bit for bit (the property test below holds it). The
 /// triangles' vertices go across the lanes (a transpose of their rows), and each lane
 /// does the scalar test's products and sums in its order; a lane with an edge function
 /// exactly zero, which the scalar test recomputes in f64, is handed to
@@ -195,7 +194,6 @@ pub fn intersect_pre(r: &RayPre, tri: &TriPre, t_min: f32, t_max: f32) -> Option
 pub fn intersect_pre4(
     r: &RayPre,
     tris: [&TriPre; 4],
-    lanes: u32,
     t_min: f32,
     t_max: f32,
     mut hit: impl FnMut(usize, (f32, f32, f32)),
@@ -221,8 +219,7 @@ pub fn intersect_pre4(
     let ((ax, ay, az), (bx, by, bz), (cx, cy, cz)) = (sheared(0), sheared(1), sheared(2));
     let (u, v, w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
     let zero = Vec4::ZERO;
-    let lanes = lanes & 15;
-    let exact = (u.cmpeq(zero) | v.cmpeq(zero) | w.cmpeq(zero)).bitmask() & lanes;
+    let exact = (u.cmpeq(zero) | v.cmpeq(zero) | w.cmpeq(zero)).bitmask();
     let neg = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
     let pos = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
     let det = u + v + w;
@@ -234,7 +231,7 @@ pub fn intersect_pre4(
         & det.abs().cmplt(Vec4::INFINITY)
         & t.cmpge(Vec4::splat(t_min))
         & t.cmple(Vec4::splat(t_max));
-    let mut todo = (met.bitmask() & lanes) | exact;
+    let mut todo = met.bitmask() | exact;
     if todo == 0 {
         return;
     }
@@ -500,14 +497,13 @@ mod tests {
         }
 
         /// Four triangles at once give the answers of four single tests, lane by lane
-        /// and bit for bit, whichever lanes are in use; on rays aimed at one of them
+        /// and bit for bit; on rays aimed at one of them
         /// (so that lanes hit, some through an edge or a vertex) and on any ray.
         #[test]
         fn four_at_once_agree_bit_for_bit(
             tris in proptest::collection::vec((vec3(), vec3(), vec3()), 4),
             o in vec3(), d in vec3(),
             aim in prop_oneof![Just(None), (0usize..4, 0.0f32..0.5, 0.0f32..0.5, 0.5f32..4.0).prop_map(Some)],
-            lanes in 0u32..16,
             t_max in prop_oneof![Just(f32::INFINITY), 0.0f32..20.0],
         ) {
             let tris: Vec<TriPre> = tris.iter().map(|&(a, b, c)| TriPre::new(&[a, b, c])).collect();
@@ -521,12 +517,12 @@ mod tests {
             let pre = RayPre::new(o, d);
             let bits = |h: Option<(f32, f32, f32)>| h.map(|(t, u, v)| [t.to_bits(), u.to_bits(), v.to_bits()]);
             let mut got = [None; 4];
-            intersect_pre4(&pre, [&tris[0], &tris[1], &tris[2], &tris[3]], lanes, 0.0, t_max, |k, h| {
+            intersect_pre4(&pre, [&tris[0], &tris[1], &tris[2], &tris[3]], 0.0, t_max, |k, h| {
                 assert!(got[k].is_none(), "lane {k} reported twice");
                 got[k] = Some(h);
             });
             for k in 0..4 {
-                let want = if lanes & (1 << k) != 0 { intersect_pre(&pre, &tris[k], 0.0, t_max) } else { None };
+                let want = intersect_pre(&pre, &tris[k], 0.0, t_max);
                 prop_assert_eq!(bits(got[k]), bits(want), "lane {}", k);
             }
         }

@@ -269,9 +269,7 @@ impl<'t> Group<'t> {
             answered |= take::<ANY>(best, hit);
         };
         if self.n == 4 && !ANY {
-            intersect_pre4(pre, self.tris, 15, ray.t_min, t_max, |k, h| {
-                keep(best, k, h)
-            });
+            intersect_pre4(pre, self.tris, ray.t_min, t_max, |k, h| keep(best, k, h));
         } else {
             // One at a time: a scan's last few (a group part full costs more than its
             // tests), and any-hit queries (shadow rays; grouped, a still camera's
