@@ -4,7 +4,7 @@
 //! over the ray's depth interval there, and stop as soon as the best hit lies before the
 //! exit of the current tile.
 
-use glam::{DVec3, Vec4};
+use glam::{DVec3, Vec3A, Vec4};
 
 use super::batch::binned;
 use super::bsp::{depth_mask, Block, LANES};
@@ -84,6 +84,64 @@ pub(crate) fn clipped_span(clip: &Aabb, ray: &Ray) -> Option<(DVec3, DVec3, f64,
         return None;
     }
     Some((o, d, t0, t1))
+}
+
+/// A box's bounds made ready for [`surely_outside`]: `None` where its coordinates are
+/// not finite or too large for the f32 check's error bound (then every ray is "maybe").
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct QuickClip {
+    lo: Vec3A,
+    hi: Vec3A,
+}
+
+/// Coordinates (of the box and of a ray's origin) up to this magnitude, and direction
+/// components from [`QUICK_MIN_DIR`] on, keep every f32 value of [`surely_outside`]
+/// finite and normal or zero: `1e15 · 1e20 = 1e35 < f32::MAX`.
+const QUICK_MAX_COORD: f32 = 1e15;
+const QUICK_MIN_DIR: f32 = 1e-20;
+
+impl QuickClip {
+    pub(crate) fn new(clip: &Aabb) -> Option<QuickClip> {
+        let (lo, hi) = (Vec3A::from(clip.min), Vec3A::from(clip.max));
+        let small = |v: Vec3A| v.abs().max_element() < QUICK_MAX_COORD;
+        (small(lo) && small(hi) && lo.cmple(hi).all()).then_some(QuickClip { lo, hi })
+    }
+}
+
+/// Whether [`clipped_span`] of `ray` against the box is certainly `None`, decided in f32
+/// lanes (one division of three lanes where `clipped_span` makes three in f64): `false`
+/// means "maybe", never "no".
+///
+/// Why a `true` is certain. With finite coordinates under `QUICK_MAX_COORD` and direction
+/// components at least `QUICK_MIN_DIR` in size, every slab value `(lo - o) / d` (each
+/// `(lo - o) · (1/d)` rounded three times) is the exact real value `v` times `1 + η`,
+/// `|η| ≤ 3 · 2⁻²⁴ < 2e-7` (no overflow; an underflow only adds an absolute error under
+/// `2⁻¹⁴⁹`), and `clip_line`'s f64 values are `v (1 + η')`, `|η'| < 1e-15`. `lower(v) =
+/// v - s|v|` and `upper(v) = v + s|v|` are increasing for `s < 1`, so they pass through
+/// `min` and `max`: the f32 entry `t0` lies in `[lower(T0), upper(T0)]` of the exact
+/// entry `T0` (s = 2e-7), and so does f64's within 1e-15, likewise the exits. Widening the
+/// f32 interval by `SLACK · |t|` (1e-5, fifty times that) plus `1e-30` thus contains the
+/// f64 one, and `clipped_span` compares the f64 interval with `[t_min, t_max]` exactly:
+/// an empty widened interval, or one wholly outside `[t_min, t_max]`, means `None`.
+/// NaN bounds or a ray outside these ranges answer `false`.
+#[inline]
+pub(crate) fn surely_outside(clip: &QuickClip, ray: &Ray) -> bool {
+    const SLACK: f32 = 1e-5;
+    const TINY: f32 = 1e-30;
+    let o = Vec3A::from(ray.origin);
+    let d = Vec3A::from(ray.dir);
+    // `<` is false for NaN: such a ray is "maybe".
+    if !(o.abs().max_element() < QUICK_MAX_COORD && d.abs().min_element() >= QUICK_MIN_DIR) {
+        return false;
+    }
+    let inv = Vec3A::ONE / d;
+    let a = (clip.lo - o) * inv;
+    let b = (clip.hi - o) * inv;
+    let t0 = a.min(b).max_element();
+    let t1 = a.max(b).min_element();
+    let enter = t0 - SLACK * t0.abs() - TINY;
+    let exit = t1 + SLACK * t1.abs() + TINY;
+    enter > exit || enter > ray.t_max || exit < ray.t_min
 }
 
 /// A triangle as a query tests it: both layers' in [`TriPre`] form (the static PSF's
@@ -402,5 +460,139 @@ impl Psf {
         } else {
             self.table.lookup(ray.dir)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use proptest::prelude::*;
+
+    fn coord() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            -100f32..100.0,
+            -1e6f32..1e6,
+            Just(0.0),
+            (-1e3f32..1e3).prop_map(|x| x * 1e9),
+        ]
+    }
+
+    fn component() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            4 => -1f32..1.0,
+            1 => prop_oneof![Just(0.0), Just(1e-19), Just(-1e-21), Just(1e-20), Just(-1e-20)],
+            1 => (-1f32..1.0).prop_map(|x| x * 1e-6),
+        ]
+    }
+
+    fn bound() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            -10f32..1e3,
+            Just(0.0),
+            Just(f32::INFINITY),
+            Just(f32::NAN),
+            Just(-f32::INFINITY),
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(20_000))]
+
+        /// The f32 check is never wrong about a miss: whenever it says "surely outside",
+        /// `clipped_span`'s f64 clip finds nothing. Rays are random or aimed at a point
+        /// of the box's surface (a corner, an edge or a face: grazing rays, where the two
+        /// precisions disagree most), with tiny and zero direction components and every
+        /// kind of bound.
+        #[test]
+        fn surely_outside_is_never_wrong(
+            lo in prop::array::uniform3(coord()),
+            size in prop::array::uniform3(prop_oneof![Just(0f32), 0f32..10.0, 0f32..1e4]),
+            dir in prop::array::uniform3(component()),
+            aim in prop::array::uniform3(0u8..4),
+            back in prop_oneof![-2f32..2.0, -1e4f32..1e4],
+            origin in prop::array::uniform3(coord()),
+            aimed in any::<bool>(),
+            t_min in bound(),
+            t_max in bound(),
+            nudge in -4i32..=4,
+        ) {
+            let lo = Vec3::from(lo);
+            let hi = lo + Vec3::from(size);
+            let clip = Aabb { min: lo, max: hi };
+            let Some(quick) = QuickClip::new(&clip) else {
+                return Ok(());
+            };
+            let d = Vec3::from(dir);
+            let o = if aimed {
+                // A point of the surface: each coordinate at a bound or between.
+                let pick = |k: usize| match aim[k] {
+                    0 => lo[k],
+                    1 => hi[k],
+                    _ => 0.5 * (lo[k] + hi[k]),
+                };
+                let p = Vec3::new(pick(0), pick(1), pick(2));
+                let o = p - d * back;
+                // Moved by a few ulps, to either side.
+                Vec3::from(o.to_array().map(|x| f32::from_bits((x.to_bits() as i32).wrapping_add(nudge) as u32)))
+            } else {
+                Vec3::from(origin)
+            };
+            let ray = Ray { origin: o, dir: d, t_min, t_max };
+            if surely_outside(&quick, &ray) {
+                prop_assert!(
+                    clipped_span(&clip, &ray).is_none(),
+                    "said outside, but the f64 clip meets the box: {ray:?} {clip:?}"
+                );
+            }
+        }
+    }
+
+    /// The check decides the plain cases: a ray away from the box, one that passes it by,
+    /// one stopped short of it are outside; one through it is not.
+    #[test]
+    fn surely_outside_decides_plain_cases() {
+        let clip = Aabb {
+            min: Vec3::splat(-1.0),
+            max: Vec3::splat(1.0),
+        };
+        let q = QuickClip::new(&clip).expect("a finite box");
+        let ray = |o: [f32; 3], d: [f32; 3], t_max: f32| Ray {
+            origin: Vec3::from(o),
+            dir: Vec3::from(d),
+            t_min: 0.0,
+            t_max,
+        };
+        assert!(surely_outside(
+            &q,
+            &ray([5.0, 0.3, 0.2], [1.0, 0.1, 0.1], f32::INFINITY)
+        ));
+        assert!(surely_outside(
+            &q,
+            &ray([5.0, 3.0, 0.2], [-1.0, 0.1, 0.1], f32::INFINITY)
+        ));
+        assert!(surely_outside(
+            &q,
+            &ray([5.0, 0.3, 0.2], [-1.0, 0.1, 0.1], 3.0)
+        ));
+        assert!(!surely_outside(
+            &q,
+            &ray([5.0, 0.3, 0.2], [-1.0, 0.1, 0.1], 4.5)
+        ));
+        assert!(!surely_outside(
+            &q,
+            &ray([0.0, 0.0, 0.0], [1.0, 0.5, 0.25], 1.0)
+        ));
+        // A zero component is left to the f64 clip.
+        assert!(!surely_outside(
+            &q,
+            &ray([5.0, 0.3, 0.2], [1.0, 0.0, 0.0], f32::INFINITY)
+        ));
+        // A box too large for the check's bound is never used.
+        let huge = Aabb {
+            min: Vec3::splat(-1e16),
+            max: Vec3::splat(1.0),
+        };
+        assert!(QuickClip::new(&huge).is_none());
     }
 }
