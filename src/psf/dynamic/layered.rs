@@ -7,7 +7,7 @@ use crate::geometry::{closest_of, Hit, Intersector, Layers, Ray, RayPre};
 use crate::psf::batch::binned;
 use crate::psf::point::{trace_batch, Plan, Sources};
 use crate::psf::stats::{Counter, NoCount, RayStats};
-use crate::psf::traverse::{clipped_span, surely_outside, QuickClip};
+use crate::psf::traverse::{clipped_span, surely_outside};
 use crate::psf::Psf;
 
 /// The static PSF and a dynamic layer queried together.
@@ -149,7 +149,7 @@ impl Layered<'_> {
         // others are traced, which in a clustered frame is a few of them.
         // Most rays of a clustered frame miss those bounds by far: a check in f32 lanes
         // that is never wrong about a miss passes over them before the exact f64 clip.
-        let quick = QuickClip::new(&d.clip);
+        let quick = d.quick;
         let near: Vec<u32> = rays
             .par_iter()
             .enumerate()

@@ -42,7 +42,9 @@ pub use layered::{Layered, Prim};
 use super::bsp::LANES;
 use super::point::{FrameGrids, PointCache};
 use super::stats::{Counter, NoCount, RayStats};
-use super::traverse::{block_window, clipped_span, scan_blocks, walk_tiles};
+use super::traverse::{
+    block_window, clipped_span, scan_blocks, surely_outside, walk_tiles, QuickClip,
+};
 use super::{
     check_triangles, margin_for, DirectionTable, Entry, GridFrame, Psf, PsfError, PsfParams,
 };
@@ -60,6 +62,9 @@ pub struct DynamicLayer {
     margin: f32,
     /// This frame's bounds grown by the rounding allowance; rays are clipped to it.
     clip: Aabb,
+    /// `clip` made ready for the f32 check that passes over the rays far from it
+    /// ([`surely_outside`]); `None` where that check cannot be used.
+    pub(crate) quick: Option<QuickClip>,
     /// This frame's triangles in the order of their centroids' Morton codes (`local[k]`
     /// is the update's `tris[order[k]]`; no copy in the input order is kept), laid out
     /// for the candidate test: entries name positions in `local`, so the candidates of a
@@ -181,6 +186,7 @@ impl DynamicLayer {
             generation: 0,
             margin: 0.0,
             clip: Aabb::EMPTY,
+            quick: None,
             local: Vec::new(),
             order: Vec::new(),
             rank: Vec::new(),
@@ -229,6 +235,7 @@ impl DynamicLayer {
         };
         self.margin = margin_for(&bounds);
         self.clip = bounds.padded(2.0 * self.margin);
+        self.quick = QuickClip::new(&self.clip);
         if tris.is_empty() {
             self.local.clear();
             return Ok(());
@@ -370,6 +377,9 @@ impl DynamicLayer {
         count: &mut C,
     ) -> Option<Hit> {
         if self.is_empty() {
+            return None;
+        }
+        if self.quick.is_some_and(|q| surely_outside(&q, ray)) {
             return None;
         }
         let (o, d, t0, t1) = clipped_span(&self.clip, ray)?;
