@@ -18,7 +18,9 @@
 //! renderer, and nothing below `gen` uses it.
 //!
 //! `unsafe` is confined to two places, each block with its `// SAFETY:` argument: the
-//! memory map in `format::read` and the SSE2 intrinsics in `psf::grid`.
+//! memory map in `format::read` and the cache hints (`_mm_prefetch`) in
+//! `render::replay`, which a still camera's frames pay for (benches/PERF.md, issue 38,
+//! round 11).
 #![deny(clippy::undocumented_unsafe_blocks)]
 
 pub mod atomic;

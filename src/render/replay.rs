@@ -247,7 +247,42 @@ pub(super) struct BlockSlots<'a> {
     lights: usize,
 }
 
+/// How many samples ahead [`BlockSlots::prefetch`] asks for a slot.
+pub(super) const PREFETCH_AHEAD: usize = 8;
+
 impl BlockSlots<'_> {
+    /// Asks the cache for sample `s`'s slot (its kept shading and shadow rays), which
+    /// the loop will read [`PREFETCH_AHEAD`] samples later: a slot is 216 bytes, so a
+    /// page holds 19 of them and the hardware's stream prefetcher, which stops at page
+    /// boundaries, left the first read of each slot waiting on memory (11 % of a still
+    /// camera's CPU at 640x480 on the `valid` flag's line; benches/PERF.md, issue 38,
+    /// round 11).
+    #[inline(always)]
+    pub(super) fn prefetch(&self, s: usize) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            let Some(i) = s.checked_sub(self.start) else {
+                return;
+            };
+            if let Some(k) = self.kept.get(i) {
+                let p = std::ptr::from_ref(k).cast::<i8>();
+                for line in (0..std::mem::size_of::<Kept>()).step_by(64) {
+                    // SAFETY: `prefetch` only hints the cache: it reads nothing the
+                    // program sees, writes nothing and never faults, whatever the
+                    // address; `wrapping_add` makes the address without any claim that
+                    // it is in bounds.
+                    unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(line)) };
+                }
+            }
+            if let Some(sh) = self.shadows.get(i * self.lights) {
+                let p = std::ptr::from_ref(sh).cast::<i8>();
+                // SAFETY: as above, a hint that cannot fault or be observed.
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(p) };
+            }
+        }
+    }
+
     /// Sample `s`'s slot, if this block owns it.
     #[inline]
     pub(super) fn get(&mut self, s: usize) -> Option<(&mut Kept, &mut [KeptShadow])> {

@@ -12,7 +12,7 @@ use super::aov::{project, rank, CryptoNames};
 use super::camera::CameraModel;
 use super::memo::{levels_kept, lights_kept, Mode, StaticMemo};
 use super::options::Aovs;
-use super::replay::{block_slots, shade_kept, BlockSlots, ShadeReplay};
+use super::replay::{block_slots, shade_kept, BlockSlots, ShadeReplay, PREFETCH_AHEAD};
 use super::sampling::Seed;
 use super::shade::{
     BlockOut, Cone, CryptoBuffers, FrameBuffers, FrameWork, Item, LightPathBuffers, ShadeContext,
@@ -805,6 +805,9 @@ fn trace_pass<T: Intersector>(
                             for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
                                 let s = b * BLOCK + k;
                                 let item = primary_item(s, &at);
+                                if let Some(v) = slots.as_ref() {
+                                    v.prefetch(s + PREFETCH_AHEAD);
+                                }
                                 let slot = slots.as_mut().and_then(|v| v.get(s));
                                 shade_kept(ctx, ray, &item, *hit, max_depth, spp as u32, out, slot);
                                 at.advance();
@@ -837,6 +840,11 @@ fn trace_pass<T: Intersector>(
                         out.clear();
                         out.light_paths = light_paths;
                         for (k, ((ray, item), hit)) in r.iter().zip(it).zip(hs).enumerate() {
+                            if let (Some(v), Some(ahead)) =
+                                (slots.as_ref(), it.get(k + PREFETCH_AHEAD))
+                            {
+                                v.prefetch(ahead.sample as usize);
+                            }
                             let slot = match slots.as_mut() {
                                 Some(v) if alone(b * BLOCK + k) => v.get(item.sample as usize),
                                 _ => None,
