@@ -261,6 +261,121 @@ fn a_still_camera_replays_its_shading_and_frames_stay_the_same() {
     assert!(frame_of(&dir, "seq", 7) != frame_of(&dir, "seq", 11));
 }
 
+/// A still camera over a floor with a mirror behind, one point light, and a cube that
+/// jumps: frames 0 and 1 it hangs between the light and the floor (its shadow on the
+/// floor), 2 and 3 under the floor (out of every ray's way), from 4 on below the
+/// camera's view, seen only in the mirror. Samples whose kept rays all miss the moving
+/// triangles take the last frame's sums whole (`ShadeReplay::settled`): a floor pixel
+/// whose shadow ray the cube blocked the frame before must not (its shadow is gone at
+/// frame 2), nor a mirror pixel whose reflected ray the cube now meets (frame 4). Every
+/// frame must be the bytes it is when rendered alone.
+#[test]
+fn settled_samples_follow_what_moves_into_and_out_of_their_rays() {
+    use glam::{Quat, Vec3, Vec4};
+    use render_scene::{cube, quad};
+    use subfield::scene::{Animation, Falloff, LightDef, LightKind, Material, Node, Property};
+
+    use common::build::{diffuse, linear, mesh, perspective, placed, SceneBuilder};
+
+    let dir = temp_dir("settled");
+    let mut b = SceneBuilder::new();
+    let grey = b.add_material(diffuse("floor", Vec4::new(0.7, 0.7, 0.7, 1.0), 0.8));
+    let mirror = b.add_material(Material {
+        metallic: 1.0,
+        ..diffuse("mirror", Vec4::new(0.9, 0.9, 0.9, 1.0), 0.0)
+    });
+    let red = b.add_material(diffuse("red", Vec4::new(0.8, 0.1, 0.1, 1.0), 0.4));
+    let room = b.add_mesh(mesh(
+        "room",
+        vec![
+            quad(Vec3::ZERO, Vec3::Z * 8.0, Vec3::X * 8.0, grey),
+            quad(
+                Vec3::new(0.0, 1.5, -2.5),
+                Vec3::X * 2.0,
+                Vec3::Y * 1.5,
+                mirror,
+            ),
+            // Out of sight under the floor: the static bounds hold every place the
+            // cube goes, so the scene's extent (part of what the replay keeps to) stays.
+            quad(
+                Vec3::new(0.0, -1.0, 0.0),
+                Vec3::X * 0.5,
+                Vec3::Z * 0.5,
+                grey,
+            ),
+        ],
+    ));
+    let cube_mesh = b.add_mesh(mesh("mover", vec![cube(Vec3::splat(0.3), red)]));
+    let room = b.add_node(Node {
+        name: Some("room".into()),
+        mesh: Some(room),
+        ..Default::default()
+    });
+    let (a, below, behind) = (
+        Vec3::new(1.2, 2.5, 0.5),
+        Vec3::new(0.0, -0.5, 0.0),
+        Vec3::new(0.0, 0.3, 3.2),
+    );
+    let mover = b.add_node(Node {
+        name: Some("mover".into()),
+        mesh: Some(cube_mesh),
+        transform: placed(a, Quat::IDENTITY),
+        ..Default::default()
+    });
+    let cam = b.add_camera(perspective("still", 0.9, Some(4.0 / 3.0), 0.1, None));
+    let cam = b.add_node(Node {
+        name: Some("still".into()),
+        camera: Some(cam),
+        transform: placed(Vec3::new(0.0, 2.0, 4.0), Quat::from_rotation_x(-0.3)),
+        ..Default::default()
+    });
+    let light = b.add_light(LightDef {
+        name: Some("bulb".into()),
+        kind: LightKind::Point,
+        color: Vec3::ONE,
+        intensity: 60.0,
+        range: None,
+        falloff: Falloff::InverseSquare,
+    });
+    let light = b.add_node(Node {
+        name: Some("bulb".into()),
+        light: Some(light),
+        transform: placed(Vec3::new(2.0, 5.0, 1.0), Quat::IDENTITY),
+        ..Default::default()
+    });
+    for n in [room, mover, cam, light] {
+        b.add_root(n);
+    }
+    // Jumps between frames (24 fps): at A up to frame 1, below from frame 2, behind
+    // the camera from frame 4.
+    let f = |k: f32| k / 24.0;
+    let keys = [a, a, below, below, behind, behind];
+    b.add_animation(Animation {
+        name: Some("jumps".into()),
+        channels: vec![linear(
+            mover,
+            Property::Translation,
+            vec![0.0, f(1.5), f(1.6), f(3.5), f(3.6), 1.0],
+            keys.iter().flat_map(|v| v.to_array()).collect(),
+        )],
+    });
+    b.scene.fps = Some(24.0);
+    let scene = dir.join("jumps.glb");
+    subfield::import::write_gltf(&b.finish(), &scene).unwrap();
+
+    sequence_is_its_frames_alone(
+        &dir,
+        &scene,
+        ("jumps", "still"),
+        "0..8",
+        &[0, 1, 2, 3, 4, 5, 7],
+        "Z",
+    );
+    // The cube's shadow leaves the floor at frame 2 and its image enters the mirror at 4.
+    assert!(frame_of(&dir, "jumps", 1) != frame_of(&dir, "jumps", 2));
+    assert!(frame_of(&dir, "jumps", 3) != frame_of(&dir, "jumps", 4));
+}
+
 #[test]
 fn resume_completes_an_interrupted_run_and_redoes_broken_frames() {
     let dir = temp_dir("resume");

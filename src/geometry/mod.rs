@@ -174,6 +174,14 @@ pub trait Layers: Sync {
     fn moving_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]);
     /// Whether a moving triangle blocks each ray.
     fn moving_occluded_batch(&self, rays: &[Ray], out: &mut [bool]);
+    /// A box that every moving triangle's hits lie in, as the moving part clips rays to
+    /// it: a ray whose part of `[t_min, t_max]` inside it is empty
+    /// (`psf::traverse::clipped_span`) gets no hit from [`moving_batch`](Self::moving_batch)
+    /// and is not blocked by [`moving_occluded_batch`](Self::moving_occluded_batch).
+    /// `None` (the default) where no such box is known.
+    fn moving_bounds(&self) -> Option<Aabb> {
+        None
+    }
 }
 
 /// The closer of two hits under [`Hit::is_closer_than`] (either, where one is `None`).

@@ -22,6 +22,7 @@ mod point;
 mod stats;
 mod storage;
 mod traverse;
+pub(crate) use traverse::BoxTest;
 pub mod tune;
 
 use std::sync::atomic::{AtomicUsize, Ordering};

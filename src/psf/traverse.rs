@@ -144,6 +144,30 @@ pub(crate) fn surely_outside(clip: &QuickClip, ray: &Ray) -> bool {
     enter > exit || enter > ray.t_max || exit < ray.t_min
 }
 
+/// A box for asking whether rays miss it as the moving layer clips them: `misses` is
+/// `clipped_span(box, ray).is_none()`, the f32 check first.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct BoxTest {
+    clip: Aabb,
+    quick: Option<QuickClip>,
+}
+
+impl BoxTest {
+    pub(crate) fn new(clip: Aabb) -> BoxTest {
+        BoxTest {
+            clip,
+            quick: QuickClip::new(&clip),
+        }
+    }
+
+    /// Whether [`clipped_span`] of `ray` against the box is `None`.
+    #[inline]
+    pub(crate) fn misses(&self, ray: &Ray) -> bool {
+        self.quick.is_some_and(|q| surely_outside(&q, ray))
+            || clipped_span(&self.clip, ray).is_none()
+    }
+}
+
 /// A triangle as a query tests it: both layers' in [`TriPre`] form (the static PSF's
 /// made on first use and kept in its point cache, the dynamic layer's built every update,
 /// in the Morton order).

@@ -26,10 +26,12 @@
 
 use glam::Vec3;
 
+use rayon::prelude::*;
+
 use super::memo::{copy_all, fill_par};
 use super::shade::{BlockOut, Item, ShadeContext, REPLAY_LIGHTS};
-use crate::geometry::{same_words, Hit, Ray};
-use crate::psf::Prim;
+use crate::geometry::{same_words, Aabb, Hit, Ray};
+use crate::psf::{BoxTest, Prim};
 
 /// The memory every level's kept shading may take together.
 pub(super) const REPLAY_BYTES: usize = 256 << 20;
@@ -85,6 +87,22 @@ pub(super) struct ShadeReplay {
     /// Per level, per sample and punctual light (`sample * lights + light`).
     shadows: Vec<Vec<KeptShadow>>,
     lights: usize,
+    /// The last frame's radiance and coverage per sample, for the settled samples of the
+    /// next ([`ShadeReplay::settled`]); `None` until a frame has kept them.
+    last: Option<Last>,
+}
+
+/// A frame's sums per sample (one sample a pixel) and the moving triangles' bounds it
+/// was traced with.
+struct Last {
+    bounds: BoxTest,
+    radiance: Vec<Vec3>,
+    coverage: Vec<f32>,
+    /// Samples written by this frame's chunks so far, in order (`usize::MAX` once a
+    /// chunk came out of order).
+    written: usize,
+    /// The frame before wrote every sample: what the settled samples may take.
+    complete: bool,
 }
 
 /// The levels the replay keeps for `samples` samples and `lights` punctual lights (none
@@ -128,7 +146,12 @@ impl ShadeReplay {
             && self.lights == lights
             && self.kept.len() == levels
             && self.kept.iter().all(|k| k.len() == samples);
+        if let Some(l) = &mut self.last {
+            l.complete = l.written == samples && l.radiance.len() == samples;
+            l.written = 0;
+        }
         if !fits {
+            self.last = None;
             self.key = key;
             self.lights = lights;
             // Set up on every thread (`memo::fill_par`).
@@ -148,10 +171,154 @@ impl ShadeReplay {
     /// to the ray, item and hit it was shaded for and to the context's key, so any frame
     /// may replay it (see [`StaticMemo::copy_kept`](super::memo::StaticMemo::copy_kept)).
     pub(super) fn copy_kept(&mut self, from: &ShadeReplay) {
+        // The sums of this lane's last frame are not those of the kept shading copied.
+        self.last = None;
         self.key.clone_from(&from.key);
         copy_all(&mut self.kept, &from.kept);
         copy_all(&mut self.shadows, &from.shadows);
         self.lights = from.lights;
+    }
+
+    /// Which of a chunk's camera rays (`rays`, samples `base..`, one a pixel; `hits`
+    /// their closest hits this frame, `item(i)` their bookkeeping) are settled: their
+    /// sample's sums this frame are the last frame's, to the bit, so that the sample
+    /// need not be shaded at all (`None`: no sample is, as where nothing was kept).
+    ///
+    /// Why. A sample's sums are a function of the rays its shading sends and their
+    /// answers (shading is a function of ray, item, hit and the context, which
+    /// [`ShadeReplay::begin`] holds to the kept one), summed in an order those rays fix.
+    /// A sample is settled when its kept shading at level 0 is valid for this frame's
+    /// camera ray, item and hit (a static hit, so no moving triangle is in front), the
+    /// mirror ray it sends (if any) has a valid kept shading at level 1 that sends no
+    /// ray further, and every shadow ray of both levels, and the mirror ray up to its
+    /// kept static hit, miss the bounds of the moving triangles of this frame and of the
+    /// last (`Layers::moving_bounds`: no moving triangle meets such a ray). A kept slot
+    /// is rewritten whenever its sample is shaded (valid only for a static hit), so in
+    /// the last frame those very rays were sent and answered by the static part alone,
+    /// or the sample was settled then, with the same sums by the same argument; and this
+    /// frame they would be again.
+    pub(super) fn settled(
+        &self,
+        base: usize,
+        rays: &[Ray],
+        hits: &[Option<Hit>],
+        item: &(dyn Fn(usize) -> Item + Sync),
+        bounds: Option<Aabb>,
+    ) -> Option<Vec<bool>> {
+        let last = self.last.as_ref().filter(|l| l.complete)?;
+        let now = BoxTest::new(bounds?);
+        let lights = self.lights;
+        let level0 = self.kept.first()?;
+        let level1 = self.kept.get(1);
+        let (shadows0, shadows1) = (self.shadows.first()?, self.shadows.get(1));
+        let shadows_miss = |list: Option<&Vec<KeptShadow>>, p: usize| {
+            list.and_then(|l| l.get(p * lights..(p + 1) * lights))
+                .is_some_and(|s| {
+                    s.iter().all(|k| {
+                        k.as_ref()
+                            .is_none_or(|(r, _)| last.bounds.misses(r) && now.misses(r))
+                    })
+                })
+        };
+        let one = |i: usize, ray: &Ray, hit: &Option<Hit>| -> bool {
+            let p = base + i;
+            let (Some(k0), Some(h)) = (level0.get(p), hit) else {
+                return false;
+            };
+            if !(k0.valid
+                && same_words(&k0.hit.bits(), &h.bits())
+                && k0.ray.same_bits(ray)
+                && same_words(&k0.item.bits(), &item(i).bits())
+                && shadows_miss(Some(shadows0), p))
+            {
+                return false;
+            }
+            let Some((r1, i1)) = k0.next else {
+                return true;
+            };
+            let Some(k1) = level1.and_then(|l| l.get(p)) else {
+                return false;
+            };
+            let to_hit = Ray {
+                t_max: k1.hit.t,
+                ..r1
+            };
+            k1.valid
+                && k1.next.is_none()
+                && k1.ray.same_bits(&r1)
+                && same_words(&k1.item.bits(), &i1.bits())
+                && now.misses(&to_hit)
+                && shadows_miss(shadows1, p)
+        };
+        let mut out = Vec::with_capacity(rays.len());
+        out.par_extend(
+            rays.par_iter()
+                .zip(hits.par_iter())
+                .enumerate()
+                .with_min_len(1024)
+                .map(|(i, (r, h))| one(i, r, h)),
+        );
+        Some(out)
+    }
+
+    /// After a chunk's levels (samples `base..` of a frame of `samples`, its sums in
+    /// `radiance` and `coverage`): the settled samples take the last frame's sums, the
+    /// others' are kept for the next frame. `settled`: [`ShadeReplay::settled`]'s answer
+    /// for the chunk; `bounds`: this frame's moving bounds.
+    pub(super) fn sums(
+        &mut self,
+        base: usize,
+        samples: usize,
+        settled: Option<&[bool]>,
+        radiance: &mut [Vec3],
+        coverage: &mut [f32],
+        bounds: Option<Aabb>,
+    ) {
+        let Some(bounds) = bounds else {
+            self.last = None;
+            return;
+        };
+        let last = self.last.get_or_insert_with(|| Last {
+            bounds: BoxTest::new(Aabb::EMPTY),
+            radiance: Vec::new(),
+            coverage: Vec::new(),
+            written: 0,
+            complete: false,
+        });
+        if last.radiance.len() != samples {
+            last.radiance = vec![Vec3::ZERO; samples];
+            last.coverage = vec![0.0; samples];
+            last.complete = false;
+        }
+        let n = radiance.len();
+        if base != last.written || base + n > samples || coverage.len() != n {
+            last.written = usize::MAX;
+            return;
+        }
+        let (lr, lc) = (
+            &mut last.radiance[base..base + n],
+            &mut last.coverage[base..base + n],
+        );
+        radiance
+            .par_iter_mut()
+            .zip(coverage.par_iter_mut())
+            .zip(lr.par_iter_mut().zip(lc.par_iter_mut()))
+            .enumerate()
+            .with_min_len(1024)
+            .for_each(|(i, ((r, c), (lr, lc)))| {
+                if settled.is_some_and(|s| s[i]) {
+                    *r = *lr;
+                    *c = *lc;
+                } else {
+                    *lr = *r;
+                    *lc = *c;
+                }
+            });
+        last.written = base + n;
+        if last.written == samples {
+            // The frame's last chunk: the next frame compares with these bounds.
+            last.bounds = BoxTest::new(bounds);
+        }
     }
 
     /// Level `level`'s kept shading and shadow rays, if it keeps any.

@@ -597,6 +597,9 @@ fn trace_pass<T: Intersector>(
     // 140 ms of CPU at 640x480 (benches/PERF.md, issue 38, round 6). A camera that
     // moves every frame allocates and fills nothing.
     let replayed = replay.begin(ctx, mode != Mode::Off && !light_paths, w * h);
+    // Where the replay serves, the samples whose every kept ray misses the moving
+    // triangles take the last frame's sums whole (`ShadeReplay::settled`).
+    let moving_bounds = layers.and_then(|l| l.moving_bounds());
     let crypto = inputs.crypto.filter(|_| aovs.cryptomatte);
     // The centre-ray AOVs: every frame's, or the one pass of a blurred frame that has them.
     let any_aov = aovs.any_centre() && pass.is_none_or(|p| p.aovs);
@@ -711,6 +714,7 @@ fn trace_pass<T: Intersector>(
 
         // The depth level: 0 for the camera rays.
         let mut level = 0usize;
+        let mut settled_chunk: Option<Vec<bool>> = None;
         while !rays.is_empty() {
             let first = level == 0;
             let clock = Instant::now();
@@ -758,6 +762,13 @@ fn trace_pass<T: Intersector>(
                     (None, _) => {}
                 }
             }
+            // The camera rays' samples that need no shading this frame.
+            if first && sel.is_none() && replayed > 0 {
+                let item = |i: usize| primary_item(i, &walk(i));
+                settled_chunk = replay.settled(px0, rays, hits, &item, moving_bounds);
+            }
+            let settled = settled_chunk.as_deref().filter(|_| first);
+
             let blocks = rays.len().div_ceil(BLOCK);
             if outs.len() < blocks {
                 outs.resize_with(blocks, BlockOut::default);
@@ -804,6 +815,10 @@ fn trace_pass<T: Intersector>(
                             let mut at = walk(b * BLOCK);
                             for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
                                 let s = b * BLOCK + k;
+                                if settled.is_some_and(|v| v[s]) {
+                                    at.advance();
+                                    continue;
+                                }
                                 let item = primary_item(s, &at);
                                 if let Some(v) = slots.as_ref() {
                                     v.prefetch(s + PREFETCH_AHEAD);
@@ -1008,6 +1023,16 @@ fn trace_pass<T: Intersector>(
         }
 
         let clock = Instant::now();
+        if replayed > 0 && sel.is_none() {
+            replay.sums(
+                px0,
+                w * h,
+                settled_chunk.as_deref(),
+                &mut radiance[..nsamples],
+                &mut coverage[..nsamples],
+                moving_bounds,
+            );
+        }
         let sums = |i: usize| {
             let mut c = Vec3::ZERO;
             let mut a = 0.0;

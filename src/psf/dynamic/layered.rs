@@ -3,7 +3,7 @@
 use rayon::prelude::*;
 
 use super::DynamicLayer;
-use crate::geometry::{closest_of, Hit, Intersector, Layers, Ray, RayPre};
+use crate::geometry::{closest_of, Aabb, Hit, Intersector, Layers, Ray, RayPre};
 use crate::psf::batch::binned;
 use crate::psf::point::{trace_batch, Plan, Sources};
 use crate::psf::stats::{Counter, NoCount, RayStats};
@@ -322,5 +322,15 @@ impl Layers for Layered<'_> {
 
     fn moving_occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
         self.moving_batch_of::<true, _>(rays, out, |h| h.is_some());
+    }
+
+    /// The layer's clip box: `moving_batch_of` answers `None` for a ray whose clipped
+    /// span is empty, and an empty layer answers `None` for every ray.
+    fn moving_bounds(&self) -> Option<Aabb> {
+        Some(if self.dynamic.is_empty() {
+            Aabb::EMPTY
+        } else {
+            self.dynamic.clip
+        })
     }
 }
