@@ -18,11 +18,18 @@
 //! sequence's next frame: a moving camera's rays never repeat, so keeping them would
 //! only cost. So the first frame of a still camera keeps, the second replays.
 //!
+//! A sample can go further: where its kept shading would be replayed at every level
+//! and none of its rays can meet a moving triangle this frame or the last, its sums are
+//! the last frame's, and it is not shaded at all ([`ShadeReplay::settled`]): most
+//! samples of a still camera's frame whose motion is clustered (302,000 of 307,200 on
+//! the shared generator's scene at 640x480), which had each replayed two levels and sent
+//! their rays again (benches/PERF.md, issue 38, round 11).
+//!
 //! Memory: 216 bytes a pixel and level ([`Kept`]) plus 52 a pixel, light and level,
 //! within [`REPLAY_BYTES`] for every level together: the camera rays and the mirror
 //! level at 640x480 with one light (157 MB), the camera rays alone at 1280x720 (247 MB),
 //! nothing at 1920x1080; nothing either with more than [`REPLAY_LIGHTS`] lights. A test
-//! holds these numbers.
+//! holds these numbers. The last frame's sums take 16 bytes a pixel besides.
 
 use glam::Vec3;
 
@@ -183,6 +190,9 @@ impl ShadeReplay {
     /// their closest hits this frame, `item(i)` their bookkeeping) are settled: their
     /// sample's sums this frame are the last frame's, to the bit, so that the sample
     /// need not be shaded at all (`None`: no sample is, as where nothing was kept).
+    /// With them, the rays the settled samples stand for (their kept shadow and mirror
+    /// rays, sent last frame and not this one), so that a frame's ray counts stay those
+    /// of its picture: (shadow rays, secondary rays).
     ///
     /// Why. A sample's sums are a function of the rays its shading sends and their
     /// answers (shading is a function of ray, item, hit and the context, which
@@ -204,7 +214,7 @@ impl ShadeReplay {
         hits: &[Option<Hit>],
         item: &(dyn Fn(usize) -> Item + Sync),
         bounds: Option<Aabb>,
-    ) -> Option<Vec<bool>> {
+    ) -> Option<(Vec<bool>, (u64, u64))> {
         let last = self.last.as_ref().filter(|l| l.complete)?;
         let now = BoxTest::new(bounds?);
         let lights = self.lights;
@@ -258,7 +268,25 @@ impl ShadeReplay {
                 .with_min_len(1024)
                 .map(|(i, (r, h))| one(i, r, h)),
         );
-        Some(out)
+        // What the settled samples' kept shading sent: shadow rays at both levels,
+        // and the mirror ray.
+        let count = |list: Option<&Vec<KeptShadow>>, p: usize| {
+            list.and_then(|l| l.get(p * lights..(p + 1) * lights))
+                .map_or(0, |s| s.iter().filter(|k| k.is_some()).count() as u64)
+        };
+        let stood_for = out
+            .par_iter()
+            .enumerate()
+            .with_min_len(1024)
+            .filter(|(_, &settled)| settled)
+            .map(|(i, _)| {
+                let p = base + i;
+                let next = level0.get(p).is_some_and(|k| k.next.is_some());
+                let shadows = count(Some(shadows0), p) + if next { count(shadows1, p) } else { 0 };
+                (shadows, u64::from(next))
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        Some((out, stood_for))
     }
 
     /// After a chunk's levels (samples `base..` of a frame of `samples`, its sums in

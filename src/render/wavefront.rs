@@ -765,7 +765,14 @@ fn trace_pass<T: Intersector>(
             // The camera rays' samples that need no shading this frame.
             if first && sel.is_none() && replayed > 0 {
                 let item = |i: usize| primary_item(i, &walk(i));
-                settled_chunk = replay.settled(px0, rays, hits, &item, moving_bounds);
+                if let Some((settled, (shadow, secondary))) =
+                    replay.settled(px0, rays, hits, &item, moving_bounds)
+                {
+                    settled_chunk = Some(settled);
+                    // The picture's rays: those the settled samples stand for too.
+                    work.rays.shadow += shadow;
+                    work.rays.secondary += secondary;
+                }
             }
             let settled = settled_chunk.as_deref().filter(|_| first);
 
