@@ -232,6 +232,12 @@ impl ShadeReplay {
         };
         let one = |i: usize, ray: &Ray, hit: &Option<Hit>| -> bool {
             let p = base + i;
+            let ahead = p + PREFETCH_AHEAD;
+            prefetch_slot(level0.get(ahead), shadows0.get(ahead * lights));
+            prefetch_slot(
+                level1.and_then(|l| l.get(ahead)),
+                shadows1.and_then(|l| l.get(ahead * lights)),
+            );
             let (Some(k0), Some(h)) = (level0.get(p), hit) else {
                 return false;
             };
@@ -442,6 +448,33 @@ pub(super) struct BlockSlots<'a> {
     lights: usize,
 }
 
+/// Asks the cache for a kept slot's four lines and its first shadow slot (either may be
+/// absent), which a loop will read some samples later.
+#[inline(always)]
+fn prefetch_slot(kept: Option<&Kept>, shadow: Option<&KeptShadow>) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        if let Some(k) = kept {
+            let p = std::ptr::from_ref(k).cast::<i8>();
+            for line in (0..std::mem::size_of::<Kept>()).step_by(64) {
+                // SAFETY: `prefetch` only hints the cache: it reads nothing the program
+                // sees, writes nothing and never faults, whatever the address;
+                // `wrapping_add` makes the address without any claim that it is in
+                // bounds.
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(line)) };
+            }
+        }
+        if let Some(sh) = shadow {
+            let p = std::ptr::from_ref(sh).cast::<i8>();
+            // SAFETY: as above, a hint that cannot fault or be observed.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(p) };
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (kept, shadow);
+}
+
 /// How many samples ahead [`BlockSlots::prefetch`] asks for a slot.
 pub(super) const PREFETCH_AHEAD: usize = 8;
 
@@ -454,28 +487,10 @@ impl BlockSlots<'_> {
     /// round 11).
     #[inline(always)]
     pub(super) fn prefetch(&self, s: usize) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            let Some(i) = s.checked_sub(self.start) else {
-                return;
-            };
-            if let Some(k) = self.kept.get(i) {
-                let p = std::ptr::from_ref(k).cast::<i8>();
-                for line in (0..std::mem::size_of::<Kept>()).step_by(64) {
-                    // SAFETY: `prefetch` only hints the cache: it reads nothing the
-                    // program sees, writes nothing and never faults, whatever the
-                    // address; `wrapping_add` makes the address without any claim that
-                    // it is in bounds.
-                    unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(line)) };
-                }
-            }
-            if let Some(sh) = self.shadows.get(i * self.lights) {
-                let p = std::ptr::from_ref(sh).cast::<i8>();
-                // SAFETY: as above, a hint that cannot fault or be observed.
-                unsafe { _mm_prefetch::<_MM_HINT_T0>(p) };
-            }
-        }
+        let Some(i) = s.checked_sub(self.start) else {
+            return;
+        };
+        prefetch_slot(self.kept.get(i), self.shadows.get(i * self.lights));
     }
 
     /// Sample `s`'s slot, if this block owns it.
