@@ -25,8 +25,8 @@ use common::build::{diffuse, mesh, placed, SceneBuilder};
 use common::exr_read::read_exr;
 use common::farm::{ok, ok_with, s, stderr};
 use common::render_scene::{
-    camera_and_lights, cube, files_under, quad, scene, temp_dir, tumbling, with_textured_lamp,
-    write_scene,
+    camera_and_lights, cube, files_under, floor_and_mirror, quad, room_materials, scene, temp_dir,
+    tumbling, with_textured_lamp, write_scene,
 };
 use glam::Vec2;
 use glam::{Quat, Vec3, Vec4};
@@ -47,11 +47,7 @@ const PIXEL_BOUND: f32 = 1e-3;
 /// range) and a directional light.
 fn subset_scene() -> Scene {
     let mut b = SceneBuilder::new();
-    let grey = b.add_material(diffuse("floor", Vec4::new(0.7, 0.7, 0.7, 1.0), 0.8));
-    let mirror = b.add_material(Material {
-        metallic: 1.0,
-        ..diffuse("mirror", Vec4::new(0.9, 0.9, 0.9, 1.0), 0.0)
-    });
+    let (grey, mirror) = room_materials(&mut b);
     let half = b.add_material(Material {
         metallic: 0.5,
         ..diffuse("half mirror", Vec4::new(0.3, 0.5, 0.8, 1.0), 0.01)
@@ -67,16 +63,12 @@ fn subset_scene() -> Scene {
         ..diffuse("glass", Vec4::ONE, 0.0)
     });
     let red = b.add_material(diffuse("red", Vec4::new(0.8, 0.1, 0.1, 1.0), 0.4));
+    let [floor, mirror_quad] = floor_and_mirror(5.0, grey, mirror);
     let statics = b.add_mesh(mesh(
         "room",
         vec![
-            quad(Vec3::ZERO, Vec3::Z * 5.0, Vec3::X * 5.0, grey),
-            quad(
-                Vec3::new(0.0, 1.5, -2.5),
-                Vec3::X * 2.0,
-                Vec3::Y * 1.5,
-                mirror,
-            ),
+            floor,
+            mirror_quad,
             quad(
                 Vec3::new(-3.0, 1.0, -1.0),
                 Vec3::Z * 1.0,

@@ -272,39 +272,25 @@ fn a_still_camera_replays_its_shading_and_frames_stay_the_same() {
 #[test]
 fn settled_samples_follow_what_moves_into_and_out_of_their_rays() {
     use glam::{Quat, Vec3, Vec4};
-    use render_scene::{cube, quad};
-    use subfield::scene::{Animation, Falloff, LightDef, LightKind, Material, Node, Property};
+    use render_scene::{cube, floor_and_mirror, quad, room_materials};
+    use subfield::scene::{Animation, Falloff, LightDef, LightKind, Node, Property};
 
     use common::build::{diffuse, linear, mesh, perspective, placed, SceneBuilder};
 
     let dir = temp_dir("settled");
     let mut b = SceneBuilder::new();
-    let grey = b.add_material(diffuse("floor", Vec4::new(0.7, 0.7, 0.7, 1.0), 0.8));
-    let mirror = b.add_material(Material {
-        metallic: 1.0,
-        ..diffuse("mirror", Vec4::new(0.9, 0.9, 0.9, 1.0), 0.0)
-    });
+    let (grey, mirror) = room_materials(&mut b);
     let red = b.add_material(diffuse("red", Vec4::new(0.8, 0.1, 0.1, 1.0), 0.4));
-    let room = b.add_mesh(mesh(
-        "room",
-        vec![
-            quad(Vec3::ZERO, Vec3::Z * 8.0, Vec3::X * 8.0, grey),
-            quad(
-                Vec3::new(0.0, 1.5, -2.5),
-                Vec3::X * 2.0,
-                Vec3::Y * 1.5,
-                mirror,
-            ),
-            // Out of sight under the floor: the static bounds hold every place the
-            // cube goes, so the scene's extent (part of what the replay keeps to) stays.
-            quad(
-                Vec3::new(0.0, -1.0, 0.0),
-                Vec3::X * 0.5,
-                Vec3::Z * 0.5,
-                grey,
-            ),
-        ],
-    ));
+    let [floor, mirror_quad] = floor_and_mirror(8.0, grey, mirror);
+    // Out of sight under the floor: the static bounds hold every place the cube goes,
+    // so the scene's extent (part of what the replay keeps to) stays.
+    let under = quad(
+        Vec3::new(0.0, -1.0, 0.0),
+        Vec3::X * 0.5,
+        Vec3::Z * 0.5,
+        grey,
+    );
+    let room = b.add_mesh(mesh("room", vec![floor, mirror_quad, under]));
     let cube_mesh = b.add_mesh(mesh("mover", vec![cube(Vec3::splat(0.3), red)]));
     let room = b.add_node(Node {
         name: Some("room".into()),

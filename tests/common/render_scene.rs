@@ -75,6 +75,31 @@ pub fn quad(centre: Vec3, a: Vec3, b: Vec3, material: u32) -> Primitive {
     }
 }
 
+/// The test rooms' first two materials, added in this order: the grey floor's and the
+/// mirror's.
+pub fn room_materials(b: &mut SceneBuilder) -> (u32, u32) {
+    let grey = b.add_material(diffuse("floor", Vec4::new(0.7, 0.7, 0.7, 1.0), 0.8));
+    let mirror = b.add_material(Material {
+        metallic: 1.0,
+        ..diffuse("mirror", Vec4::new(0.9, 0.9, 0.9, 1.0), 0.0)
+    });
+    (grey, mirror)
+}
+
+/// The test rooms' floor (at y = 0, `half` each way in x and z) and the mirror behind
+/// it (4 × 3 at z = −2.5, facing +z).
+pub fn floor_and_mirror(half: f32, grey: u32, mirror: u32) -> [Primitive; 2] {
+    [
+        quad(Vec3::ZERO, Vec3::Z * half, Vec3::X * half, grey),
+        quad(
+            Vec3::new(0.0, 1.5, -2.5),
+            Vec3::X * 2.0,
+            Vec3::Y * 1.5,
+            mirror,
+        ),
+    ]
+}
+
 /// The moving cube's channels: over 1 s from (1, 0.4, 0.5) to `to`, turning 1.5 rad
 /// about +Y.
 pub fn tumbling(node: usize, to: Vec3) -> [Channel; 2] {
@@ -112,11 +137,7 @@ pub fn scene_without_emitters() -> Scene {
 
 fn scene_of(lamp_on: bool) -> Scene {
     let mut b = SceneBuilder::new();
-    let grey = b.add_material(diffuse("floor", Vec4::new(0.7, 0.7, 0.7, 1.0), 0.8));
-    let mirror = b.add_material(Material {
-        metallic: 1.0,
-        ..diffuse("mirror", Vec4::new(0.9, 0.9, 0.9, 1.0), 0.0)
-    });
+    let (grey, mirror) = room_materials(&mut b);
     let glass = b.add_material(Material {
         transmission: 1.0,
         ior: 1.5,
@@ -128,15 +149,7 @@ fn scene_of(lamp_on: bool) -> Scene {
         emissive: Vec3::new(1.0, 0.9, 0.6),
         ..diffuse("lamp", Vec4::ONE, 1.0)
     });
-    let mut room_quads = vec![
-        quad(Vec3::ZERO, Vec3::Z * 5.0, Vec3::X * 5.0, grey),
-        quad(
-            Vec3::new(0.0, 1.5, -2.5),
-            Vec3::X * 2.0,
-            Vec3::Y * 1.5,
-            mirror,
-        ),
-    ];
+    let mut room_quads = floor_and_mirror(5.0, grey, mirror).to_vec();
     if lamp_on {
         room_quads.push(quad(
             Vec3::new(3.0, 2.5, -2.0),
