@@ -89,7 +89,7 @@ pub(crate) fn clipped_span(clip: &Aabb, ray: &Ray) -> Option<(DVec3, DVec3, f64,
 /// A box's bounds made ready for [`surely_outside`]: `None` where its coordinates are
 /// not finite or too large for the f32 check's error bound (then every ray is "maybe").
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct QuickClip {
+struct QuickClip {
     lo: Vec3A,
     hi: Vec3A,
 }
@@ -101,7 +101,7 @@ const QUICK_MAX_COORD: f32 = 1e15;
 const QUICK_MIN_DIR: f32 = 1e-20;
 
 impl QuickClip {
-    pub(crate) fn new(clip: &Aabb) -> Option<QuickClip> {
+    fn new(clip: &Aabb) -> Option<QuickClip> {
         let (lo, hi) = (Vec3A::from(clip.min), Vec3A::from(clip.max));
         let small = |v: Vec3A| v.abs().max_element() < QUICK_MAX_COORD;
         (small(lo) && small(hi) && lo.cmple(hi).all()).then_some(QuickClip { lo, hi })
@@ -125,7 +125,7 @@ impl QuickClip {
 /// an empty widened interval, or one wholly outside `[t_min, t_max]`, means `None`.
 /// NaN bounds or a ray outside these ranges answer `false`.
 #[inline]
-pub(crate) fn surely_outside(clip: &QuickClip, ray: &Ray) -> bool {
+fn surely_outside(clip: &QuickClip, ray: &Ray) -> bool {
     const SLACK: f32 = 1e-5;
     const TINY: f32 = 1e-30;
     let o = Vec3A::from(ray.origin);
@@ -144,8 +144,9 @@ pub(crate) fn surely_outside(clip: &QuickClip, ray: &Ray) -> bool {
     enter > exit || enter > ray.t_max || exit < ray.t_min
 }
 
-/// A box for asking whether rays miss it as the moving layer clips them: `misses` is
-/// `clipped_span(box, ray).is_none()`, the f32 check first.
+/// A box that rays are clipped to ([`clipped_span`]), with its f32 form for the check
+/// that passes over the rays far from it first ([`surely_outside`]): the moving layer's
+/// bounds, which its walk, its batch filter and the replay's settled samples clip to.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct BoxTest {
     clip: Aabb,
@@ -153,6 +154,11 @@ pub(crate) struct BoxTest {
 }
 
 impl BoxTest {
+    pub(crate) const EMPTY: BoxTest = BoxTest {
+        clip: Aabb::EMPTY,
+        quick: None,
+    };
+
     pub(crate) fn new(clip: Aabb) -> BoxTest {
         BoxTest {
             clip,
@@ -160,11 +166,24 @@ impl BoxTest {
         }
     }
 
+    /// The box.
+    pub(crate) fn aabb(&self) -> Aabb {
+        self.clip
+    }
+
+    /// [`clipped_span`] of `ray` against the box, the clear misses decided in f32.
+    #[inline]
+    pub(crate) fn span(&self, ray: &Ray) -> Option<(DVec3, DVec3, f64, f64)> {
+        if self.quick.is_some_and(|q| surely_outside(&q, ray)) {
+            return None;
+        }
+        clipped_span(&self.clip, ray)
+    }
+
     /// Whether [`clipped_span`] of `ray` against the box is `None`.
     #[inline]
     pub(crate) fn misses(&self, ray: &Ray) -> bool {
-        self.quick.is_some_and(|q| surely_outside(&q, ray))
-            || clipped_span(&self.clip, ray).is_none()
+        self.span(ray).is_none()
     }
 }
 

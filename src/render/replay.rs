@@ -221,16 +221,17 @@ impl ShadeReplay {
         let level0 = self.kept.first()?;
         let level1 = self.kept.get(1);
         let (shadows0, shadows1) = (self.shadows.first()?, self.shadows.get(1));
-        let shadows_miss = |list: Option<&Vec<KeptShadow>>, p: usize| {
-            list.and_then(|l| l.get(p * lights..(p + 1) * lights))
-                .is_some_and(|s| {
-                    s.iter().all(|k| {
-                        k.as_ref()
-                            .is_none_or(|(r, _)| last.bounds.misses(r) && now.misses(r))
-                    })
-                })
+        // Sample `p`'s shadow slots in a level's list, one a light.
+        let slots = |p: usize| p * lights..(p + 1) * lights;
+        let shadows_miss = |s: &[KeptShadow]| {
+            s.iter().all(|k| {
+                k.as_ref()
+                    .is_none_or(|(r, _)| last.bounds.misses(r) && now.misses(r))
+            })
         };
-        let one = |i: usize, ray: &Ray, hit: &Option<Hit>| -> bool {
+        let sent = |s: &[KeptShadow]| s.iter().filter(|k| k.is_some()).count() as u64;
+        // A settled sample's (shadow rays, mirror rays) kept, `None` for any other.
+        let one = |i: usize, ray: &Ray, hit: &Option<Hit>| -> Option<(u64, u64)> {
             let p = base + i;
             let ahead = p + PREFETCH_AHEAD;
             prefetch_slot(level0.get(ahead), shadows0.get(ahead * lights));
@@ -238,61 +239,45 @@ impl ShadeReplay {
                 level1.and_then(|l| l.get(ahead)),
                 shadows1.and_then(|l| l.get(ahead * lights)),
             );
-            let (Some(k0), Some(h)) = (level0.get(p), hit) else {
-                return false;
-            };
+            let (k0, h, s0) = (level0.get(p)?, hit.as_ref()?, shadows0.get(slots(p))?);
             if !(k0.valid
                 && same_words(&k0.hit.bits(), &h.bits())
                 && k0.ray.same_bits(ray)
                 && same_words(&k0.item.bits(), &item(i).bits())
-                && shadows_miss(Some(shadows0), p))
+                && shadows_miss(s0))
             {
-                return false;
+                return None;
             }
             let Some((r1, i1)) = k0.next else {
-                return true;
+                return Some((sent(s0), 0));
             };
-            let Some(k1) = level1.and_then(|l| l.get(p)) else {
-                return false;
-            };
+            let (k1, s1) = (level1?.get(p)?, shadows1?.get(slots(p))?);
             let to_hit = Ray {
                 t_max: k1.hit.t,
                 ..r1
             };
-            k1.valid
+            (k1.valid
                 && k1.next.is_none()
                 && k1.ray.same_bits(&r1)
                 && same_words(&k1.item.bits(), &i1.bits())
                 && now.misses(&to_hit)
-                && shadows_miss(shadows1, p)
+                && shadows_miss(s1))
+            .then(|| (sent(s0) + sent(s1), 1))
         };
-        let mut out = Vec::with_capacity(rays.len());
-        out.par_extend(
+        let mut each = Vec::with_capacity(rays.len());
+        each.par_extend(
             rays.par_iter()
                 .zip(hits.par_iter())
                 .enumerate()
                 .with_min_len(1024)
                 .map(|(i, (r, h))| one(i, r, h)),
         );
-        // What the settled samples' kept shading sent: shadow rays at both levels,
-        // and the mirror ray.
-        let count = |list: Option<&Vec<KeptShadow>>, p: usize| {
-            list.and_then(|l| l.get(p * lights..(p + 1) * lights))
-                .map_or(0, |s| s.iter().filter(|k| k.is_some()).count() as u64)
-        };
-        let stood_for = out
+        let stood_for = each
             .par_iter()
-            .enumerate()
-            .with_min_len(1024)
-            .filter(|(_, &settled)| settled)
-            .map(|(i, _)| {
-                let p = base + i;
-                let next = level0.get(p).is_some_and(|k| k.next.is_some());
-                let shadows = count(Some(shadows0), p) + if next { count(shadows1, p) } else { 0 };
-                (shadows, u64::from(next))
-            })
+            .flatten()
+            .copied()
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-        Some((out, stood_for))
+        Some((each.par_iter().map(Option::is_some).collect(), stood_for))
     }
 
     /// After a chunk's levels (samples `base..` of a frame of `samples`, its sums in
@@ -313,7 +298,7 @@ impl ShadeReplay {
             return;
         };
         let last = self.last.get_or_insert_with(|| Last {
-            bounds: BoxTest::new(Aabb::EMPTY),
+            bounds: BoxTest::EMPTY,
             radiance: Vec::new(),
             coverage: Vec::new(),
             written: 0,

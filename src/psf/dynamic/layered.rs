@@ -7,7 +7,6 @@ use crate::geometry::{closest_of, Aabb, Hit, Intersector, Layers, Ray, RayPre};
 use crate::psf::batch::binned;
 use crate::psf::point::{trace_batch, Plan, Sources};
 use crate::psf::stats::{Counter, NoCount, RayStats};
-use crate::psf::traverse::{clipped_span, surely_outside};
 use crate::psf::Psf;
 
 /// The static PSF and a dynamic layer queried together.
@@ -146,17 +145,13 @@ impl Layered<'_> {
         }
         // Rays that miss the moving triangles' bounds (grown by their rounding
         // allowance, as the layer's own walk clips them) meet none of them: only the
-        // others are traced, which in a clustered frame is a few of them.
-        // Most rays of a clustered frame miss those bounds by far: a check in f32 lanes
-        // that is never wrong about a miss passes over them before the exact f64 clip.
-        let quick = d.quick;
+        // others are traced, which in a clustered frame is a few of them (most miss by
+        // far, and the clip's f32 check passes over them).
         let near: Vec<u32> = rays
             .par_iter()
             .enumerate()
             .with_min_len(1024)
-            .filter(|(_, r)| {
-                !quick.is_some_and(|q| surely_outside(&q, r)) && clipped_span(&d.clip, r).is_some()
-            })
+            .filter(|(_, r)| !d.clip.misses(r))
             .map(|(i, _)| i as u32)
             .collect();
         if near.len() < rays.len() {
@@ -236,7 +231,7 @@ impl Layered<'_> {
             bounds: if d.is_empty() {
                 *self.psf.bounds()
             } else {
-                self.psf.bounds().union(&d.clip)
+                self.psf.bounds().union(&d.clip.aabb())
             },
             cache: self.psf.point_cache(),
             within: false,
@@ -330,7 +325,7 @@ impl Layers for Layered<'_> {
         Some(if self.dynamic.is_empty() {
             Aabb::EMPTY
         } else {
-            self.dynamic.clip
+            self.dynamic.clip.aabb()
         })
     }
 }

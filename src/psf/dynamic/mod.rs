@@ -42,9 +42,7 @@ pub use layered::{Layered, Prim};
 use super::bsp::LANES;
 use super::point::{FrameGrids, PointCache};
 use super::stats::{Counter, NoCount, RayStats};
-use super::traverse::{
-    block_window, clipped_span, scan_blocks, surely_outside, walk_tiles, QuickClip,
-};
+use super::traverse::{block_window, scan_blocks, walk_tiles, BoxTest};
 use super::{
     check_triangles, margin_for, DirectionTable, Entry, GridFrame, Psf, PsfError, PsfParams,
 };
@@ -61,10 +59,7 @@ pub struct DynamicLayer {
     generation: u32,
     margin: f32,
     /// This frame's bounds grown by the rounding allowance; rays are clipped to it.
-    clip: Aabb,
-    /// `clip` made ready for the f32 check that passes over the rays far from it
-    /// ([`surely_outside`]); `None` where that check cannot be used.
-    pub(crate) quick: Option<QuickClip>,
+    clip: BoxTest,
     /// This frame's triangles in the order of their centroids' Morton codes (`local[k]`
     /// is the update's `tris[order[k]]`; no copy in the input order is kept), laid out
     /// for the candidate test: entries name positions in `local`, so the candidates of a
@@ -185,8 +180,7 @@ impl DynamicLayer {
             table: DirectionTable::new(&dirs),
             generation: 0,
             margin: 0.0,
-            clip: Aabb::EMPTY,
-            quick: None,
+            clip: BoxTest::EMPTY,
             local: Vec::new(),
             order: Vec::new(),
             rank: Vec::new(),
@@ -234,8 +228,7 @@ impl DynamicLayer {
             }
         };
         self.margin = margin_for(&bounds);
-        self.clip = bounds.padded(2.0 * self.margin);
-        self.quick = QuickClip::new(&self.clip);
+        self.clip = BoxTest::new(bounds.padded(2.0 * self.margin));
         if tris.is_empty() {
             self.local.clear();
             return Ok(());
@@ -244,7 +237,7 @@ impl DynamicLayer {
         // spread (`resolution`): clustered frames would otherwise clip each triangle
         // into hundreds of tiles.
         let tiles = resolution::frame_tiles(tris, &bounds, self.params.tiles);
-        let (gv, margin, clip) = (self.generation, self.margin, self.clip);
+        let (gv, margin, clip) = (self.generation, self.margin, self.clip.aabb());
         let (keys, counts, order, rank) = (
             &mut self.keys,
             &mut self.counts,
@@ -379,10 +372,7 @@ impl DynamicLayer {
         if self.is_empty() {
             return None;
         }
-        if self.quick.is_some_and(|q| surely_outside(&q, ray)) {
-            return None;
-        }
-        let (o, d, t0, t1) = clipped_span(&self.clip, ray)?;
+        let (o, d, t0, t1) = self.clip.span(ray)?;
         let sf = &self.subfields[sub.unwrap_or_else(|| self.table.lookup(ray.dir))];
         let (margin, gv, tris, order) = (self.margin, self.generation, &self.local, &self.order);
         let slack = (margin as f64 + 1e-6 * o.length()) / d.length();

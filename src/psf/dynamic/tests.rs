@@ -198,7 +198,7 @@ fn update_lists_what_an_insertion_of_the_sorted_copy_lists() {
         let gv = layer.generation;
         let mut fresh = DynamicLayer::with_grids(params, grids).expect("params");
         for (s, f) in layer.subfields.iter().zip(&mut fresh.subfields) {
-            f.count(&sorted, gv, layer.margin, &layer.clip, tiles, None);
+            f.count(&sorted, gv, layer.margin, &layer.clip.aabb(), tiles, None);
             f.write(&identity(sorted.len()), gv);
             let (got, want) = (lists(s, gv), lists(f, gv));
             assert_eq!(got.len(), want.len(), "level {level}, {tiles} tiles");
