@@ -372,8 +372,11 @@ impl ShadeContext<'_> {
         // A whole exponent (a polished surface's is the cap, 256) by repeated squaring,
         // inlined: libm's `powf` was a tenth of the shading, half of that its slow path
         // for results that underflow, and `f32::powi` a call (benches/PERF.md, issue 38).
-        let lobe = if shininess.fract() == 0.0 {
-            powi(nh, shininess as u32)
+        // `shininess` lies in (0, 256]: it is whole exactly when it comes back from
+        // `u32` unchanged (`fract` was a call to libm's `trunc` on every glint).
+        let whole = shininess as u32;
+        let lobe = if whole as f32 == shininess {
+            powi(nh, whole)
         } else {
             nh.powf(shininess)
         };

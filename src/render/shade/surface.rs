@@ -213,15 +213,26 @@ impl ShadeContext<'_> {
         }
     }
 
-    /// Emitted radiance of `m` at `uv`.
-    pub(super) fn emission(&self, m: &Material, uv: Vec2, lod: f32) -> Vec3 {
-        let mut e = m.emissive * m.emissive_strength;
-        if e != Vec3::ZERO {
-            if let Some(t) = self.texture(m.emissive_texture, uv, lod, true) {
-                e *= t.truncate();
-            }
+    /// Emitted radiance of `m` at `uv`. Inlined, in lanes: returned through memory by an
+    /// out-of-line call, its three floats were read back as one wider load that waited
+    /// on the stores (a tenth of a dolly frame's shading; benches/PERF.md, issue 38,
+    /// round 12); the texture's lookup stays out of line.
+    #[inline(always)]
+    pub(super) fn emission(&self, m: &Material, uv: Vec2, lod: f32) -> Vec3A {
+        let e = Vec3A::from(m.emissive) * m.emissive_strength;
+        if e != Vec3A::ZERO && m.emissive_texture.is_some() {
+            self.textured_emission(m, e, uv, lod)
+        } else {
+            e
         }
-        e
+    }
+
+    #[inline(never)]
+    fn textured_emission(&self, m: &Material, e: Vec3A, uv: Vec2, lod: f32) -> Vec3A {
+        match self.texture(m.emissive_texture, uv, lod, true) {
+            Some(t) => e * Vec3A::from(t.truncate()),
+            None => e,
+        }
     }
 
     /// Texture coordinates at barycentrics `b` of hit number `tri`.
