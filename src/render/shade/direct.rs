@@ -200,7 +200,7 @@ impl ShadeContext<'_> {
             let Some(m) = self.material(lp.material) else {
                 continue;
             };
-            let le = Vec3A::from(self.emission(m, self.uv_at(lp.tri, lp.bary), f32::NEG_INFINITY));
+            let le = self.emission(m, self.uv_at(lp.tri, lp.bary), f32::NEG_INFINITY);
             let brdf = Self::brdf(lobes, s, to, !lobes.reflects);
             let c = weight * brdf * le * (cos_i * cos_l / (d2 * lp.pdf_area * n as f32));
             if c.max_element() <= MIN_WEIGHT * 1e-2 || !c.is_finite() {

@@ -291,7 +291,7 @@ impl<'a> ShadeContext<'a> {
 
         // Emission (front face; both when double-sided) and ambient.
         let emitted = if (s.entering || m.double_sided) && !item.diffuse {
-            Vec3A::from(self.emission(m, s.uv, s.lod))
+            self.emission(m, s.uv, s.lod)
         } else {
             Vec3A::ZERO
         };
