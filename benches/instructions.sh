@@ -12,7 +12,8 @@
 # camera (written as benches/scaling.sh writes it, by ../shared/peers, if missing);
 # 320x240 (a quarter of 640x480: the trace and shading scale with the pixels, the grids'
 # builds do not); frame 5, rendered alone, --max-depth 1, 1 thread; the render pass
-# (PATTERN `*render_pass_with*`; `*ShadeContext*shade*` counts shading alone); the top 30
+# (PATTERN `*Frames*trace*`, the frame's pass: `render_pass_with` is inlined into it, so
+# its own name counted nothing; `*ShadeContext*shade*` counts shading alone); the top 30
 # lines. `--sim` adds callgrind's branch and cache simulation and prints their totals
 # (mispredicted conditional branches, first-level data misses): a change can run fewer
 # instructions and take longer (benches/PERF.md, issue 38, round 10), and these models
@@ -23,7 +24,7 @@ cd "$(dirname "$0")/.."
 die() { echo "benches/instructions.sh: $*" >&2; exit 1; }
 
 BIN=target/release/subfield; SCENE=""; CAMERA=dolly; SIZE=320x240; FRAME=5
-ONLY='*render_pass_with*'; TOP=30; SIM=()
+ONLY='*Frames*trace*'; TOP=30; SIM=()
 while [ $# -gt 0 ]; do
     case "$1" in
         --binary) BIN=${2:?--binary needs a path}; shift ;;
@@ -103,6 +104,11 @@ with open(out) as f:
             continue
         cost[last] += int(m.group(2))
 total = sum(cost.values())
+if total == 0:
+    # A pattern that names no function the binary has (inlined away, renamed) counts
+    # nothing; a table of zeros would read as a result.
+    sys.exit("benches/instructions.sh: --only's pattern counted no instructions: no function "
+             "of the binary matches it (look for the name with `nm -C BINARY | grep`)")
 addrs = sorted(cost)
 lines = subprocess.run(["addr2line", "-e", binary, "-i", "-a"], input="\n".join(hex(a) for a in addrs),
                        capture_output=True, text=True, check=True).stdout.splitlines()
