@@ -206,16 +206,17 @@ impl<'a> Plan<'a> {
 }
 
 /// Up to four candidates waiting for their test, with the hit number each reports: a
-/// closest-hit scan tests its candidates four at a time ([`intersect_pre4`]), one
-/// branch for four where a test each had one, about as often taken as not. A group part
-/// full (a scan's last few) and an any-hit query's candidates are tested one at a time.
+/// scan tests its candidates four at a time ([`intersect_pre4`]), one branch for four
+/// where a test each had one, about as often taken as not. A group part full (a scan's
+/// last few) is tested one at a time.
 ///
 /// The hits are those of testing one at a time. The closest hit is the least by
 /// [`Hit::is_closer_than`], a total order, whichever order the candidates are tested
 /// in. A group may test up to three candidates that a scan one at a time would have
 /// passed over, once a hit had narrowed its depth window: no such triangle is met
 /// closer than that hit (the early exit's argument), so they change nothing. An
-/// any-hit query takes the first hit it finds, as before.
+/// any-hit query is answered by any hit of the group: every caller asks only whether
+/// there is one.
 struct Group<'t> {
     tris: [&'t TriPre; 4],
     number: [u32; 4],
@@ -268,12 +269,14 @@ impl<'t> Group<'t> {
             };
             answered |= take::<ANY>(best, hit);
         };
-        if self.n == 4 && !ANY {
+        if self.n == 4 {
             intersect_pre4(pre, self.tris, ray.t_min, t_max, |k, h| keep(best, k, h));
         } else {
             // One at a time: a scan's last few (a group part full costs more than its
-            // tests), and any-hit queries (shadow rays; grouped, a still camera's
-            // frames traced 10 % slower: benches/PERF.md, issue 38, round 10).
+            // tests). Any-hit queries are grouped too since the still camera's samples
+            // settle (its frames had traced 10 % slower grouped, round 10; now the
+            // same, and the dolly's shadow rays 4.5 ms a frame faster: benches/PERF.md,
+            // issue 38, round 12).
             for k in 0..self.n.min(4) {
                 let t_max = best.map_or(ray.t_max, |b| b.t);
                 if let Some(h) = intersect_pre(pre, self.tris[k], ray.t_min, t_max) {
