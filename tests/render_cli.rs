@@ -261,23 +261,16 @@ fn a_still_camera_replays_its_shading_and_frames_stay_the_same() {
     assert!(frame_of(&dir, "seq", 7) != frame_of(&dir, "seq", 11));
 }
 
-/// A still camera over a floor with a mirror behind, one point light, and a cube that
-/// jumps: frames 0 and 1 it hangs between the light and the floor (its shadow on the
-/// floor), 2 and 3 under the floor (out of every ray's way), from 4 on below the
-/// camera's view, seen only in the mirror. Samples whose kept rays all miss the moving
-/// triangles take the last frame's sums whole (`ShadeReplay::settled`): a floor pixel
-/// whose shadow ray the cube blocked the frame before must not (its shadow is gone at
-/// frame 2), nor a mirror pixel whose reflected ray the cube now meets (frame 4). Every
-/// frame must be the bytes it is when rendered alone.
-#[test]
-fn settled_samples_follow_what_moves_into_and_out_of_their_rays() {
+/// A still camera ("still") over a floor with a mirror behind, one point light, and a red
+/// cube that jumps between the places `keys` gives (frame numbers at 24 fps, each place
+/// held until the next key's frame). The scene's file in `dir`.
+fn jumping_cube_scene(dir: &Path, keys: &[(f32, glam::Vec3)]) -> std::path::PathBuf {
     use glam::{Quat, Vec3, Vec4};
     use render_scene::{cube, floor_and_mirror, quad, room_materials};
     use subfield::scene::{Animation, Falloff, LightDef, LightKind, Node, Property};
 
     use common::build::{diffuse, linear, mesh, perspective, placed, SceneBuilder};
 
-    let dir = temp_dir("settled");
     let mut b = SceneBuilder::new();
     let (grey, mirror) = room_materials(&mut b);
     let red = b.add_material(diffuse("red", Vec4::new(0.8, 0.1, 0.1, 1.0), 0.4));
@@ -297,15 +290,10 @@ fn settled_samples_follow_what_moves_into_and_out_of_their_rays() {
         mesh: Some(room),
         ..Default::default()
     });
-    let (a, below, behind) = (
-        Vec3::new(1.2, 2.5, 0.5),
-        Vec3::new(0.0, -0.5, 0.0),
-        Vec3::new(0.0, 0.3, 3.2),
-    );
     let mover = b.add_node(Node {
         name: Some("mover".into()),
         mesh: Some(cube_mesh),
-        transform: placed(a, Quat::IDENTITY),
+        transform: placed(keys[0].1, Quat::IDENTITY),
         ..Default::default()
     });
     let cam = b.add_camera(perspective("still", 0.9, Some(4.0 / 3.0), 0.1, None));
@@ -332,23 +320,50 @@ fn settled_samples_follow_what_moves_into_and_out_of_their_rays() {
     for n in [room, mover, cam, light] {
         b.add_root(n);
     }
-    // Jumps between frames (24 fps): at A up to frame 1, below from frame 2, behind
-    // the camera from frame 4.
+    // Each place held from its frame to just before the next key's (a jump of a tenth
+    // of a frame, between frames).
     let f = |k: f32| k / 24.0;
-    let keys = [a, a, below, below, behind, behind];
+    let mut times = Vec::new();
+    let mut places = Vec::new();
+    for (i, &(frame, at)) in keys.iter().enumerate() {
+        times.push(f(frame));
+        places.push(at);
+        let until = keys.get(i + 1).map_or(frame + 24.0, |k| k.0);
+        times.push(f(until - 0.5));
+        places.push(at);
+    }
     b.add_animation(Animation {
         name: Some("jumps".into()),
         channels: vec![linear(
             mover,
             Property::Translation,
-            vec![0.0, f(1.5), f(1.6), f(3.5), f(3.6), 1.0],
-            keys.iter().flat_map(|v| v.to_array()).collect(),
+            times,
+            places.iter().flat_map(|v| v.to_array()).collect(),
         )],
     });
     b.scene.fps = Some(24.0);
     let scene = dir.join("jumps.glb");
     subfield::import::write_gltf(&b.finish(), &scene).unwrap();
+    scene
+}
 
+/// The jumping cube: frames 0 and 1 it hangs between the light and the floor (its
+/// shadow on the floor), 2 and 3 under the floor (out of every ray's way), from 4 on
+/// below the camera's view, seen only in the mirror. Samples whose kept rays all miss
+/// the moving triangles take the last frame's sums whole (`ShadeReplay::settled`): a
+/// floor pixel whose shadow ray the cube blocked the frame before must not (its shadow
+/// is gone at frame 2), nor a mirror pixel whose reflected ray the cube now meets
+/// (frame 4). Every frame must be the bytes it is when rendered alone.
+#[test]
+fn settled_samples_follow_what_moves_into_and_out_of_their_rays() {
+    use glam::Vec3;
+    let dir = temp_dir("settled");
+    let (a, below, behind) = (
+        Vec3::new(1.2, 2.5, 0.5),
+        Vec3::new(0.0, -0.5, 0.0),
+        Vec3::new(0.0, 0.3, 3.2),
+    );
+    let scene = jumping_cube_scene(&dir, &[(0.0, a), (2.0, below), (4.0, behind)]);
     sequence_is_its_frames_alone(
         &dir,
         &scene,
@@ -360,6 +375,33 @@ fn settled_samples_follow_what_moves_into_and_out_of_their_rays() {
     // The cube's shadow leaves the floor at frame 2 and its image enters the mirror at 4.
     assert!(frame_of(&dir, "jumps", 1) != frame_of(&dir, "jumps", 2));
     assert!(frame_of(&dir, "jumps", 3) != frame_of(&dir, "jumps", 4));
+}
+
+/// The jumping cube under the floor, in the camera's view for one frame (4; for each
+/// of two frames in flight, its lane's third frame, which settles most samples by
+/// what the lane kept), then under the floor again. A pixel that saw the cube was not
+/// settled and was shaded, its kept shading dropped (a moving hit): what a settled
+/// sample's check had kept of it must be dropped too, or the next frame takes the sums
+/// that showed the cube (frames 5 and 6 against themselves rendered alone).
+#[test]
+fn a_pixel_that_saw_a_mover_is_not_settled_after_it_leaves() {
+    use glam::Vec3;
+    let dir = temp_dir("settled_seen");
+    let below = Vec3::new(0.0, -0.5, 0.0);
+    // In front of the camera, near it and low: far from the floor's shadow rays.
+    let seen = Vec3::new(-0.3, 1.4, 2.6);
+    let scene = jumping_cube_scene(&dir, &[(0.0, below), (4.0, seen), (5.0, below)]);
+    sequence_is_its_frames_alone(
+        &dir,
+        &scene,
+        ("seen", "still"),
+        "0..8",
+        &[3, 4, 5, 6, 7],
+        "Z",
+    );
+    assert!(frame_of(&dir, "seen", 3) != frame_of(&dir, "seen", 4));
+    assert!(frame_of(&dir, "seen", 4) != frame_of(&dir, "seen", 5));
+    assert!(frame_of(&dir, "seen", 3) == frame_of(&dir, "seen", 5));
 }
 
 #[test]

@@ -97,7 +97,43 @@ pub(super) struct ShadeReplay {
     /// The last frame's radiance and coverage per sample, for the settled samples of the
     /// next ([`ShadeReplay::settled`]); `None` until a frame has kept them.
     last: Option<Last>,
+    /// Per sample, what [`ShadeReplay::settled`] found when its slots last passed the
+    /// whole check ([`Settle`]); empty where the lights are more than [`SETTLE_LIGHTS`].
+    settle: Vec<Settle>,
+    /// Per sample, [`Settle`]'s rays: the kept shadow rays of both levels, then (last of
+    /// `2 · lights + 1`) the mirror ray up to its kept hit.
+    segments: Vec<Ray>,
 }
+
+/// What a settled sample's check needs of its slots, kept apart from them: later frames
+/// read these 20 bytes and `2 · lights + 1` rays (116 bytes with one light) instead of
+/// two levels' slots and shadow slots (536 bytes with one light), which the check had
+/// streamed from memory for every sample of every frame (benches/PERF.md, issue 38,
+/// round 12). Made when a sample's slots pass [`ShadeReplay::settled`]'s whole check;
+/// `eligible` only while the slots stay as they were then: a sample not settled is
+/// shaded, which may rewrite them, so it is made ineligible, and every sample is when the
+/// camera is not the one of the lane's frame before (a camera ray is then another ray).
+#[derive(Clone, Copy)]
+struct Settle {
+    /// The camera ray's kept hit.
+    hit: Hit,
+    /// The kept shadow rays of both levels (the first `segments`).
+    shadows: u16,
+    /// Whether the kept shading sends a mirror ray (the last segment).
+    mirror: bool,
+    eligible: bool,
+}
+
+const NOT_SETTLED: Settle = Settle {
+    hit: EMPTY.hit,
+    shadows: 0,
+    mirror: false,
+    eligible: false,
+};
+
+/// The most punctual lights for which [`Settle`] records are kept: beyond, its rays
+/// would take as many bytes as the slots.
+const SETTLE_LIGHTS: usize = 2;
 
 /// A frame's sums per sample (one sample a pixel) and the moving triangles' bounds it
 /// was traced with.
@@ -170,6 +206,7 @@ impl ShadeReplay {
             for k in &mut self.shadows {
                 fill_par(k, samples * lights, None);
             }
+            self.reset_settle(samples);
         }
         levels
     }
@@ -184,6 +221,20 @@ impl ShadeReplay {
         copy_all(&mut self.kept, &from.kept);
         copy_all(&mut self.shadows, &from.shadows);
         self.lights = from.lights;
+        self.reset_settle(self.kept.first().map_or(0, Vec::len));
+    }
+
+    /// Every sample's [`Settle`] record made ineligible (none kept beyond
+    /// [`SETTLE_LIGHTS`] lights).
+    fn reset_settle(&mut self, samples: usize) {
+        if self.lights <= SETTLE_LIGHTS && !self.kept.is_empty() {
+            fill_par(&mut self.settle, samples, NOT_SETTLED);
+            let empty = EMPTY.ray;
+            fill_par(&mut self.segments, samples * (2 * self.lights + 1), empty);
+        } else {
+            self.settle = Vec::new();
+            self.segments = Vec::new();
+        }
     }
 
     /// Which of a chunk's camera rays (`rays`, samples `base..`, one a pixel; `hits`
@@ -208,37 +259,65 @@ impl ShadeReplay {
     /// or the sample was settled then, with the same sums by the same argument; and this
     /// frame they would be again.
     pub(super) fn settled(
-        &self,
+        &mut self,
         base: usize,
         rays: &[Ray],
         hits: &[Option<Hit>],
         item: &(dyn Fn(usize) -> Item + Sync),
         bounds: Option<Aabb>,
+        same_camera: bool,
     ) -> Option<(Vec<bool>, (u64, u64))> {
-        let last = self.last.as_ref().filter(|l| l.complete)?;
-        let now = BoxTest::new(bounds?);
+        let n = rays.len();
         let lights = self.lights;
-        let level0 = self.kept.first()?;
+        // Per sample: its record, its rays; `None` where none are kept.
+        let m = 2 * lights + 1;
+        let records = (self.settle.len() >= base + n && self.segments.len() >= (base + n) * m)
+            .then(|| {
+                (
+                    &mut self.settle[base..base + n],
+                    &mut self.segments[base * m..(base + n) * m],
+                )
+            });
+        let ready = (|| {
+            let last = self.last.as_ref().filter(|l| l.complete)?;
+            Some((
+                last.bounds,
+                BoxTest::new(bounds?),
+                self.kept.first()?,
+                self.shadows.first()?,
+            ))
+        })();
+        let Some((before, now, level0, shadows0)) = ready else {
+            // No sample is settled: each is shaded, which may rewrite its slots.
+            if let Some((records, _)) = records {
+                records.par_iter_mut().for_each(|r| r.eligible = false);
+            }
+            return None;
+        };
         let level1 = self.kept.get(1);
-        let (shadows0, shadows1) = (self.shadows.first()?, self.shadows.get(1));
+        let shadows1 = self.shadows.get(1);
         // Sample `p`'s shadow slots in a level's list, one a light.
         let slots = |p: usize| p * lights..(p + 1) * lights;
+        // One test against the two frames' boxes together: a ray that misses their
+        // union misses each, also as `BoxTest::misses` computes it (a box inside another
+        // gets slab values inside the other's, rounding being monotonic), and a
+        // sample's rays make two tests where they made four.
+        let both = BoxTest::new(before.aabb().union(&now.aabb()));
+        let misses_both = |r: &Ray| both.misses(r);
         let shadows_miss = |s: &[KeptShadow]| {
-            s.iter().all(|k| {
-                k.as_ref()
-                    .is_none_or(|(r, _)| last.bounds.misses(r) && now.misses(r))
-            })
+            s.iter()
+                .all(|k| k.as_ref().is_none_or(|(r, _)| misses_both(r)))
         };
         let sent = |s: &[KeptShadow]| s.iter().filter(|k| k.is_some()).count() as u64;
-        // A settled sample's (shadow rays, mirror rays) kept, `None` for any other.
-        let one = |i: usize, ray: &Ray, hit: &Option<Hit>| -> Option<(u64, u64)> {
+        // The whole check of sample `p` (camera ray `ray`, its hit this frame `hit`),
+        // reading its slots: `Some` with the rays a settled sample's kept shading
+        // sends, and (where `seg` is given) its record made in `rec` and `seg`.
+        let whole = |i: usize,
+                     ray: &Ray,
+                     hit: &Option<Hit>,
+                     keep: Option<(&mut Settle, &mut [Ray])>|
+         -> Option<(u64, u64)> {
             let p = base + i;
-            let ahead = p + PREFETCH_AHEAD;
-            prefetch_slot(level0.get(ahead), shadows0.get(ahead * lights));
-            prefetch_slot(
-                level1.and_then(|l| l.get(ahead)),
-                shadows1.and_then(|l| l.get(ahead * lights)),
-            );
             let (k0, h, s0) = (level0.get(p)?, hit.as_ref()?, shadows0.get(slots(p))?);
             if !(k0.valid
                 && same_words(&k0.hit.bits(), &h.bits())
@@ -248,30 +327,103 @@ impl ShadeReplay {
             {
                 return None;
             }
-            let Some((r1, i1)) = k0.next else {
-                return Some((sent(s0), 0));
+            let (counts, s1, to_hit) = match k0.next {
+                None => ((sent(s0), 0), None, None),
+                Some((r1, i1)) => {
+                    let (k1, s1) = (level1?.get(p)?, shadows1?.get(slots(p))?);
+                    let to_hit = Ray {
+                        t_max: k1.hit.t,
+                        ..r1
+                    };
+                    let ok = k1.valid
+                        && k1.next.is_none()
+                        && k1.ray.same_bits(&r1)
+                        && same_words(&k1.item.bits(), &i1.bits())
+                        && now.misses(&to_hit)
+                        && shadows_miss(s1);
+                    if !ok {
+                        return None;
+                    }
+                    ((sent(s0) + sent(s1), 1), Some(s1), Some(to_hit))
+                }
             };
-            let (k1, s1) = (level1?.get(p)?, shadows1?.get(slots(p))?);
-            let to_hit = Ray {
-                t_max: k1.hit.t,
-                ..r1
-            };
-            (k1.valid
-                && k1.next.is_none()
-                && k1.ray.same_bits(&r1)
-                && same_words(&k1.item.bits(), &i1.bits())
-                && now.misses(&to_hit)
-                && shadows_miss(s1))
-            .then(|| (sent(s0) + sent(s1), 1))
+            if let Some((rec, seg)) = keep {
+                let kept = s0.iter().chain(s1.into_iter().flatten());
+                let mut k = 0;
+                for (r, _) in kept.flatten() {
+                    seg[k] = *r;
+                    k += 1;
+                }
+                if let Some(r) = to_hit {
+                    seg[m - 1] = r;
+                }
+                *rec = Settle {
+                    hit: k0.hit,
+                    shadows: k as u16,
+                    mirror: to_hit.is_some(),
+                    eligible: true,
+                };
+            }
+            Some(counts)
         };
-        let mut each = Vec::with_capacity(rays.len());
-        each.par_extend(
-            rays.par_iter()
-                .zip(hits.par_iter())
+        // What a sample whose record is eligible needs: the same hit, and its rays
+        // missing the moving triangles' bounds (as `whole` tests them).
+        let quick = |rec: &Settle, seg: &[Ray], hit: &Option<Hit>| -> Option<(u64, u64)> {
+            let h = hit.as_ref()?;
+            let shadows = seg.get(..rec.shadows as usize)?;
+            (same_words(&rec.hit.bits(), &h.bits())
+                && shadows.iter().all(misses_both)
+                && (!rec.mirror || now.misses(&seg[m - 1])))
+            .then_some((rec.shadows.into(), rec.mirror.into()))
+        };
+        let prefetch = |p: usize| {
+            prefetch_slot(level0.get(p), shadows0.get(p * lights));
+            prefetch_slot(
+                level1.and_then(|l| l.get(p)),
+                shadows1.and_then(|l| l.get(p * lights)),
+            );
+        };
+        let mut each: Vec<Option<(u64, u64)>> = vec![None; n];
+        match records {
+            Some((records, segments)) => {
+                // A task's run of samples, so that it reads ahead (for the slots of the
+                // samples its whole check will read) in records it owns.
+                const RUN: usize = 1024;
+                each.par_chunks_mut(RUN)
+                    .zip(records.par_chunks_mut(RUN))
+                    .zip(segments.par_chunks_mut(RUN * m))
+                    .enumerate()
+                    .for_each(|(c, ((out, recs), segs))| {
+                        let i0 = c * RUN;
+                        for k in 0..out.len() {
+                            let i = i0 + k;
+                            if let Some(ahead) = recs.get(k + PREFETCH_AHEAD) {
+                                if !(same_camera && ahead.eligible) {
+                                    prefetch(base + i + PREFETCH_AHEAD);
+                                }
+                            }
+                            let (rec, seg) = (&mut recs[k], &mut segs[k * m..(k + 1) * m]);
+                            out[k] = if same_camera && rec.eligible {
+                                quick(rec, seg, &hits[i])
+                            } else {
+                                whole(i, &rays[i], &hits[i], Some((&mut *rec, &mut *seg)))
+                            };
+                            if out[k].is_none() {
+                                // Shaded this frame: its slots may change.
+                                rec.eligible = false;
+                            }
+                        }
+                    });
+            }
+            None => each
+                .par_iter_mut()
                 .enumerate()
                 .with_min_len(1024)
-                .map(|(i, (r, h))| one(i, r, h)),
-        );
+                .for_each(|(i, out)| {
+                    prefetch(base + i + PREFETCH_AHEAD);
+                    *out = whole(i, &rays[i], &hits[i], None);
+                }),
+        }
         let stood_for = each
             .par_iter()
             .flatten()

@@ -766,7 +766,7 @@ fn trace_pass<T: Intersector>(
             if first && sel.is_none() && replayed > 0 {
                 let item = |i: usize| primary_item(i, &walk(i));
                 if let Some((settled, (shadow, secondary))) =
-                    replay.settled(px0, rays, hits, &item, moving_bounds)
+                    replay.settled(px0, rays, hits, &item, moving_bounds, mode == Mode::Reuse)
                 {
                     settled_chunk = Some(settled);
                     // The picture's rays: those the settled samples stand for too.
