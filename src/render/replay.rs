@@ -29,7 +29,9 @@
 //! within [`REPLAY_BYTES`] for every level together: the camera rays and the mirror
 //! level at 640x480 with one light (157 MB), the camera rays alone at 1280x720 (247 MB),
 //! nothing at 1920x1080; nothing either with more than [`REPLAY_LIGHTS`] lights. A test
-//! holds these numbers. The last frame's sums take 16 bytes a pixel besides.
+//! holds these numbers. The last frame's sums take 16 bytes a pixel besides, and the
+//! settled samples' records ([`Settle`]) `20 + 32 · (2 · lights + 1)` (116 with one
+//! light, 34 MB at 640x480; none beyond [`SETTLE_LIGHTS`] lights).
 
 use glam::Vec3;
 
@@ -698,6 +700,13 @@ mod tests {
         // Two levels at 640x480 with one light, in the module's notes: about 150 MB.
         let two = 2 * 640 * 480 * (kept + shadow);
         assert!((140 << 20..=160 << 20).contains(&two), "{two} bytes");
+        // What a settled sample's check reads of it: its slots (536 bytes), or its
+        // record and rays (116), one light.
+        assert_eq!(2 * (kept + shadow), 536);
+        let record = std::mem::size_of::<Settle>() + 3 * std::mem::size_of::<Ray>();
+        assert_eq!(record, 116);
+        let records = 640 * 480 * record;
+        assert!((33 << 20..=35 << 20).contains(&records), "{records} bytes");
     }
 
     #[test]
