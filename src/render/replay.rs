@@ -260,6 +260,13 @@ impl ShadeReplay {
     /// the last frame those very rays were sent and answered by the static part alone,
     /// or the sample was settled then, with the same sums by the same argument; and this
     /// frame they would be again.
+    ///
+    /// `same_camera`: the camera is the one of this lane's frame before (the memo
+    /// reuses), so each camera ray and item are the ones of that frame. Then a sample
+    /// whose record ([`Settle`]) is eligible is checked by the record alone: its slots
+    /// passed this whole check when it was made and have not changed since (a sample
+    /// not settled drops its record, the camera being another drops every record), so
+    /// only the hit and the moving bounds are left to compare.
     pub(super) fn settled(
         &mut self,
         base: usize,
