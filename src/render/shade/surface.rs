@@ -213,10 +213,9 @@ impl ShadeContext<'_> {
         }
     }
 
-    /// Emitted radiance of `m` at `uv`. Inlined, in lanes: returned through memory by an
-    /// out-of-line call, its three floats were read back as one wider load that waited
-    /// on the stores (a tenth of a dolly frame's shading; benches/PERF.md, issue 38,
-    /// round 12); the texture's lookup stays out of line.
+    /// Emitted radiance of `m` at `uv`. Inlined, in lanes (it was an out-of-line call
+    /// whose `Vec3` came back through memory); the texture's lookup stays out of line
+    /// (benches/PERF.md, issue 38, round 12).
     #[inline(always)]
     pub(super) fn emission(&self, m: &Material, uv: Vec2, lod: f32) -> Vec3A {
         let e = Vec3A::from(m.emissive) * m.emissive_strength;
