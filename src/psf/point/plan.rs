@@ -323,9 +323,20 @@ impl<'a> Plan<'a> {
             at.reach2 = 2.25 * far2 + margin * margin;
             if let Some(g) = &kept {
                 at.reach2 = at.reach2.max(g.at.reach2);
+                // Both rectangles, tiled for the more rays of the two: adding the
+                // counts (as a batch's own rays are added up) made every rebuild finer
+                // than the one before, and a dollying frame's light grid, rebuilt as
+                // its rectangles crept, had grown to 104,000 tiles (650,000 entries
+                // merged a frame) for the 18,800 its batches ask (benches/PERF.md,
+                // issue 38, round 13).
                 for (a, b) in all.iter_mut().zip(&g.rects) {
                     if b.4 > 0 {
-                        *a = if a.4 > 0 { union(*a, *b) } else { *b };
+                        *a = if a.4 > 0 {
+                            let u = union(*a, *b);
+                            (u.0, u.1, u.2, u.3, a.4.max(b.4))
+                        } else {
+                            *b
+                        };
                     }
                 }
             }
