@@ -820,6 +820,42 @@ fn trace_pass<T: Intersector>(
                             out.clear();
                             out.light_paths = light_paths;
                             let mut at = walk(b * BLOCK);
+                            if slots.is_none() && settled.is_none() && ctx.lanes(out) {
+                                // Four hits at once where the frame allows
+                                // (`ShadeContext::shade4`; the same lists).
+                                let (r4, rest) = r.split_at(r.len() / 4 * 4);
+                                for (q, (rq, hq)) in
+                                    r4.chunks_exact(4).zip(hs.chunks_exact(4)).enumerate()
+                                {
+                                    let s0 = b * BLOCK + 4 * q;
+                                    let mut one = |j: usize| {
+                                        let item = primary_item(s0 + j, &at);
+                                        at.advance();
+                                        item
+                                    };
+                                    let items = [one(0), one(1), one(2), one(3)];
+                                    let (r4, i4) = (
+                                        [&rq[0], &rq[1], &rq[2], &rq[3]],
+                                        [&items[0], &items[1], &items[2], &items[3]],
+                                    );
+                                    ctx.shade4(
+                                        r4,
+                                        i4,
+                                        [hq[0], hq[1], hq[2], hq[3]],
+                                        max_depth,
+                                        spp as u32,
+                                        out,
+                                    );
+                                }
+                                for (k, (ray, hit)) in rest.iter().zip(&hs[r4.len()..]).enumerate()
+                                {
+                                    let s = b * BLOCK + r4.len() + k;
+                                    let item = primary_item(s, &at);
+                                    ctx.shade(ray, &item, *hit, max_depth, spp as u32, out);
+                                    at.advance();
+                                }
+                                return;
+                            }
                             for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
                                 let s = b * BLOCK + k;
                                 if settled.is_some_and(|v| v[s]) {
@@ -861,6 +897,28 @@ fn trace_pass<T: Intersector>(
                     .for_each(|(b, ((((out, r), it), hs), slots))| {
                         out.clear();
                         out.light_paths = light_paths;
+                        if slots.is_none() && ctx.lanes(out) {
+                            // Four hits at once where the frame allows, as above.
+                            let n4 = r.len() / 4 * 4;
+                            for ((rq, iq), hq) in r[..n4]
+                                .chunks_exact(4)
+                                .zip(it[..n4].chunks_exact(4))
+                                .zip(hs[..n4].chunks_exact(4))
+                            {
+                                ctx.shade4(
+                                    [&rq[0], &rq[1], &rq[2], &rq[3]],
+                                    [&iq[0], &iq[1], &iq[2], &iq[3]],
+                                    [hq[0], hq[1], hq[2], hq[3]],
+                                    max_depth,
+                                    spp as u32,
+                                    out,
+                                );
+                            }
+                            for ((ray, item), hit) in r[n4..].iter().zip(&it[n4..]).zip(&hs[n4..]) {
+                                ctx.shade(ray, item, *hit, max_depth, spp as u32, out);
+                            }
+                            return;
+                        }
                         for (k, ((ray, item), hit)) in r.iter().zip(it).zip(hs).enumerate() {
                             if let (Some(v), Some(ahead)) =
                                 (slots.as_ref(), it.get(k + PREFETCH_AHEAD))

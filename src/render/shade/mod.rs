@@ -13,6 +13,7 @@
 //! | `surface` | the surface a ray meets: point, normals, normal maps, uvs, texture level of detail, textured factors |
 //! | `bsdf` | the lobes (Fresnel, reflected / transmitted / diffuse weights, the glint) and the rays they send on |
 //! | `direct` | direct light: shadow rays to the punctual lights and to samples of the emitters |
+//! | `lanes` | the same model on four hits at once in SSE lanes, for plain materials and point or directional lights (`shade4`, the same bits as `shade`) |
 //! | `block` | a wavefront's bookkeeping: [`Item`], [`BlockOut`] |
 //! | `frame` | what a frame's shading fills and reports: [`FrameBuffers`], light-path passes, Cryptomatte, counts |
 //!
@@ -64,6 +65,7 @@ mod block;
 mod bsdf;
 mod direct;
 mod frame;
+mod lanes;
 mod surface;
 
 use glam::{Vec3, Vec3A};
@@ -101,6 +103,13 @@ pub struct ShadeContext<'a> {
     /// bounces, a glossy lobe). Without, no ray's seed is ever read, so none is made:
     /// a camera ray's is four rounds of a hash (benches/PERF.md, issue 38, round 3).
     pub(in crate::render) random: bool,
+    /// Each material as the four-lane path reads it (`None`: one it leaves to
+    /// [`shade`](Self::shade)), and the default material's.
+    plain: Vec<Option<lanes::PlainMaterial>>,
+    plain_default: Option<lanes::PlainMaterial>,
+    /// Whether the frame's hits may be shaded four at once ([`ShadeContext::shade4`]):
+    /// no random numbers, area lights or bounces, point and directional lights only.
+    lanes: bool,
 }
 
 /// Passes through alpha-cut surfaces a ray may make.
@@ -184,7 +193,15 @@ impl<'a> ShadeContext<'a> {
                 .iter()
                 .chain(std::iter::once(&default_material))
                 .any(bsdf::may_be_glossy);
+        let lanes = !random && lanes::lanes_light(&pre);
         ShadeContext {
+            plain: scene
+                .materials
+                .iter()
+                .map(lanes::PlainMaterial::of)
+                .collect(),
+            plain_default: lanes::PlainMaterial::of(&default_material),
+            lanes,
             scene,
             static_soup,
             dynamic_soup,
