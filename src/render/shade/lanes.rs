@@ -249,6 +249,19 @@ struct Mats {
 
 impl Mats {
     fn of(m: [&PlainMaterial; 4]) -> Mats {
+        if m.iter().all(|x| std::ptr::eq(*x, m[0])) {
+            // One material in all four lanes (most groups: a surface's neighbouring
+            // pixels): splatted, not gathered.
+            let m = m[0];
+            return Mats {
+                albedo: V3::splat(m.albedo),
+                f0: V3::splat(m.f0),
+                diffuse: Vec4::splat(m.diffuse),
+                rough_metal: Vec4::splat(m.rough_metal),
+                gloss: Vec4::splat(m.gloss),
+                reflects: BVec4A::splat(m.reflects),
+            };
+        }
         let v = |f: fn(&PlainMaterial) -> Vec3A| V3::of(m.map(|m| f(m).into()));
         let s = |f: fn(&PlainMaterial) -> f32| Vec4::from_array(m.map(f));
         Mats {
