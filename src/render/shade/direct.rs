@@ -63,6 +63,21 @@ impl PreLight {
     }
 }
 
+/// A spot light's cone as its falloff reads it: the cosine of the outer angle and the
+/// scale that takes `cos − cos_outer` to 1 at the inner angle; `None` for another kind.
+#[inline]
+pub(super) fn cone(l: &PreLight) -> Option<(f32, f32)> {
+    let LightKind::Spot {
+        inner_cone_angle,
+        outer_cone_angle,
+    } = l.kind
+    else {
+        return None;
+    };
+    let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
+    Some((co, 1.0 / (ci - co).max(1e-3)))
+}
+
 /// The direction towards light `l` from `origin`, its distance (infinite for a
 /// directional light) and the irradiance it brings there (range and cone applied);
 /// `None` at the light itself or where the numbers overflow.
@@ -85,13 +100,7 @@ pub(super) fn light_at(l: &PreLight, origin: Vec3A) -> Option<(Vec3A, f32, Vec3A
                 att *= (1.0 - (dist / r).powi(4)).clamp(0.0, 1.0).powi(2);
             }
             let to = d / dist;
-            if let LightKind::Spot {
-                inner_cone_angle,
-                outer_cone_angle,
-            } = l.kind
-            {
-                let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
-                let scale = 1.0 / (ci - co).max(1e-3);
+            if let Some((co, scale)) = cone(l) {
                 let cd = Vec3A::from(l.direction).dot(-to);
                 att *= ((cd - co) * scale).clamp(0.0, 1.0).powi(2);
             }

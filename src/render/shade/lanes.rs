@@ -24,7 +24,7 @@ use glam::{BVec4A, Mat4, Vec3, Vec3A, Vec4};
 
 use super::block::{BlockOut, Item};
 use super::bsdf::powi;
-use super::direct::PreLight;
+use super::direct::{cone, PreLight};
 use super::{LightPath, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT};
 use crate::geometry::{Hit, Ray};
 use crate::psf::Prim;
@@ -614,13 +614,7 @@ fn shaped(l: &PreLight, mut att: Vec4, dist: Vec4, to: V3) -> Vec4 {
         let w = clamp(Vec4::ONE - q2 * q2, 0.0, 1.0);
         att *= w * w;
     }
-    if let LightKind::Spot {
-        inner_cone_angle,
-        outer_cone_angle,
-    } = l.kind
-    {
-        let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
-        let scale = 1.0 / (ci - co).max(1e-3);
+    if let Some((co, scale)) = cone(l) {
         let cd = V3::splat(l.direction.into()).dot(to.neg());
         let w = clamp((cd - Vec4::splat(co)) * Vec4::splat(scale), 0.0, 1.0);
         att *= w * w;
@@ -636,33 +630,29 @@ fn ray_dir_reflect(d: V3, n: V3, two: Vec4) -> V3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gen::synth::Rng;
     use crate::render::camera::CameraModel;
     use crate::render::mips::TextureMips;
     use crate::render::options::ShadingOptions;
     use crate::render::sampling::Seed;
     use crate::scene::{Light, Scene, TriangleSoup};
 
-    /// A small deterministic generator (xorshift64*), so a failing case names its seed.
-    struct Rng(u64);
+    /// The crate's deterministic generator, with what these tests draw from it.
+    trait Draw {
+        fn pick<T: Copy>(&mut self, xs: &[T]) -> T;
+        fn vec(&mut self, s: f32) -> Vec3;
+        fn next(&mut self) -> u64;
+    }
 
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-        }
-        fn unit(&mut self) -> f32 {
-            (self.next() >> 40) as f32 / (1u64 << 24) as f32
-        }
-        fn range(&mut self, lo: f32, hi: f32) -> f32 {
-            lo + (hi - lo) * self.unit()
-        }
+    impl Draw for Rng {
         fn pick<T: Copy>(&mut self, xs: &[T]) -> T {
-            xs[(self.next() % xs.len() as u64) as usize]
+            xs[self.below(xs.len())]
         }
         fn vec(&mut self, s: f32) -> Vec3 {
-            Vec3::new(self.range(-s, s), self.range(-s, s), self.range(-s, s))
+            self.in_box(Vec3::splat(-s), Vec3::splat(s))
+        }
+        fn next(&mut self) -> u64 {
+            self.next_u64()
         }
     }
 
@@ -698,7 +688,7 @@ mod tests {
 
     fn material(rng: &mut Rng) -> Material {
         let mut m = Material {
-            base_color: Vec4::new(rng.unit(), rng.range(0.0, 1.5), rng.unit(), 1.0),
+            base_color: Vec4::new(rng.f32(), rng.range(0.0, 1.5), rng.f32(), 1.0),
             // Polished (a mirror ray) or rough (none): a glossy lobe draws random
             // numbers, which leaves the whole frame to the scalar path.
             roughness: rng.pick(&[0.0, 0.01, 0.4, 0.5, 0.9, 1.0]),
@@ -707,7 +697,7 @@ mod tests {
             ..Material::default()
         };
         if rng.next().is_multiple_of(6) {
-            m.emissive = Vec3::new(rng.unit(), rng.unit(), 0.0);
+            m.emissive = Vec3::new(rng.f32(), rng.f32(), 0.0);
             m.emissive_strength = rng.range(0.5, 4.0);
         }
         if rng.next().is_multiple_of(8) {
@@ -727,7 +717,7 @@ mod tests {
             name: None,
             node: 0,
             kind: rng.pick(&[LightKind::Point, LightKind::Directional, spot]),
-            color: Vec3::new(1.0, rng.unit(), rng.unit()),
+            color: Vec3::new(1.0, rng.f32(), rng.f32()),
             intensity: rng.range(0.5, 50.0),
             range: rng.pick(&[None, None, range]),
             falloff: rng.pick(&[Falloff::InverseSquare, Falloff::None]),
@@ -763,7 +753,7 @@ mod tests {
     fn four_hits_at_once_push_what_four_calls_push() {
         let (mut took, mut groups, mut frames) = (0, 0, 0);
         for seed in 1..=400u64 {
-            let mut rng = Rng(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1);
+            let mut rng = Rng::new(seed);
             let mut scene = Scene::default();
             for _ in 0..1 + rng.next() % 5 {
                 scene.materials.push(material(&mut rng));
@@ -774,7 +764,7 @@ mod tests {
             let lights: Vec<Light> = (0..1 + rng.next() % 3).map(|_| light(&mut rng)).collect();
             let camera = CameraModel::framing(Vec3::splat(-2.0), Vec3::splat(2.0), 8, 8);
             let options = ShadingOptions {
-                ambient: Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 0.2,
+                ambient: Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 0.2,
                 default_light: false,
                 ..ShadingOptions::default()
             };
@@ -800,7 +790,7 @@ mod tests {
                 for k in 0..4 {
                     let dir = rng.vec(1.0) * rng.pick(&[1.0, 0.001, 7.0]);
                     rays[k] = Ray::new(rng.vec(3.0), dir);
-                    let u = rng.unit();
+                    let u = rng.f32();
                     let v = rng.range(0.0, 1.0 - u);
                     let tri = match rng.next() % 20 {
                         0 => 1000, // out of range
@@ -814,7 +804,7 @@ mod tests {
                     });
                     items[k] = Item {
                         sample: (rng.next() % 64) as u32,
-                        weight: Vec3::new(rng.unit(), rng.unit(), rng.unit())
+                        weight: Vec3::new(rng.f32(), rng.f32(), rng.f32())
                             * rng.pick(&[1.0, 0.0, 1e-5]),
                         coverage: rng.pick(&[1.0, 0.0, 0.5]),
                         depth: rng.pick(&[0, 1, 2]),
@@ -823,8 +813,8 @@ mod tests {
                         diffuse: rng.next().is_multiple_of(6),
                         seed: Seed(rng.next()),
                         cone: super::super::Cone {
-                            width: rng.unit(),
-                            spread: rng.unit() * 0.01,
+                            width: rng.f32(),
+                            spread: rng.f32() * 0.01,
                         },
                         path: rng.pick(&[None, Some(LightPath::Specular)]),
                     };
