@@ -821,39 +821,12 @@ fn trace_pass<T: Intersector>(
                             out.light_paths = light_paths;
                             let mut at = walk(b * BLOCK);
                             if slots.is_none() && settled.is_none() && ctx.lanes(out) {
-                                // Four hits at once where the frame allows
-                                // (`ShadeContext::shade4`; the same lists).
-                                let (r4, rest) = r.split_at(r.len() / 4 * 4);
-                                for (q, (rq, hq)) in
-                                    r4.chunks_exact(4).zip(hs.chunks_exact(4)).enumerate()
-                                {
-                                    let s0 = b * BLOCK + 4 * q;
-                                    let mut one = |j: usize| {
-                                        let item = primary_item(s0 + j, &at);
-                                        at.advance();
-                                        item
-                                    };
-                                    let items = [one(0), one(1), one(2), one(3)];
-                                    let (r4, i4) = (
-                                        [&rq[0], &rq[1], &rq[2], &rq[3]],
-                                        [&items[0], &items[1], &items[2], &items[3]],
-                                    );
-                                    ctx.shade4(
-                                        r4,
-                                        i4,
-                                        [hq[0], hq[1], hq[2], hq[3]],
-                                        max_depth,
-                                        spp as u32,
-                                        out,
-                                    );
-                                }
-                                for (k, (ray, hit)) in rest.iter().zip(&hs[r4.len()..]).enumerate()
-                                {
-                                    let s = b * BLOCK + r4.len() + k;
-                                    let item = primary_item(s, &at);
-                                    ctx.shade(ray, &item, *hit, max_depth, spp as u32, out);
+                                let item = |k: usize| {
+                                    let item = primary_item(b * BLOCK + k, &at);
                                     at.advance();
-                                }
+                                    item
+                                };
+                                shade_in_fours(ctx, r, hs, item, max_depth, spp as u32, out);
                                 return;
                             }
                             for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
@@ -898,25 +871,7 @@ fn trace_pass<T: Intersector>(
                         out.clear();
                         out.light_paths = light_paths;
                         if slots.is_none() && ctx.lanes(out) {
-                            // Four hits at once where the frame allows, as above.
-                            let n4 = r.len() / 4 * 4;
-                            for ((rq, iq), hq) in r[..n4]
-                                .chunks_exact(4)
-                                .zip(it[..n4].chunks_exact(4))
-                                .zip(hs[..n4].chunks_exact(4))
-                            {
-                                ctx.shade4(
-                                    [&rq[0], &rq[1], &rq[2], &rq[3]],
-                                    [&iq[0], &iq[1], &iq[2], &iq[3]],
-                                    [hq[0], hq[1], hq[2], hq[3]],
-                                    max_depth,
-                                    spp as u32,
-                                    out,
-                                );
-                            }
-                            for ((ray, item), hit) in r[n4..].iter().zip(&it[n4..]).zip(&hs[n4..]) {
-                                ctx.shade(ray, item, *hit, max_depth, spp as u32, out);
-                            }
+                            shade_in_fours(ctx, r, hs, |k| it[k], max_depth, spp as u32, out);
                             return;
                         }
                         for (k, ((ray, item), hit)) in r.iter().zip(it).zip(hs).enumerate() {
@@ -1169,6 +1124,40 @@ fn trace_pass<T: Intersector>(
 
 /// Samples a task of [`add_unblocked`] owns.
 const ADD_SAMPLES: usize = 16 * BLOCK;
+
+/// A block's rays shaded four at a time where the frame allows
+/// ([`ShadeContext::shade4`]: the same lists as one at a time), the last few one at a
+/// time; `item(k)` is ray `k`'s bookkeeping, asked for in order.
+fn shade_in_fours(
+    ctx: &ShadeContext<'_>,
+    rays: &[Ray],
+    hits: &[Option<Hit>],
+    mut item: impl FnMut(usize) -> Item,
+    max_depth: u32,
+    spp: u32,
+    out: &mut BlockOut,
+) {
+    let n4 = rays.len() / 4 * 4;
+    for (q, (r, h)) in rays[..n4]
+        .chunks_exact(4)
+        .zip(hits.chunks_exact(4))
+        .enumerate()
+    {
+        let k = 4 * q;
+        let items = [item(k), item(k + 1), item(k + 2), item(k + 3)];
+        ctx.shade4(
+            [&r[0], &r[1], &r[2], &r[3]],
+            [&items[0], &items[1], &items[2], &items[3]],
+            [h[0], h[1], h[2], h[3]],
+            max_depth,
+            spp,
+            out,
+        );
+    }
+    for (k, (ray, hit)) in rays.iter().zip(hits).enumerate().skip(n4) {
+        ctx.shade(ray, &item(k), *hit, max_depth, spp, out);
+    }
+}
 
 /// Adds each shadow ray's contribution to its sample (`add(&mut dst[sample], i)` for
 /// ray `i`), in the order of one serial pass over the rays, in parallel over ranges of

@@ -414,6 +414,7 @@ impl ShadeContext<'_> {
         let cone_width = Vec4::from_array(items.map(|i| i.cone.width));
         let spread = Vec4::from_array(items.map(|i| i.cone.spread));
         let width = cone_width + spread * distance;
+        // Times the opaque surface's coverage, 1, as `shade` multiplies it.
         let weight = V3::of(items.map(|i| i.weight)).scale(Vec4::ONE);
 
         // The lobes (`ShadeContext::lobes`, without textures or transmission).
@@ -445,9 +446,9 @@ impl ShadeContext<'_> {
         let kr_w = weight.mul(kr);
         let krmax = kr_w.max_element();
         let two = Vec4::splat(2.0);
-        let mut r = ray_dir_reflect(dir, ns, two);
+        let mut r = reflect4(dir, ns, two);
         let under = r.dot(ng).cmple(Vec4::ZERO);
-        r = V3::select(under, ray_dir_reflect(dir, ng, two), r);
+        r = V3::select(under, reflect4(dir, ng, two), r);
 
         // What the four calls would push, hit by hit.
         let (added, origin, r, kr_w) = (added.lanes(), origin.lanes(), r.lanes(), kr_w.lanes());
@@ -623,7 +624,7 @@ fn shaped(l: &PreLight, mut att: Vec4, dist: Vec4, to: V3) -> Vec4 {
 }
 
 /// `reflect(d, n)`: `d − (2 (d·n)) n`.
-fn ray_dir_reflect(d: V3, n: V3, two: Vec4) -> V3 {
+fn reflect4(d: V3, n: V3, two: Vec4) -> V3 {
     d.sub(n.scale(two * d.dot(n)))
 }
 
