@@ -14,13 +14,14 @@ use glam::Vec3;
 use crate::geometry::Aabb;
 
 /// Tiles across the median triangle's extent, at most (within a factor of 2: the count
-/// is a power of two). 2 keeps a typical triangle within about 3 × 3 tiles, listed
-/// unclipped (`insert::COARSE` is 16). On the shared generator's 16k scene at its
-/// cluster (`benches/PERF.md`, issue 23, step 1), one thread, fastest frames: updates of
-/// 1.1–1.3 ms at 2, 1.9–2.0 at 4 and 43–47 at 8 (triangles clipped again), against
-/// 460–620 ms with the fixed tile count (two threads); dynamic candidates a reflection
-/// ray 2.9, 1.1, 0.2, and 0.04 with the fixed count.
-pub(super) const SPAN: f32 = 2.0;
+/// is a power of two). On the shared generator's 16k scene at its cluster
+/// (`benches/PERF.md`, issue 23, step 1), one thread, fastest frames: updates of 1.1–1.3
+/// ms at 2, 1.9–2.0 at 4 and 43–47 at 8 (triangles clipped again), against 460–620 ms
+/// with the fixed tile count (two threads); dynamic candidates a reflection ray 2.9,
+/// 1.1, 0.2, and 0.04 with the fixed count. 2 was kept then; once the rest of the frame
+/// had grown faster, 4 paid: the benchmark's dolly and still frames traced 3–4 ms
+/// faster for an update 1 ms longer, other scenes unchanged (issue 38, round 14).
+pub(super) const SPAN: f32 = 4.0;
 
 /// Bins of the histogram of `log2(extent of the bounds / extent of a triangle)`.
 const BINS: usize = 32;
