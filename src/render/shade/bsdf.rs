@@ -53,6 +53,34 @@ pub(super) fn may_be_glossy(m: &Material) -> bool {
     roughness < GLOSSY_LIMIT && roughness * roughness >= MIRROR_ALPHA
 }
 
+/// A material's factors as the lobes read them, once any texture has scaled metallic
+/// and roughness: both clamped to [0, 1], the transmission (none on a metal), the
+/// gloss and the reflectance at normal incidence. The four-lane path
+/// (`lanes::PlainMaterial`) works out its constants with it too, so the two agree to
+/// the bit.
+pub(super) struct Factors {
+    pub(super) metallic: f32,
+    pub(super) roughness: f32,
+    pub(super) transmission: f32,
+    pub(super) gloss: f32,
+    pub(super) f0: Vec3A,
+}
+
+impl Factors {
+    #[inline]
+    pub(super) fn of(metallic: f32, roughness: f32, transmission: f32, albedo: Vec3A) -> Factors {
+        let metallic = metallic.clamp(0.0, 1.0);
+        let roughness = roughness.clamp(0.0, 1.0);
+        Factors {
+            metallic,
+            roughness,
+            transmission: (transmission.clamp(0.0, 1.0)) * (1.0 - metallic),
+            gloss: (1.0 - roughness) * (1.0 - roughness),
+            f0: Vec3A::splat(0.04).lerp(albedo, metallic),
+        }
+    }
+}
+
 /// What a surface's material makes of light, as [`ShadeContext::lobes`] finds it.
 #[derive(Clone, Copy)]
 pub(super) struct Lobes {
@@ -279,13 +307,15 @@ impl ShadeContext<'_> {
             metallic *= t.z;
             roughness *= t.y;
         }
-        let metallic = metallic.clamp(0.0, 1.0);
-        let roughness = roughness.clamp(0.0, 1.0);
-        let transmission = (m.transmission.clamp(0.0, 1.0)) * (1.0 - metallic);
-        let gloss = (1.0 - roughness) * (1.0 - roughness);
+        let Factors {
+            metallic,
+            roughness,
+            transmission,
+            gloss,
+            f0,
+        } = Factors::of(metallic, roughness, m.transmission, albedo);
         let v = -s.dir;
         let cos_o = s.ns.dot(v).clamp(0.0, 1.0);
-        let f0 = Vec3A::splat(0.04).lerp(albedo, metallic);
         let ior = if m.ior.is_finite() && m.ior >= 1.0 {
             m.ior
         } else {

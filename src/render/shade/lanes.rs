@@ -23,7 +23,7 @@
 use glam::{BVec4A, Mat4, Vec3, Vec3A, Vec4};
 
 use super::block::{BlockOut, Item};
-use super::bsdf::powi;
+use super::bsdf::{powi, Factors};
 use super::direct::{cone, PreLight};
 use super::{LightPath, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT};
 use crate::geometry::{Hit, Ray};
@@ -67,11 +67,13 @@ impl PlainMaterial {
         }
         // As `ShadeContext::lobes` computes them without textures.
         let albedo: Vec3A = m.base_color.truncate().into();
-        let metallic = m.metallic.clamp(0.0, 1.0);
-        let roughness = m.roughness.clamp(0.0, 1.0);
-        let transmission = (m.transmission.clamp(0.0, 1.0)) * (1.0 - metallic);
-        let gloss = (1.0 - roughness) * (1.0 - roughness);
-        let f0 = Vec3A::splat(0.04).lerp(albedo, metallic);
+        let Factors {
+            metallic,
+            roughness,
+            transmission,
+            gloss,
+            f0,
+        } = Factors::of(m.metallic, m.roughness, m.transmission, albedo);
         let shininess = ShadeContext::shininess(roughness);
         // An emitter is an area light, whose samples draw random numbers: a frame
         // with one is not the lanes' anyway. The emission must be +0 to the bit (the
