@@ -2,13 +2,18 @@
 //! command line, runs one, and turns an error into one line on stderr and a non-zero
 //! exit (the only place that prints errors or exits).
 //!
-//! The command line is safe code but for one module, `cli::guard` (a SIGBUS handler that
-//! turns a bake cut short under its mapping into one line), whose blocks carry their
-//! `// SAFETY:` argument; the library's few `unsafe` blocks are its own.
+//! The command line is safe code but for two modules, `cli::guard` (a SIGBUS handler that
+//! turns a bake cut short under its mapping into one line) and `cli::oom` (the global
+//! allocator, which turns out of memory into one line and exit 5), whose blocks carry
+//! their `// SAFETY:` argument; the library's few `unsafe` blocks are its own.
 #![deny(unsafe_code)]
 #![deny(clippy::undocumented_unsafe_blocks)]
 
 mod cli;
+
+/// The system's allocator, but out of memory is an error line and exit 5 (`cli::oom`).
+#[global_allocator]
+static ALLOCATOR: cli::oom::Allocator = cli::oom::Allocator;
 
 use std::process::ExitCode;
 
@@ -33,6 +38,7 @@ fn main() -> ExitCode {
             return ExitCode::from(cli::exit::ExitClass::Usage.code());
         }
     };
+    let quiet = panics_in_one_line();
     let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| cli::run(args)));
     match run {
         Ok(Ok(code)) => code,
@@ -50,14 +56,52 @@ fn main() -> ExitCode {
             cli::report::error(&line, class);
             ExitCode::from(class.code())
         }
-        // The panic's message is on stderr already (the default hook wrote it).
         Err(_) => {
             let class = cli::exit::ExitClass::Internal;
+            // The default hook has written the panic's report above (RUST_BACKTRACE set);
+            // else the line says what panicked where.
+            let what = match FIRST_PANIC.lock().ok().and_then(|mut p| p.take()) {
+                Some(what) if quiet => what,
+                _ => "a panic, above".into(),
+            };
             cli::report::error(
-                "internal error (a panic, above): please report it with the command that caused it",
+                &format!(
+                    "internal error ({what}): please report it with the command that caused it"
+                ),
                 class,
             );
             ExitCode::from(class.code())
         }
     }
+}
+
+/// The first panic's message and place (later ones are mostly its echoes: a scoped
+/// thread's panic raises another where the scope ends).
+static FIRST_PANIC: std::sync::Mutex<Option<String>> = std::sync::Mutex::new(None);
+
+/// A panic that reaches `main` is one line like every other error, and a panic that the
+/// library contains (the USD reader's on a damaged file, which becomes an error naming
+/// the file) writes nothing: the hook only notes the first panic for `main`. With
+/// `RUST_BACKTRACE` set the default hook stays, with its report and backtrace. Whether
+/// the hook was replaced.
+fn panics_in_one_line() -> bool {
+    if std::env::var_os("RUST_BACKTRACE").is_some_and(|v| v != "0") {
+        return false;
+    }
+    std::panic::set_hook(Box::new(|info| {
+        let payload = info.payload();
+        let message = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "no message".into());
+        let at = info
+            .location()
+            .map(|l| format!(" at {}:{}", l.file(), l.line()))
+            .unwrap_or_default();
+        if let Ok(mut first) = FIRST_PANIC.lock() {
+            first.get_or_insert_with(|| format!("{}{at}", message.replace('\n', " ")));
+        }
+    }));
+    true
 }

@@ -306,6 +306,9 @@ fn bad_inputs_fail_with_one_line() {
         ),
         ("syntax.usda", &["syntax.usda"]),
         ("truncated.usdc", &["truncated.usdc"]),
+        // The USD reader panics on it (a length that overflows its allocation): an
+        // error like the others, naming the prim being read.
+        ("overflow.usdc", &["/World/Sheet", "probably damaged"]),
         ("cycle_a.usda", &["cycle"]),
         ("missing.usda", &["nowhere.usda"]),
         (
@@ -347,6 +350,62 @@ fn render_of_a_broken_file_writes_nothing() {
     assert!(!run.status.success());
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(err.contains("/World/Broken.faceVertexIndices"), "{err}");
+    assert_eq!(
+        std::fs::read_dir(&out).unwrap().count(),
+        0,
+        "wrote something"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// The command on a `.usdc` whose array length is corrupt: one line naming the file and
+/// an exit code, whether the USD reader panics on it (bad input, 3) or asks for more
+/// memory than any machine has (out of memory, 5: the allocator's failure is an error
+/// line, not an abort), in text and as a JSON event; no panic's report, no frame.
+#[test]
+fn a_corrupt_array_length_is_one_line_and_an_exit_code() {
+    let Some(dir) = scenes() else {
+        return;
+    };
+    let out = temp_dir("usd-corrupt-cli");
+    for (file, code, says) in [
+        ("overflow.usdc", 3, "probably damaged"),
+        ("huge.usdc", 5, "out of memory while reading it"),
+    ] {
+        for json in [false, true] {
+            let path = dir.join("bad").join(file);
+            let mut cmd = Command::new(env!("CARGO_BIN_EXE_subfield"));
+            cmd.arg("render")
+                .arg(&path)
+                .arg("-o")
+                .arg(out.join("f.#.exr"))
+                // The default panic report is kept where a backtrace is asked for.
+                .env_remove("RUST_BACKTRACE");
+            if json {
+                cmd.args(["--log-format", "json"]);
+            }
+            let run = cmd.output().unwrap();
+            let err = String::from_utf8_lossy(&run.stderr);
+            assert_eq!(run.status.code(), Some(code), "{file} (json {json}): {err}");
+            let lines: Vec<&str> = err.lines().collect();
+            assert_eq!(lines.len(), 1, "{file} (json {json}): not one line: {err}");
+            let line = lines[0];
+            if json {
+                let v: Value = serde_json::from_str(line).unwrap();
+                assert_eq!(v["event"], "error", "{line}");
+                assert_eq!(v["exit_code"], code, "{line}");
+                let m = v["message"].as_str().unwrap();
+                assert!(m.starts_with(&path.display().to_string()), "{line}");
+                assert!(m.contains(says), "{line}");
+            } else {
+                assert!(
+                    line.starts_with(&format!("error: {}", path.display())),
+                    "{line}"
+                );
+                assert!(line.contains(says), "{line}");
+            }
+        }
+    }
     assert_eq!(
         std::fs::read_dir(&out).unwrap().count(),
         0,

@@ -9,7 +9,6 @@ use std::time::Instant;
 
 use anyhow::Context;
 use subfield::format::{write_psf, Codec, WriteOptions};
-use subfield::import;
 use subfield::psf::{Quality, TuneEvent, Tuning};
 use subfield::scene::{ClipSelection, Scene};
 use subfield::{Psf, PsfParams};
@@ -63,7 +62,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     }
     .validate()?;
     super::prepare_output(&a.output)?;
-    let scene = import::load(&a.scene)?;
+    let scene = super::load_scene(&a.scene)?;
     let say = |s: String| {
         if !a.quiet {
             eprintln!("{s}");

@@ -10,7 +10,6 @@ use std::time::Instant;
 use anyhow::Context;
 use subfield::format::{write_psf, WriteOptions};
 use subfield::gen::museum::{write_museum, MuseumParams};
-use subfield::import;
 use subfield::render::{OutputPattern, PreviewOptions, RenderOptions, TraceDevice};
 use subfield::scene::ClipSelection;
 use subfield::{Psf, PsfParams};
@@ -77,7 +76,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let params = MuseumParams::default();
     write_museum(&params, &scene_path)
         .with_context(|| format!("cannot write {}", scene_path.display()))?;
-    let scene = import::load(&scene_path)?;
+    let scene = super::load_scene(&scene_path)?;
     let statics = scene.static_triangles(&scene.split(ClipSelection::All));
     let psf = Psf::build(
         &statics.positions,

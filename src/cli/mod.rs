@@ -6,10 +6,13 @@ mod convert;
 mod demo;
 pub mod exit;
 mod generate;
-// The one module of the CLI with unsafe code (a signal handler; see its docs).
+// The two modules of the CLI with unsafe code (a signal handler; the allocator that
+// turns out of memory into an error line; see their docs).
 #[allow(unsafe_code)]
 pub mod guard;
 mod inspect;
+#[allow(unsafe_code)]
+pub mod oom;
 mod parse;
 mod progress;
 mod render;
@@ -66,6 +69,15 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
 
 /// Sets the size of rayon's global pool (`--threads`); 0 or absent keeps rayon's default
 /// (all cores).
+/// A scene read from its file, which an allocation that fails meanwhile names
+/// ([`oom::Reading`]).
+pub fn load_scene(
+    path: &std::path::Path,
+) -> Result<subfield::scene::Scene, subfield::import::ImportError> {
+    let _reading = oom::Reading::file(path);
+    subfield::import::load(path)
+}
+
 pub fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
     if let Some(t) = threads.filter(|&t| t > 0) {
         rayon::ThreadPoolBuilder::new()

@@ -8,7 +8,6 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use subfield::farm;
 use subfield::format::ContentHash;
-use subfield::import;
 use subfield::render::{
     self, LookAt, PixelType, PreviewOptions, RenderEvent, RenderOptions, TraceDevice,
 };
@@ -397,7 +396,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     }
     opts.baked = baked;
     let clock = std::time::Instant::now();
-    let scene = import::load(&a.scene)?;
+    let scene = super::load_scene(&a.scene)?;
     size_from_scene(&a, &scene, &mut opts);
     let mut preface: Vec<String> = staged.into_iter().collect();
     preface.push(format!(

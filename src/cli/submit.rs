@@ -278,7 +278,7 @@ fn prepare(r: &render_cmd::Args, dry_run: bool, slurm_script: bool) -> anyhow::R
             bail!("{}: no such baked file", b.display());
         }
     }
-    let scene = subfield::import::load(&scene_path)?;
+    let scene = super::load_scene(&scene_path)?;
     render_cmd::size_from_scene(r, &scene, &mut opts);
     let plan = render::plan(&scene, &opts)
         .with_context(|| format!("cannot render {}", r.scene.display()))?;

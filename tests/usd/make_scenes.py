@@ -21,12 +21,14 @@ Scenes:
                  light and a distant light.
   area.usda      Y up, metres: a rect light at y = 2 and a disk light at x = 5, y = 2, both
                  turned to shine down (-Y), over a grey floor at y = 0.
-  bad/...        broken inputs (see bad_inputs()).
+  bad/...        broken inputs (see bad_inputs()), among them binary files with a
+                 corrupt array length (overflow.usdc, huge.usdc).
 """
 import json
 import math
 import os
 import random
+import struct
 import sys
 
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdUtils
@@ -319,6 +321,25 @@ def bad_inputs(bad):
     with open(os.path.join(bad, "truncated.usdc"), "wb") as f:
         f.write(data[: len(data) // 2])
     os.remove(os.path.join(bad, "whole.usdc"))
+    # Corrupt array lengths in a good binary file, as a bad disk or a crashed writer
+    # leaves them: the length of the points array (1,237 Vec3f, stored uncompressed
+    # after its 8-byte length) set past what a length can address (the USD reader's
+    # allocation overflows) and to 2^58 (an allocation no machine can make).
+    s = Usd.Stage.CreateNew(os.path.join(bad, "counts.usdc"))
+    m = UsdGeom.Mesh.Define(s, "/World/Sheet")
+    pts = [(i * 0.5 + 0.25, 1.0, 2.0) for i in range(1237)]
+    m.CreatePointsAttr(pts)
+    m.CreateFaceVertexCountsAttr([3])
+    m.CreateFaceVertexIndicesAttr([0, 1, 2])
+    s.GetRootLayer().Save()
+    data = open(os.path.join(bad, "counts.usdc"), "rb").read()
+    os.remove(os.path.join(bad, "counts.usdc"))
+    first = struct.pack("<Q", len(pts)) + struct.pack("<3f", *pts[0])
+    at = data.find(first)
+    assert at >= 0 and data.find(first, at + 1) < 0, "points array not found once"
+    for name, count in (("overflow.usdc", (1 << 63) | len(pts)), ("huge.usdc", 1 << 58)):
+        with open(os.path.join(bad, name), "wb") as f:
+            f.write(data[:at] + struct.pack("<Q", count) + data[at + 8:])
     # A cycle of sublayers.
     for a, b in (("cycle_a.usda", "cycle_b.usda"), ("cycle_b.usda", "cycle_a.usda")):
         with open(os.path.join(bad, a), "w") as f:

@@ -25,7 +25,9 @@
 mod mesh;
 mod resolver;
 
+use std::cell::RefCell;
 use std::collections::{BTreeMap, HashMap, HashSet};
+use std::panic::{self, AssertUnwindSafe};
 use std::path::Path;
 
 use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
@@ -43,7 +45,50 @@ use super::ImportError;
 use mesh::{Interp, Primvar};
 
 /// Reads a USD file and its composition.
+///
+/// The `openusd` crate (0.6) can panic on damaged data where it should return an error:
+/// an array's length read from a corrupt `.usdc` overflows its allocation (found by
+/// `fuzz/fuzz_targets/usd_import.rs`). Everything that touches the crate runs here under
+/// `catch_unwind`, so such a file is an error naming it (and the prim being read), like
+/// any other damaged input, not a crash of the whole command. The crate is used at import
+/// only: the scene it fills holds none of its values.
 pub(super) fn load(path: &Path) -> Result<Scene, ImportError> {
+    let reading = RefCell::new(String::new());
+    // AssertUnwindSafe: after a panic nothing made inside is used again (the stage and
+    // the half-read scene are dropped), and `reading` is only ever a complete string.
+    match panic::catch_unwind(AssertUnwindSafe(|| load_stage(path, &reading))) {
+        Ok(read) => read,
+        Err(payload) => {
+            let what = payload
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "no message".into());
+            let reason = format!(
+                "the USD reader stopped on data it cannot make sense of ({}); the file is \
+                 probably damaged (if usdcat reads it, please report it)",
+                what.replace('\n', " ")
+            );
+            let prim = reading.into_inner();
+            Err(if prim.is_empty() {
+                ImportError::UsdStage {
+                    path: path.to_path_buf(),
+                    reason,
+                }
+            } else {
+                ImportError::Usd {
+                    path: path.to_path_buf(),
+                    prim,
+                    attribute: None,
+                    reason,
+                }
+            })
+        }
+    }
+}
+
+/// [`load`]'s work; `reading` names the prim being read.
+fn load_stage(path: &Path, reading: &RefCell<String>) -> Result<Scene, ImportError> {
     let folder = path.parent().unwrap_or(Path::new("."));
     let folder = if folder.as_os_str().is_empty() {
         Path::new(".")
@@ -84,7 +129,7 @@ pub(super) fn load(path: &Path) -> Result<Scene, ImportError> {
             }))
         }
     };
-    let mut r = Reader::new(path, stage);
+    let mut r = Reader::new(path, stage, reading);
     r.read()?;
     if let Some(e) = outside(&refused) {
         return Err(e);
@@ -133,6 +178,8 @@ const GROUPS: &[&str] = &["", "Xform", "Scope", "SkelRoot"];
 
 struct Reader<'a> {
     path: &'a Path,
+    /// The prim being read, for an error if the USD reader panics ([`load`]).
+    reading: &'a RefCell<String>,
     stage: Stage,
     /// Time codes per second.
     tcps: f64,
@@ -154,7 +201,7 @@ struct Reader<'a> {
 }
 
 impl<'a> Reader<'a> {
-    fn new(path: &'a Path, stage: Stage) -> Self {
+    fn new(path: &'a Path, stage: Stage, reading: &'a RefCell<String>) -> Self {
         let tcps = stage.time_codes_per_second();
         let t0 = if stage.has_authored_time_code_range() {
             stage.start_time_code()
@@ -163,6 +210,7 @@ impl<'a> Reader<'a> {
         };
         Reader {
             path,
+            reading,
             stage,
             tcps,
             t0,
@@ -256,11 +304,13 @@ impl<'a> Reader<'a> {
         for p in paths {
             self.prim(&p)?;
         }
+        self.reading.replace(String::new());
         Ok(())
     }
 
     fn prim(&mut self, path: &sdf::Path) -> Result<(), ImportError> {
         let name = path.as_str().to_string();
+        self.reading.replace(name.clone());
         let parent_path = path.parent();
         let parent_name = parent_path.as_ref().map(|p| p.as_str().to_string());
         if parent_name
