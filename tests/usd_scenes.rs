@@ -414,6 +414,33 @@ fn a_corrupt_array_length_is_one_line_and_an_exit_code() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
+/// A prim name from the file with a line break in it (the USD reader accepts a quoted
+/// name with any characters; found by the fuzz target) is escaped in the error, which
+/// stays one line. Written here as text: no usd-core needed.
+#[test]
+fn a_name_with_a_line_break_stays_one_line() {
+    let dir = temp_dir("usd-name-break");
+    let path = dir.join("broken.usda");
+    std::fs::write(
+        &path,
+        "#usda 1.0\n\ndef Xform \"World\"\n{\n    def Mesh \"Sh\n urface\"\n    {\n        \
+         int[] faceVertexCounts = [3]\n        int[] faceVertexIndices = [0, 1, 7]\n        \
+         point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]\n    }\n}\n",
+    )
+    .unwrap();
+    let e = match import::load(&path) {
+        Ok(_) => panic!("read without error"),
+        Err(e) => e.to_string(),
+    };
+    assert!(!e.contains('\n'), "not one line: {e:?}");
+    assert!(
+        e.contains("/World/Sh\\n urface"),
+        "the name not escaped: {e:?}"
+    );
+    assert!(e.contains("out of range"), "{e:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn usdz_package_renders_as_the_file() {
     let Some(dir) = scenes() else {

@@ -47,12 +47,17 @@ pub enum ImportError {
 
     /// A USD stage that cannot be opened or composed (a truncated `.usdc`, a `.usda`
     /// syntax error, a missing sublayer, reference or clip, a cycle of layers).
-    #[error("{path}: cannot read the USD stage: {reason}")]
+    #[error("{path}: cannot read the USD stage: {}", printable(.reason))]
     UsdStage { path: PathBuf, reason: String },
 
     /// A USD prim or attribute that cannot be read onto the model: the prim's path and
     /// the attribute (`/World/Debris.faceVertexIndices`).
-    #[error("{path}: {prim}{}: {reason}", .attribute.as_ref().map(|a| format!(".{a}")).unwrap_or_default())]
+    #[error(
+        "{path}: {}{}: {}",
+        printable(.prim),
+        printable(&.attribute.as_ref().map(|a| format!(".{a}")).unwrap_or_default()),
+        printable(.reason)
+    )]
     Usd {
         path: PathBuf,
         /// The prim's path (`/World/Debris`); empty for the stage itself.
@@ -220,5 +225,24 @@ fn name_suffix(name: &Option<String>) -> String {
     match name {
         Some(n) => format!(" ({n:?})"),
         None => String::new(),
+    }
+}
+
+/// `s` with its control characters escaped (`\n`): prim names, attribute names and
+/// the USD reader's messages come from the file, and an error is one line.
+fn printable(s: &str) -> std::borrow::Cow<'_, str> {
+    if s.chars().any(char::is_control) {
+        s.chars()
+            .map(|c| {
+                if c.is_control() {
+                    c.escape_default().to_string()
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect::<String>()
+            .into()
+    } else {
+        s.into()
     }
 }
