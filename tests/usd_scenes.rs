@@ -415,8 +415,9 @@ fn a_corrupt_array_length_is_one_line_and_an_exit_code() {
 }
 
 /// A prim name from the file with a line break in it (the USD reader accepts a quoted
-/// name with any characters; found by the fuzz target) is escaped in the error, which
-/// stays one line. Written here as text: no usd-core needed.
+/// name with any characters, and such a name can send its traversal into recursion
+/// without end; found by the fuzz target) is refused naming its line, escaped, in one
+/// line. Written here as text: no usd-core needed.
 #[test]
 fn a_name_with_a_line_break_stays_one_line() {
     let dir = temp_dir("usd-name-break");
@@ -434,10 +435,123 @@ fn a_name_with_a_line_break_stays_one_line() {
     };
     assert!(!e.contains('\n'), "not one line: {e:?}");
     assert!(
-        e.contains("/World/Sh\\n urface"),
-        "the name not escaped: {e:?}"
+        e.contains("line 5: the prim name \"Sh\\n urface\" is not a name"),
+        "{e:?}"
     );
-    assert!(e.contains("out of range"), "{e:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Malformed scene paths and names that send the USD reader (`openusd` 0.6) into
+/// recursion or a loop without end (found by the fuzz target): a relationship's target
+/// `<r }>`, a connection's `<}>`, an xformOp name that is no attribute name. Each is one
+/// line naming the file and where, exit 3, at once (the command is given 60 s).
+#[test]
+fn paths_that_never_resolve_are_refused_at_once() {
+    let dir = temp_dir("usd-endless-paths");
+    let mesh =
+        "int[] faceVertexCounts = [3]\n        int[] faceVertexIndices = [0, 1, 2]\n        \
+                point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]";
+    let head = "#usda 1.0\ndef \"W\"\n{\n    def Mesh \"Pl\" (apiSchemas = [\"MaterialBindingAPI\"])\n    {\n";
+    let cases = [
+        (
+            "binding.usda",
+            format!("{head}        {mesh}\n        rel material:binding = <r }}>\n    }}\n}}\n"),
+            "line 9: the path <r }> is not a scene path",
+        ),
+        (
+            "connection.usda",
+            format!(
+                "{head}        {mesh}\n        rel material:binding = </W/M>\n    }}\n    \
+                 def Material \"M\"\n    {{\n        token outputs:surface.connect = <}}>\n    }}\n}}\n"
+            ),
+            "line 13: the path <}> is not a scene path",
+        ),
+        (
+            "xformop.usda",
+            format!(
+                "{head}        {mesh}\n        double3 xformOp:translate = (0, 0, 1)\n        \
+                 uniform token[] xformOpOrder = [\"xformOp:t (1, 2)\"]\n    }}\n}}\n"
+            ),
+            "/W/Pl.xformOpOrder: \"xformOp:t (1, 2)\" is not an attribute name",
+        ),
+    ];
+    for (file, text, says) in cases {
+        let path = dir.join(file);
+        std::fs::write(&path, text).unwrap();
+        let mut child = Command::new(env!("CARGO_BIN_EXE_subfield"))
+            .arg("render")
+            .arg(&path)
+            .arg("-o")
+            .arg(dir.join("out/f.#.exr"))
+            .env_remove("RUST_BACKTRACE")
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let clock = std::time::Instant::now();
+        while child.try_wait().unwrap().is_none() {
+            if clock.elapsed().as_secs() > 60 {
+                let _ = child.kill();
+                panic!("{file}: still reading after 60 s");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        let run = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(3), "{file}: {err}");
+        assert_eq!(err.lines().count(), 1, "{file}: not one line: {err}");
+        assert!(err.contains(&path.display().to_string()), "{file}: {err}");
+        assert!(err.contains(says), "{file}: {err:?} does not say {says:?}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// 100,000 nested prims: the USD reader's parser recurses once a level and overflows
+/// the stack (8 MB); the command says so in one line naming the file, exit 3, not an
+/// abort (`cli::guard`).
+#[test]
+fn nesting_beyond_the_stack_is_one_line() {
+    let dir = temp_dir("usd-deep");
+    let path = dir.join("deep.usda");
+    let n = 100_000;
+    let mut text = String::from("#usda 1.0\n");
+    for i in 0..n {
+        text.push_str(&format!("def \"P{i}\" {{\n"));
+    }
+    text.push_str(&"}\n".repeat(n));
+    std::fs::write(&path, text).unwrap();
+    for json in [false, true] {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_subfield"));
+        cmd.arg("render")
+            .arg(&path)
+            .arg("-o")
+            .arg(dir.join("out/f.#.exr"))
+            .env_remove("RUST_BACKTRACE");
+        if json {
+            cmd.args(["--log-format", "json"]);
+        }
+        let run = cmd.output().unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(3), "json {json}: {err}");
+        assert_eq!(err.lines().count(), 1, "json {json}: not one line: {err}");
+        assert!(err.contains("reading it overflowed the stack"), "{err}");
+        if json {
+            let v: Value = serde_json::from_str(err.trim()).unwrap();
+            assert_eq!(v["exit_code"], 3, "{err}");
+            assert!(
+                v["message"]
+                    .as_str()
+                    .unwrap()
+                    .starts_with(&path.display().to_string()),
+                "{err}"
+            );
+        } else {
+            assert!(
+                err.starts_with(&format!("error: {}", path.display())),
+                "{err}"
+            );
+        }
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

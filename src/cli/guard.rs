@@ -12,7 +12,15 @@
 //! hash check then says whether it is the job's). A staged bake
 //! (`--stage-dir`, `--baked-hash`) is never written again, so it cannot fault this way.
 //! **SIGXFSZ** is ignored, so that a file-size limit is an error that names the file
-//! (exit 5), not a silent kill ([`file_size_limit_as_error`]).
+//! (exit 5), not a silent kill ([`file_size_limit_as_error`]). **SIGSEGV while a scene
+//! is read**: the USD reader (`openusd` 0.6) follows some malformed paths of a damaged
+//! file without end (a relationship or connection target such as `<}>`: found by the
+//! fuzz target `usd_import`; `import::usd` now refuses the kinds found) and parses
+//! nesting recursively (100,000 nested prims overflow an 8 MB stack), until the stack
+//! overflows, which Rust reports as `thread 'main' has overflowed its stack` and an
+//! abort (exit 134, no file named). While a scene is read ([`ReadingFile`]) the fault is
+//! instead one line naming the file, and exit 3 (bad input): reading is safe code, so a
+//! fault there is that overflow.
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -197,5 +205,87 @@ fn install_stop(signal: libc::c_int) {
         sa.sa_flags = libc::SA_RESTART;
         libc::sigemptyset(&mut sa.sa_mask);
         libc::sigaction(signal, &sa, std::ptr::null_mut());
+    }
+}
+
+/// The line a fault while a scene is read writes (text or JSON), made before the
+/// handler is installed; leaked, so that it lives as long as the handler may run.
+static SEGV_LINE: std::sync::atomic::AtomicPtr<Vec<u8>> =
+    std::sync::atomic::AtomicPtr::new(std::ptr::null_mut());
+
+/// SIGSEGV's action before [`ReadingFile`] installed its own (Rust's stack overflow
+/// report), put back when the file is read.
+static SEGV_BEFORE: std::sync::Mutex<Option<libc::sigaction>> = std::sync::Mutex::new(None);
+
+/// While this lives, a segmentation fault (a stack overflow while the scene is read) is
+/// one line naming `path` and exit 3.
+pub struct ReadingFile;
+
+impl ReadingFile {
+    pub fn new(path: &Path) -> ReadingFile {
+        let message = format!(
+            "{}: reading it overflowed the stack (prims nested deeper than the reader can \
+             follow, or something it follows without end); the file is probably damaged",
+            path.display()
+        );
+        let line = if JSON_LINES.load(Ordering::SeqCst) {
+            format!(
+                "{}\n",
+                serde_json::json!({
+                    "class": "bad-input",
+                    "event": "error",
+                    "exit_code": 3,
+                    "message": message,
+                })
+            )
+        } else {
+            format!("error: {message}\n")
+        };
+        let old = SEGV_LINE.swap(Box::into_raw(Box::new(line.into_bytes())), Ordering::SeqCst);
+        // The line before, if any, stays allocated: a handler may be reading it.
+        let _ = old;
+        // SAFETY: `sa` is zero-initialised with an empty mask and an `extern "C"
+        // fn(c_int)` handler (no SA_SIGINFO); SA_ONSTACK runs it on the alternate
+        // signal stack that Rust's runtime sets up for its own stack overflow handler
+        // (the overflowed stack has no room left). The old action is read into `old`
+        // and kept to be put back. `on_segv` touches only an atomic pointer to a
+        // leaked, never-freed buffer and async-signal-safe calls.
+        unsafe {
+            let mut sa: libc::sigaction = std::mem::zeroed();
+            sa.sa_sigaction = on_segv as extern "C" fn(libc::c_int) as libc::sighandler_t;
+            sa.sa_flags = libc::SA_ONSTACK;
+            libc::sigemptyset(&mut sa.sa_mask);
+            let mut old: libc::sigaction = std::mem::zeroed();
+            if libc::sigaction(libc::SIGSEGV, &sa, &mut old) == 0 {
+                if let Ok(mut before) = SEGV_BEFORE.lock() {
+                    before.get_or_insert(old);
+                }
+            }
+        }
+        ReadingFile
+    }
+}
+
+impl Drop for ReadingFile {
+    fn drop(&mut self) {
+        if let Some(old) = SEGV_BEFORE.lock().ok().and_then(|mut b| b.take()) {
+            // SAFETY: `old` is the action `sigaction` itself returned for SIGSEGV.
+            unsafe {
+                libc::sigaction(libc::SIGSEGV, &old, std::ptr::null_mut());
+            }
+        }
+    }
+}
+
+extern "C" fn on_segv(_signal: libc::c_int) {
+    let line = SEGV_LINE.load(Ordering::SeqCst);
+    // SAFETY: a non-null `line` points to a leaked `Vec<u8>` that is never freed or
+    // changed (a new line replaces the pointer, not the buffer); write(2) and _exit(2)
+    // are async-signal-safe, and _exit ends the process without running anything else.
+    unsafe {
+        if let Some(l) = line.as_ref() {
+            libc::write(2, l.as_ptr().cast(), l.len());
+        }
+        libc::_exit(3)
     }
 }

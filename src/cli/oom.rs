@@ -66,8 +66,9 @@ unsafe impl GlobalAlloc for Allocator {
 /// The scene file being read: its path as text and as the inside of a JSON string.
 static READING: Mutex<Option<(String, String)>> = Mutex::new(None);
 
-/// While this lives, an allocation that fails names `path` as the file being read.
-pub struct Reading;
+/// While this lives, an allocation that fails names `path` as the file being read, and
+/// so does a stack overflow (`guard::ReadingFile`).
+pub struct Reading(#[allow(dead_code)] super::guard::ReadingFile);
 
 impl Reading {
     pub fn file(path: &Path) -> Reading {
@@ -81,7 +82,7 @@ impl Reading {
         if let Ok(mut r) = READING.lock() {
             *r = Some((text, json));
         }
-        Reading
+        Reading(super::guard::ReadingFile::new(path))
     }
 }
 

@@ -23,6 +23,7 @@
 //! folder policy ([`resolver`]).
 
 mod mesh;
+mod paths;
 mod resolver;
 
 use std::cell::RefCell;
@@ -367,6 +368,15 @@ impl<'a> Reader<'a> {
                     )
                 });
                 continue;
+            }
+            // A name from the file: the USD reader loops without end on a property path
+            // made from one that is no attribute name (found by the fuzz target).
+            if op.contains('.') || !sdf::Path::is_valid_namespace_identifier(op) {
+                return Err(self.err(
+                    name,
+                    Some("xformOpOrder"),
+                    format!("\"{}\" is not an attribute name", paths::shown(op)),
+                ));
             }
             let t = prim
                 .attribute(op)

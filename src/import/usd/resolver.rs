@@ -1,6 +1,7 @@
 //! The folder policy (`import::folder`) for the layers a USD stage opens: sublayers,
 //! references, payloads and clip files resolve only inside the scene's folder. A path
-//! outside is not resolved (so never opened) and is remembered, for the error.
+//! outside is not resolved (so never opened) and is remembered, for the error. Every
+//! layer opened passes the scene-path check of [`super::paths`] first.
 
 use std::cell::RefCell;
 use std::io;
@@ -73,8 +74,13 @@ impl Resolver for FolderResolver {
         None
     }
 
+    /// The layer's bytes, once its scene paths pass [`super::paths::check_layer`] (a
+    /// malformed path sends the USD reader into recursion without end).
     fn open_asset(&self, resolved_path: &ResolvedPath) -> io::Result<Box<dyn Asset>> {
-        self.inner.open_asset(resolved_path)
+        let bytes = self.inner.open_asset(resolved_path)?.read_all()?;
+        super::paths::check_layer(&bytes)
+            .map_err(|why| io::Error::new(io::ErrorKind::InvalidData, why))?;
+        Ok(Box::new(io::Cursor::new(bytes)))
     }
 
     fn identity(&self) -> String {
