@@ -64,111 +64,115 @@ fn prim_name(name: &str) -> bool {
 /// `.usda` layer's text, with its line: the text is scanned as the format's lexer would,
 /// past comments, strings (single, double, triple quoted) and asset paths (`@...@`,
 /// `@@@...@@@`).
-pub(super) fn check_usda(text: &str) -> Result<(), String> {
-    let b = text.as_bytes();
-    let mut i = 0;
-    let mut line = 1;
-    // The last two words before a string: `def "name"` or `def Mesh "name"` (also
-    // `over`, `class`) make it a prim's name.
-    let mut words: [&str; 2] = ["", ""];
-    let specifier = |w: &str| matches!(w, "def" | "over" | "class");
-    // Skips to just past `close` from `i`, counting lines; a backslash escapes the next
-    // byte where `escapes`.
-    let skip = |i: &mut usize, line: &mut usize, close: &[u8], escapes: bool| {
+pub(super) fn check_usda(b: &[u8]) -> Result<(), String> {
+    // The line of byte `at`, for an error.
+    let line = |at: usize| 1 + memchr::memchr_iter(b'\n', &b[..at]).count();
+    let text = |from: usize, to: usize| String::from_utf8_lossy(&b[from..to]);
+    // Skips to just past `close` from `i`; a backslash escapes the next byte where
+    // `escapes`.
+    let skip = |i: &mut usize, close: &[u8], escapes: bool| {
         while *i < b.len() {
             if b[*i..].starts_with(close) {
                 *i += close.len();
                 return;
             }
-            if b[*i] == b'\n' {
-                *line += 1;
-            }
             if escapes && b[*i] == b'\\' {
                 *i += 1;
-                if *i < b.len() && b[*i] == b'\n' {
-                    *line += 1;
-                }
             }
             *i += 1;
         }
     };
+    let mut i = 0;
     while i < b.len() {
         match b[i] {
-            b'\n' => {
-                line += 1;
-                i += 1;
-            }
             b'#' => {
-                while i < b.len() && b[i] != b'\n' {
-                    i += 1;
-                }
+                i = memchr::memchr(b'\n', &b[i..]).map_or(b.len(), |n| i + n);
             }
             q @ (b'"' | b'\'') => {
                 let triple = [q, q, q];
-                let start_line = line;
                 if b[i..].starts_with(&triple) {
                     i += 3;
-                    skip(&mut i, &mut line, &triple, true);
+                    skip(&mut i, &triple, true);
                 } else {
+                    let at = i;
+                    let names_prim = after_specifier(&b[..i]);
                     let start = i + 1;
                     i += 1;
-                    skip(&mut i, &mut line, &[q], true);
-                    let names_prim =
-                        specifier(words[1]) || (specifier(words[0]) && prim_name(words[1]));
-                    let name = &text[start..i.saturating_sub(1).max(start)];
-                    if names_prim && !prim_name(name) {
+                    skip(&mut i, &[q], true);
+                    let name = text(start, i.saturating_sub(1).max(start));
+                    if names_prim && !prim_name(&name) {
                         return Err(format!(
-                            "line {start_line}: the prim name \"{}\" is not a name (a letter \
-                             or '_', then letters, digits or '_')",
-                            shown(name)
+                            "line {}: the prim name \"{}\" is not a name (a letter or '_', then \
+                             letters, digits or '_')",
+                            line(at),
+                            shown(&name)
                         ));
                     }
                 }
-                words = ["", ""];
             }
             b'@' => {
-                words = ["", ""];
                 if b[i..].starts_with(b"@@@") {
                     i += 3;
-                    skip(&mut i, &mut line, b"@@@", false);
+                    skip(&mut i, b"@@@", false);
                 } else {
                     i += 1;
-                    skip(&mut i, &mut line, b"@", false);
+                    skip(&mut i, b"@", false);
                 }
             }
             b'<' => {
-                words = ["", ""];
                 let start = i + 1;
-                let Some(len) = b[start..].iter().position(|&c| c == b'>') else {
+                let Some(len) = memchr::memchr(b'>', &b[start..]) else {
                     // Unclosed: the reader's parser says so.
                     return Ok(());
                 };
-                let path = &text[start..start + len];
-                if let Some(why) = malformed(path) {
+                let path = text(start, start + len);
+                if let Some(why) = malformed(&path) {
                     return Err(format!(
-                        "line {line}: the path <{}> is not a scene path ({why})",
-                        shown(path)
+                        "line {}: the path <{}> is not a scene path ({why})",
+                        line(i),
+                        shown(&path)
                     ));
                 }
-                line += path.matches('\n').count();
                 i = start + len + 1;
             }
-            c if c.is_ascii_alphanumeric() || c == b'_' || c == b':' => {
-                let start = i;
-                while i < b.len() && (b[i].is_ascii_alphanumeric() || b[i] == b'_' || b[i] == b':')
-                {
+            // Only those bytes start something to look at: the rest (numbers above all)
+            // is passed over in a tight loop.
+            _ => {
+                i += 1;
+                while i < b.len() && !matches!(b[i], b'#' | b'"' | b'\'' | b'@' | b'<') {
                     i += 1;
                 }
-                words = [words[1], &text[start..i]];
-            }
-            c if c.is_ascii_whitespace() => i += 1,
-            _ => {
-                words = ["", ""];
-                i += 1;
             }
         }
     }
     Ok(())
+}
+
+/// Whether the text before a string ends in `def`, `over` or `class`, maybe followed by
+/// a type name (`def Mesh`): the string is then a prim's name. Read backwards over
+/// white space and words (letters, digits, `_`, `:`).
+fn after_specifier(before: &[u8]) -> bool {
+    let word_char = |c: u8| c.is_ascii_alphanumeric() || c == b'_' || c == b':';
+    let mut end = before.len();
+    let word = |end: &mut usize| -> &[u8] {
+        while *end > 0 && before[*end - 1].is_ascii_whitespace() {
+            *end -= 1;
+        }
+        let stop = *end;
+        while *end > 0 && word_char(before[*end - 1]) {
+            *end -= 1;
+        }
+        &before[*end..stop]
+    };
+    let specifier = |w: &[u8]| matches!(w, b"def" | b"over" | b"class");
+    let last = word(&mut end);
+    if specifier(last) {
+        return true;
+    }
+    if last.is_empty() || !prim_name(&String::from_utf8_lossy(last)) {
+        return false;
+    }
+    specifier(word(&mut end))
 }
 
 /// The first malformed path of a `.usdc` layer (its PATHS section, as the USD reader
@@ -193,7 +197,7 @@ pub(super) fn check_layer(bytes: &[u8]) -> Result<(), String> {
     if bytes.starts_with(openusd::usdc::MAGIC) {
         check_usdc(bytes)
     } else if bytes.starts_with(b"#usda") {
-        check_usda(&String::from_utf8_lossy(bytes))
+        check_usda(bytes)
     } else {
         Ok(())
     }
@@ -261,23 +265,23 @@ mod tests {
         let ok = "#usda 1.0\n(\n    doc = \"\"\"a <} > in a\ndocstring\"\"\"\n)\n# a <}> in a comment\n\
                   def \"W\" (references = @./a<}>.usda@</Asset>)\n{\n    string s = \"<}>\\\"<}>\"\n    \
                   string t = '<}>'\n    asset a = @@@x@y<}>@@@\n    rel r = </W/M{v=a}N.x>\n}\n";
-        assert_eq!(check_usda(ok), Ok(()));
+        assert_eq!(check_usda(ok.as_bytes()), Ok(()));
         // Prim names: only after `def`, `over`, `class` (and a type name).
         let names =
             "#usda 1.0\ndef Xform \"Wörld_1\" (kind = \"a b\")\n{\n    over \"_x\" {}\n    \
                      class \"C\" {}\n    variantSet \"shading set\" = { \"red one\" {} }\n    \
                      string def = \"a b\"\n}\n";
-        assert_eq!(check_usda(names), Ok(()));
-        let e = check_usda("#usda 1.0\ndef \"d\"\n{\n def \"\n}O}\" {}\n}\n").unwrap_err();
+        assert_eq!(check_usda(names.as_bytes()), Ok(()));
+        let e = check_usda(b"#usda 1.0\ndef \"d\"\n{\n def \"\n}O}\" {}\n}\n").unwrap_err();
         assert!(e.starts_with("line 4: the prim name \"\\n}O}\""), "{e}");
-        let e = check_usda("#usda 1.0\ndef Mesh \"1st\" {}\n").unwrap_err();
+        let e = check_usda(b"#usda 1.0\ndef Mesh \"1st\" {}\n").unwrap_err();
         assert!(e.starts_with("line 2: the prim name \"1st\""), "{e}");
         let bad = "#usda 1.0\ndef \"W\"\n{\n    rel material:binding = <r }>\n}\n";
-        let e = check_usda(bad).unwrap_err();
+        let e = check_usda(bad.as_bytes()).unwrap_err();
         assert!(e.starts_with("line 4: the path <r }>"), "{e}");
         // Lines counted past a multi-line string and path.
         let bad = "#usda 1.0\n\"\"\"\n\n\"\"\"\nrel a = </A>\nrel b = <\n}>\n";
-        let e = check_usda(bad).unwrap_err();
+        let e = check_usda(bad.as_bytes()).unwrap_err();
         assert!(e.starts_with("line 6: the path <\\n}>"), "{e}");
     }
 }
