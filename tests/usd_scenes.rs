@@ -358,6 +358,60 @@ fn render_of_a_broken_file_writes_nothing() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
+/// `subfield render PATH`, which must fail: its exit code and its error message, the
+/// one line it writes on stderr (asserted to be one line; with `json`, an `error` event
+/// whose `exit_code` is the process's, and its `message`; else the line after
+/// `error: `). No backtrace is asked for (the default panic report would add lines);
+/// the command is given 60 s.
+fn render_error(path: &Path, out: &Path, json: bool) -> (Option<i32>, String) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_subfield"));
+    cmd.arg("render")
+        .arg(path)
+        .arg("-o")
+        .arg(out.join("f.#.exr"))
+        .env_remove("RUST_BACKTRACE")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped());
+    if json {
+        cmd.args(["--log-format", "json"]);
+    }
+    let mut child = cmd.spawn().unwrap();
+    let clock = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if clock.elapsed().as_secs() > 60 {
+            let _ = child.kill();
+            panic!("{}: still reading after 60 s", path.display());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let run = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&run.stderr).into_owned();
+    let code = run.status.code();
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "{} (json {json}): not one line: {err}",
+        path.display()
+    );
+    let message = if json {
+        let v: Value = serde_json::from_str(lines[0]).unwrap();
+        assert_eq!(v["event"], "error", "{err}");
+        assert_eq!(v["exit_code"].as_i64(), code.map(i64::from), "{err}");
+        v["message"].as_str().unwrap().to_string()
+    } else {
+        lines[0]
+            .strip_prefix("error: ")
+            .unwrap_or_else(|| panic!("not an error line: {err}"))
+            .to_string()
+    };
+    assert!(
+        message.starts_with(&path.display().to_string()),
+        "names another file: {message}"
+    );
+    (code, message)
+}
+
 /// The command on a `.usdc` whose array length is corrupt: one line naming the file and
 /// an exit code, whether the USD reader panics on it (bad input, 3) or asks for more
 /// memory than any machine has (out of memory, 5: the allocator's failure is an error
@@ -373,37 +427,9 @@ fn a_corrupt_array_length_is_one_line_and_an_exit_code() {
         ("huge.usdc", 5, "out of memory while reading it"),
     ] {
         for json in [false, true] {
-            let path = dir.join("bad").join(file);
-            let mut cmd = Command::new(env!("CARGO_BIN_EXE_subfield"));
-            cmd.arg("render")
-                .arg(&path)
-                .arg("-o")
-                .arg(out.join("f.#.exr"))
-                // The default panic report is kept where a backtrace is asked for.
-                .env_remove("RUST_BACKTRACE");
-            if json {
-                cmd.args(["--log-format", "json"]);
-            }
-            let run = cmd.output().unwrap();
-            let err = String::from_utf8_lossy(&run.stderr);
-            assert_eq!(run.status.code(), Some(code), "{file} (json {json}): {err}");
-            let lines: Vec<&str> = err.lines().collect();
-            assert_eq!(lines.len(), 1, "{file} (json {json}): not one line: {err}");
-            let line = lines[0];
-            if json {
-                let v: Value = serde_json::from_str(line).unwrap();
-                assert_eq!(v["event"], "error", "{line}");
-                assert_eq!(v["exit_code"], code, "{line}");
-                let m = v["message"].as_str().unwrap();
-                assert!(m.starts_with(&path.display().to_string()), "{line}");
-                assert!(m.contains(says), "{line}");
-            } else {
-                assert!(
-                    line.starts_with(&format!("error: {}", path.display())),
-                    "{line}"
-                );
-                assert!(line.contains(says), "{line}");
-            }
+            let (got, message) = render_error(&dir.join("bad").join(file), &out, json);
+            assert_eq!(got, Some(code), "{file} (json {json}): {message}");
+            assert!(message.contains(says), "{file}: {message}");
         }
     }
     assert_eq!(
@@ -478,30 +504,12 @@ fn paths_that_never_resolve_are_refused_at_once() {
     for (file, text, says) in cases {
         let path = dir.join(file);
         std::fs::write(&path, text).unwrap();
-        let mut child = Command::new(env!("CARGO_BIN_EXE_subfield"))
-            .arg("render")
-            .arg(&path)
-            .arg("-o")
-            .arg(dir.join("out/f.#.exr"))
-            .env_remove("RUST_BACKTRACE")
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let clock = std::time::Instant::now();
-        while child.try_wait().unwrap().is_none() {
-            if clock.elapsed().as_secs() > 60 {
-                let _ = child.kill();
-                panic!("{file}: still reading after 60 s");
-            }
-            std::thread::sleep(std::time::Duration::from_millis(20));
-        }
-        let run = child.wait_with_output().unwrap();
-        let err = String::from_utf8_lossy(&run.stderr);
-        assert_eq!(run.status.code(), Some(3), "{file}: {err}");
-        assert_eq!(err.lines().count(), 1, "{file}: not one line: {err}");
-        assert!(err.contains(&path.display().to_string()), "{file}: {err}");
-        assert!(err.contains(says), "{file}: {err:?} does not say {says:?}");
+        let (code, message) = render_error(&path, &dir.join("out"), false);
+        assert_eq!(code, Some(3), "{file}: {message}");
+        assert!(
+            message.contains(says),
+            "{file}: {message:?} does not say {says:?}"
+        );
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -521,36 +529,12 @@ fn nesting_beyond_the_stack_is_one_line() {
     text.push_str(&"}\n".repeat(n));
     std::fs::write(&path, text).unwrap();
     for json in [false, true] {
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_subfield"));
-        cmd.arg("render")
-            .arg(&path)
-            .arg("-o")
-            .arg(dir.join("out/f.#.exr"))
-            .env_remove("RUST_BACKTRACE");
-        if json {
-            cmd.args(["--log-format", "json"]);
-        }
-        let run = cmd.output().unwrap();
-        let err = String::from_utf8_lossy(&run.stderr);
-        assert_eq!(run.status.code(), Some(3), "json {json}: {err}");
-        assert_eq!(err.lines().count(), 1, "json {json}: not one line: {err}");
-        assert!(err.contains("reading it overflowed the stack"), "{err}");
-        if json {
-            let v: Value = serde_json::from_str(err.trim()).unwrap();
-            assert_eq!(v["exit_code"], 3, "{err}");
-            assert!(
-                v["message"]
-                    .as_str()
-                    .unwrap()
-                    .starts_with(&path.display().to_string()),
-                "{err}"
-            );
-        } else {
-            assert!(
-                err.starts_with(&format!("error: {}", path.display())),
-                "{err}"
-            );
-        }
+        let (code, message) = render_error(&path, &dir.join("out"), json);
+        assert_eq!(code, Some(3), "json {json}: {message}");
+        assert!(
+            message.contains("reading it overflowed the stack"),
+            "{message}"
+        );
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
