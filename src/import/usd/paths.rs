@@ -82,6 +82,15 @@ pub(super) fn check_usda(b: &[u8]) -> Result<(), String> {
             *i += 1;
         }
     };
+    // The next `@` or `'` at or after a position, kept: those are rare, and a search for
+    // them from every `"`, `<` or `#` would scan to the end of a long file each time.
+    let mut other = 0;
+    let mut next_other = |from: usize| -> usize {
+        if other < from {
+            other = memchr::memchr2(b'@', b'\'', &b[from..]).map_or(b.len(), |n| from + n);
+        }
+        other
+    };
     let mut i = 0;
     while i < b.len() {
         match b[i] {
@@ -136,12 +145,12 @@ pub(super) fn check_usda(b: &[u8]) -> Result<(), String> {
                 i = start + len + 1;
             }
             // Only those bytes start something to look at: the rest (numbers above all)
-            // is passed over in a tight loop.
+            // is passed over by `memchr`.
             _ => {
-                i += 1;
-                while i < b.len() && !matches!(b[i], b'#' | b'"' | b'\'' | b'@' | b'<') {
-                    i += 1;
-                }
+                let from = i + 1;
+                let common =
+                    memchr::memchr3(b'#', b'"', b'<', &b[from..]).map_or(b.len(), |n| from + n);
+                i = common.min(next_other(from));
             }
         }
     }

@@ -80,10 +80,42 @@ impl Resolver for FolderResolver {
         let bytes = self.inner.open_asset(resolved_path)?.read_all()?;
         super::paths::check_layer(&bytes)
             .map_err(|why| io::Error::new(io::ErrorKind::InvalidData, why))?;
-        Ok(Box::new(io::Cursor::new(bytes)))
+        Ok(Box::new(Layer(io::Cursor::new(bytes))))
     }
 
     fn identity(&self) -> String {
         format!("subfield-folder:{}", self.folder.display())
+    }
+}
+
+/// A layer's bytes, read once: the USD reader's `read_all` takes them without a copy.
+struct Layer(io::Cursor<Vec<u8>>);
+
+impl io::Read for Layer {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        self.0.read(buf)
+    }
+}
+
+impl io::Seek for Layer {
+    fn seek(&mut self, pos: io::SeekFrom) -> io::Result<u64> {
+        self.0.seek(pos)
+    }
+}
+
+impl Asset for Layer {
+    fn size(&self) -> io::Result<u64> {
+        Ok(self.0.get_ref().len() as u64)
+    }
+
+    /// The bytes not yet read, moved out (all of them for a fresh layer).
+    fn read_all(&mut self) -> io::Result<Vec<u8>> {
+        let at = usize::try_from(self.0.position()).unwrap_or(usize::MAX);
+        let mut bytes = std::mem::take(self.0.get_mut());
+        self.0.set_position(0);
+        if at > 0 {
+            bytes.drain(..at.min(bytes.len()));
+        }
+        Ok(bytes)
     }
 }
