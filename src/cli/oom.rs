@@ -68,7 +68,9 @@ static READING: Mutex<Option<(String, String)>> = Mutex::new(None);
 
 /// While this lives, an allocation that fails names `path` as the file being read, and
 /// so does a stack overflow (`guard::ReadingFile`).
-pub struct Reading(#[allow(dead_code)] super::guard::ReadingFile);
+pub struct Reading {
+    _stack: super::guard::ReadingFile,
+}
 
 impl Reading {
     pub fn file(path: &Path) -> Reading {
@@ -82,7 +84,9 @@ impl Reading {
         if let Ok(mut r) = READING.lock() {
             *r = Some((text, json));
         }
-        Reading(super::guard::ReadingFile::new(path))
+        Reading {
+            _stack: super::guard::ReadingFile::new(path),
+        }
     }
 }
 

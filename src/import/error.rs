@@ -230,7 +230,7 @@ fn name_suffix(name: &Option<String>) -> String {
 
 /// `s` with its control characters escaped (`\n`): prim names, attribute names and
 /// the USD reader's messages come from the file, and an error is one line.
-fn printable(s: &str) -> std::borrow::Cow<'_, str> {
+pub(crate) fn printable(s: &str) -> std::borrow::Cow<'_, str> {
     if s.chars().any(char::is_control) {
         s.chars()
             .map(|c| {

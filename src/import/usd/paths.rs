@@ -212,9 +212,11 @@ pub(super) fn check_layer(bytes: &[u8]) -> Result<(), String> {
     }
 }
 
-/// A path or name for an error line: control characters escaped, at most 80 characters.
+/// A path or name for an error line: at most 80 characters, control characters escaped
+/// as the import's errors escape them.
 pub(super) fn shown(path: &str) -> String {
-    let mut s: String = path.chars().take(80).flat_map(char::escape_debug).collect();
+    let cut: String = path.chars().take(80).collect();
+    let mut s = crate::import::error::printable(&cut).into_owned();
     if path.chars().count() > 80 {
         s.push('…');
     }
