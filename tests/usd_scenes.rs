@@ -364,7 +364,26 @@ fn render_of_a_broken_file_writes_nothing() {
 /// `error: `). No backtrace is asked for (the default panic report would add lines);
 /// the command is given 60 s.
 fn render_error(path: &Path, out: &Path, json: bool) -> (Option<i32>, String) {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_subfield"));
+    render_error_within(path, out, json, None)
+}
+
+/// [`render_error`], the command run with its address space limited to `kib` KiB
+/// (`ulimit -v`) where given.
+fn render_error_within(
+    path: &Path,
+    out: &Path,
+    json: bool,
+    kib: Option<u64>,
+) -> (Option<i32>, String) {
+    let bin = env!("CARGO_BIN_EXE_subfield");
+    let mut cmd = match kib {
+        Some(kib) => {
+            let mut sh = Command::new("sh");
+            sh.args(["-c", &format!("ulimit -v {kib} && exec \"$0\" \"$@\""), bin]);
+            sh
+        }
+        None => Command::new(bin),
+    };
     cmd.arg("render")
         .arg(path)
         .arg("-o")
@@ -413,25 +432,43 @@ fn render_error(path: &Path, out: &Path, json: bool) -> (Option<i32>, String) {
 }
 
 /// The command on a `.usdc` whose array length is corrupt: one line naming the file and
-/// an exit code, whether the USD reader panics on it (bad input, 3) or asks for more
-/// memory than any machine has (out of memory, 5: the allocator's failure is an error
-/// line, not an abort), in text and as a JSON event; no panic's report, no frame.
+/// an exit code, in text and as a JSON event; no panic's report, no frame. The USD
+/// reader panics on a length past what a length can address (bad input, 3); a length
+/// beyond what the file's bytes can decode to is refused before it is allocated (bad
+/// input, 3: without the command allocator's bound, `big.usdc` took 6 GiB and seconds
+/// before the reader's own error, which does not say "corrupt array length"); one
+/// within that bound but beyond the memory the process may have is out of memory (5:
+/// the allocator's failure is an error line, not an abort), here under a 768 MiB limit.
 #[test]
 fn a_corrupt_array_length_is_one_line_and_an_exit_code() {
     let Some(dir) = scenes() else {
         return;
     };
     let out = temp_dir("usd-corrupt-cli");
-    for (file, code, says) in [
-        ("overflow.usdc", 3, "probably damaged"),
-        ("huge.usdc", 5, "out of memory while reading it"),
+    let damaged = "the file is probably damaged (a corrupt array length)";
+    for (file, code, says, kib) in [
+        ("overflow.usdc", 3, "probably damaged", None),
+        ("huge.usdc", 3, damaged, None),
+        ("big.usdc", 3, damaged, None),
+        (
+            "short.usdc",
+            5,
+            "out of memory while reading it",
+            Some(768 << 10),
+        ),
     ] {
         for json in [false, true] {
-            let (got, message) = render_error(&dir.join("bad").join(file), &out, json);
+            let path = dir.join("bad").join(file);
+            let (got, message) = render_error_within(&path, &out, json, kib);
             assert_eq!(got, Some(code), "{file} (json {json}): {message}");
             assert!(message.contains(says), "{file}: {message}");
         }
     }
+    // Within the bound and without a limit, the reader's own error (the file is too
+    // short for the length): the bound refuses only what no file of this size holds.
+    let (got, message) = render_error(&dir.join("bad").join("short.usdc"), &out, false);
+    assert_eq!(got, Some(3), "{message}");
+    assert!(!message.contains(damaged), "{message}");
     assert_eq!(
         std::fs::read_dir(&out).unwrap().count(),
         0,

@@ -67,8 +67,6 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     }
 }
 
-/// Sets the size of rayon's global pool (`--threads`); 0 or absent keeps rayon's default
-/// (all cores).
 /// A scene read from its file, which an allocation that fails meanwhile names
 /// ([`oom::Reading`]).
 pub fn load_scene(
@@ -78,6 +76,8 @@ pub fn load_scene(
     subfield::import::load(path)
 }
 
+/// Sets the size of rayon's global pool (`--threads`); 0 or absent keeps rayon's default
+/// (all cores).
 pub fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
     if let Some(t) = threads.filter(|&t| t > 0) {
         rayon::ThreadPoolBuilder::new()

@@ -38,6 +38,11 @@ use std::path::Path;
 pub use error::ImportError;
 pub use folder::Outside;
 pub use gltf_write::{to_glb, to_gltf_json, write_gltf};
+/// The most one allocation may ask for on this thread while a USD stage is read here
+/// (`None` elsewhere): a global allocator that refuses more turns a damaged array length
+/// into an error instead of gigabytes allocated and filled (`import::usd::cap`).
+#[cfg(feature = "usd")]
+pub use usd::allocation_cap as usd_allocation_cap;
 /// Triangles of the fan a USD disk light becomes (an emitting card).
 #[cfg(feature = "usd")]
 pub use usd::DISK_SEGMENTS as USD_DISK_SEGMENTS;

@@ -22,7 +22,8 @@ Scenes:
   area.usda      Y up, metres: a rect light at y = 2 and a disk light at x = 5, y = 2, both
                  turned to shine down (-Y), over a grey floor at y = 0.
   bad/...        broken inputs (see bad_inputs()), among them binary files with a
-                 corrupt array length (overflow.usdc, huge.usdc).
+                 corrupt array length (overflow.usdc, huge.usdc, big.usdc,
+                 short.usdc).
 """
 import json
 import math
@@ -324,7 +325,9 @@ def bad_inputs(bad):
     # Corrupt array lengths in a good binary file, as a bad disk or a crashed writer
     # leaves them: the length of the points array (1,237 Vec3f, stored uncompressed
     # after its 8-byte length) set past what a length can address (the USD reader's
-    # allocation overflows) and to 2^58 (an allocation no machine can make).
+    # allocation overflows), to 2^58 (an allocation no machine can make), to 2^29 (6 GiB:
+    # one many machines can make, far more than the file can hold) and to 80,000,000
+    # (0.9 GiB: within what a file may decode to, for a test under a memory limit).
     s = Usd.Stage.CreateNew(os.path.join(bad, "counts.usdc"))
     m = UsdGeom.Mesh.Define(s, "/World/Sheet")
     pts = [(i * 0.5 + 0.25, 1.0, 2.0) for i in range(1237)]
@@ -337,7 +340,12 @@ def bad_inputs(bad):
     first = struct.pack("<Q", len(pts)) + struct.pack("<3f", *pts[0])
     at = data.find(first)
     assert at >= 0 and data.find(first, at + 1) < 0, "points array not found once"
-    for name, count in (("overflow.usdc", (1 << 63) | len(pts)), ("huge.usdc", 1 << 58)):
+    for name, count in (
+        ("overflow.usdc", (1 << 63) | len(pts)),
+        ("huge.usdc", 1 << 58),
+        ("big.usdc", 1 << 29),
+        ("short.usdc", 80_000_000),
+    ):
         with open(os.path.join(bad, name), "wb") as f:
             f.write(data[:at] + struct.pack("<Q", count) + data[at + 8:])
     # A cycle of sublayers.

@@ -22,9 +22,12 @@
 //! Anything else is named once in a warning. Every layer the stage opens passes the
 //! folder policy ([`resolver`]).
 
+mod cap;
 mod mesh;
 mod paths;
 mod resolver;
+
+pub use cap::allocation_cap;
 
 use std::cell::RefCell;
 use std::collections::{BTreeMap, HashMap, HashSet};
@@ -102,10 +105,15 @@ fn load_stage(path: &Path, reading: &RefCell<String>) -> Result<Scene, ImportErr
     })?;
     // Read the file once here: a missing or unreadable file is an I/O error like any
     // other scene's, not a composition message.
-    std::fs::metadata(path).map_err(|source| ImportError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = std::fs::metadata(path)
+        .map_err(|source| ImportError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .len();
+    // What the reader allocates stays within what the layers can hold ([`cap`]) until
+    // the stage is read; the scene built from it is not the reader's.
+    let capped = cap::Capped::new(bytes);
     let refused = resolver::Refused::default();
     let opened = Stage::builder()
         .resolver(resolver::FolderResolver::new(canonical, refused.clone()))
@@ -148,6 +156,7 @@ fn load_stage(path: &Path, reading: &RefCell<String>) -> Result<Scene, ImportErr
             ),
         });
     }
+    drop(capped);
     let scene = r.finish();
     super::validate(&scene)?;
     Ok(scene)
@@ -851,6 +860,9 @@ impl<'a> Reader<'a> {
 
     /// A `UsdUVTexture` file (relative to the scene's folder, and inside it), decoded.
     fn texture(&mut self, shader: &str, file: &str) -> Result<TextureRef, ImportError> {
+        // An image is not the layers' data: its file and its pixels may be far larger
+        // than the layers ([`cap`]).
+        let _uncapped = cap::Uncapped::new();
         let folder = self.path.parent().unwrap_or(Path::new(""));
         let bad = |r: &Self, reason: String| r.err(shader, Some("diffuseColor"), reason);
         let resolved = super::folder::resolve_inside(folder, Path::new(file)).map_err(|why| {

@@ -1,7 +1,8 @@
 //! The folder policy (`import::folder`) for the layers a USD stage opens: sublayers,
 //! references, payloads and clip files resolve only inside the scene's folder. A path
 //! outside is not resolved (so never opened) and is remembered, for the error. Every
-//! layer opened passes the scene-path check of [`super::paths`] first.
+//! layer opened passes the scene-path check of [`super::paths`] first, and raises what
+//! the reader may allocate by its size ([`super::cap`]).
 
 use std::cell::RefCell;
 use std::io;
@@ -75,9 +76,12 @@ impl Resolver for FolderResolver {
     }
 
     /// The layer's bytes, once its scene paths pass [`super::paths::check_layer`] (a
-    /// malformed path sends the USD reader into recursion without end).
+    /// malformed path sends the USD reader into recursion without end). Its size
+    /// counts towards what the reader may allocate ([`super::cap`]) before it is read.
     fn open_asset(&self, resolved_path: &ResolvedPath) -> io::Result<Box<dyn Asset>> {
-        let bytes = self.inner.open_asset(resolved_path)?.read_all()?;
+        let mut asset = self.inner.open_asset(resolved_path)?;
+        super::cap::layer(asset.size()?);
+        let bytes = asset.read_all()?;
         super::paths::check_layer(&bytes)
             .map_err(|why| io::Error::new(io::ErrorKind::InvalidData, why))?;
         Ok(Box::new(Layer(io::Cursor::new(bytes))))
