@@ -156,6 +156,7 @@ impl BlockOut {
             }
         }
     }
+    #[inline]
     pub(super) fn cover(&mut self, sample: u32, c: f32) {
         if c > 0.0 {
             self.cover.push((sample, c));
@@ -182,6 +183,7 @@ impl BlockOut {
             l.split.push(split());
         }
     }
+    #[inline]
     pub(in crate::render) fn next(&mut self, ray: Ray, item: Item) {
         self.next_rays.push(ray);
         self.next_items.push(item);
@@ -189,6 +191,7 @@ impl BlockOut {
 
     /// A shadow ray towards batch `light` that adds `add.1` to sample `add.0` when
     /// unblocked (without the passes' split: not for [`BlockOut::light_paths`]).
+    #[inline]
     pub(in crate::render) fn push_shadow(&mut self, ray: Ray, light: usize, add: (u32, Vec3)) {
         if self.shadow.len() <= light {
             self.shadow.resize_with(light + 1, ShadowList::default);
