@@ -450,6 +450,9 @@ fn a_corrupt_array_length_is_one_line_and_an_exit_code() {
         ("overflow.usdc", 3, "probably damaged", None),
         ("huge.usdc", 3, damaged, None),
         ("big.usdc", 3, damaged, None),
+        // 1.5 times its own bound (240 KB: 8,192 times that): refused only where the
+        // root layer, which the reader opens twice, counts once.
+        ("wide.usdc", 3, damaged, None),
         (
             "short.usdc",
             5,

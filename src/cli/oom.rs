@@ -130,6 +130,15 @@ struct StackLine {
     len: usize,
 }
 
+impl StackLine {
+    fn new() -> StackLine {
+        StackLine {
+            buf: [0; 4096],
+            len: 0,
+        }
+    }
+}
+
 impl std::fmt::Write for StackLine {
     fn write_str(&mut self, s: &str) -> std::fmt::Result {
         let n = s.len().min(self.buf.len() - self.len);
@@ -158,10 +167,7 @@ fn with_reading<R>(json: bool, f: impl FnOnce(Option<&str>) -> R) -> R {
 
 fn out_of_memory(bytes: usize) -> ! {
     let json = report::get().log == LogFormat::Json;
-    let mut message = StackLine {
-        buf: [0; 4096],
-        len: 0,
-    };
+    let mut message = StackLine::new();
     with_reading(json, |file| match file {
         Some(file) => write!(
             message,
@@ -186,10 +192,7 @@ fn out_of_memory(bytes: usize) -> ! {
 #[cfg(feature = "usd")]
 fn beyond_cap(bytes: usize, cap: u64) -> ! {
     let json = report::get().log == LogFormat::Json;
-    let mut message = StackLine {
-        buf: [0; 4096],
-        len: 0,
-    };
+    let mut message = StackLine::new();
     with_reading(json, |file| {
         write!(
             message,
@@ -211,10 +214,7 @@ fn end(class: ExitClass, message: &StackLine) -> ! {
     let reporting = report::get();
     let json = reporting.log == LogFormat::Json;
     let text = &message.buf[..message.len];
-    let mut line = StackLine {
-        buf: [0; 4096],
-        len: 0,
-    };
+    let mut line = StackLine::new();
     // A cut line may end inside a character: keep what is whole.
     let text = match std::str::from_utf8(text) {
         Ok(t) => t,
@@ -231,10 +231,7 @@ fn end(class: ExitClass, message: &StackLine) -> ! {
     } else {
         writeln!(line, "error: {text}")
     };
-    let mut fail = StackLine {
-        buf: [0; 4096],
-        len: 0,
-    };
+    let mut fail = StackLine::new();
     if reporting.openjd {
         let _ = writeln!(fail, "openjd_fail: {text}");
     }

@@ -23,7 +23,7 @@ Scenes:
                  turned to shine down (-Y), over a grey floor at y = 0.
   bad/...        broken inputs (see bad_inputs()), among them binary files with a
                  corrupt array length (overflow.usdc, huge.usdc, big.usdc,
-                 short.usdc).
+                 short.usdc, wide.usdc).
 """
 import json
 import math
@@ -348,6 +348,25 @@ def bad_inputs(bad):
     ):
         with open(os.path.join(bad, name), "wb") as f:
             f.write(data[:at] + struct.pack("<Q", count) + data[at + 8:])
+    # A file large enough that its bound is 8,192 times its size (not 1 GiB), with a
+    # length of 1.5 times that bound: refused only when the reader's layers are counted
+    # once each (it opens the root layer twice).
+    s = Usd.Stage.CreateNew(os.path.join(bad, "wide_src.usdc"))
+    m = UsdGeom.Mesh.Define(s, "/World/Sheet")
+    pts = [(i * 0.5 + 0.25, 1.0, 2.0) for i in range(20000)]
+    m.CreatePointsAttr(pts)
+    m.CreateFaceVertexCountsAttr([3])
+    m.CreateFaceVertexIndicesAttr([0, 1, 2])
+    s.GetRootLayer().Save()
+    data = open(os.path.join(bad, "wide_src.usdc"), "rb").read()
+    os.remove(os.path.join(bad, "wide_src.usdc"))
+    first = struct.pack("<Q", len(pts)) + struct.pack("<3f", *pts[0])
+    at = data.find(first)
+    assert at >= 0 and data.find(first, at + 1) < 0, "points array not found once"
+    assert len(data) * 8192 > 1 << 30, "wide.usdc too small for its bound to pass 1 GiB"
+    count = len(data) * 8192 * 3 // 2 // 12
+    with open(os.path.join(bad, "wide.usdc"), "wb") as f:
+        f.write(data[:at] + struct.pack("<Q", count) + data[at + 8:])
     # A cycle of sublayers.
     for a, b in (("cycle_a.usda", "cycle_b.usda"), ("cycle_b.usda", "cycle_a.usda")):
         with open(os.path.join(bad, a), "w") as f:

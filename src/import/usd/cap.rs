@@ -49,17 +49,17 @@ fn bound(layers: u64) -> u64 {
     layers.saturating_mul(RATIO).max(FLOOR)
 }
 
-/// While this lives, this thread reads a stage: the bound holds, starting from
-/// `bytes` (the file named on the command line; its layers are counted as they open).
+/// While this lives, this thread reads a stage: the bound holds, [`FLOOR`] until its
+/// layers (the file named on the command line first) are counted as they open.
 pub(super) struct Capped {
     before: (u64, u64),
 }
 
 impl Capped {
-    pub(super) fn new(bytes: u64) -> Capped {
+    pub(super) fn new() -> Capped {
         let before = (
-            CAP.with(|c| c.replace(bound(bytes))),
-            LAYERS.with(|l| l.replace(bytes)),
+            CAP.with(|c| c.replace(FLOOR)),
+            LAYERS.with(|l| l.replace(0)),
         );
         Capped { before }
     }
@@ -115,7 +115,9 @@ mod tests {
     fn the_bound_holds_while_a_stage_is_read_and_grows_with_its_layers() {
         assert_eq!(allocation_cap(), None);
         {
-            let _read = Capped::new(1000);
+            let _read = Capped::new();
+            assert_eq!(allocation_cap(), Some(FLOOR));
+            layer(1000);
             assert_eq!(allocation_cap(), Some(FLOOR));
             layer(1 << 20);
             assert_eq!(allocation_cap(), Some(((1 << 20) + 1000) * RATIO));
@@ -136,9 +138,10 @@ mod tests {
 
     #[test]
     fn stages_read_within_stages_restore_the_outer_bound() {
-        let _outer = Capped::new(1 << 20);
+        let _outer = Capped::new();
+        layer(1 << 20);
         {
-            let _inner = Capped::new(0);
+            let _inner = Capped::new();
             assert_eq!(allocation_cap(), Some(FLOOR));
         }
         assert_eq!(allocation_cap(), Some((1 << 20) * RATIO));
@@ -146,7 +149,7 @@ mod tests {
 
     #[test]
     fn the_bound_is_per_thread() {
-        let _read = Capped::new(0);
+        let _read = Capped::new();
         assert_eq!(allocation_cap(), Some(FLOOR));
         assert_eq!(std::thread::spawn(allocation_cap).join().ok(), Some(None));
     }

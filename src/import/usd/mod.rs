@@ -105,15 +105,14 @@ fn load_stage(path: &Path, reading: &RefCell<String>) -> Result<Scene, ImportErr
     })?;
     // Read the file once here: a missing or unreadable file is an I/O error like any
     // other scene's, not a composition message.
-    let bytes = std::fs::metadata(path)
-        .map_err(|source| ImportError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?
-        .len();
+    std::fs::metadata(path).map_err(|source| ImportError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
     // What the reader allocates stays within what the layers can hold ([`cap`]) until
-    // the stage is read; the scene built from it is not the reader's.
-    let capped = cap::Capped::new(bytes);
+    // the stage is read (the resolver counts each layer, this file first, as it opens
+    // it); the scene built from it is not the reader's.
+    let capped = cap::Capped::new();
     let refused = resolver::Refused::default();
     let opened = Stage::builder()
         .resolver(resolver::FolderResolver::new(canonical, refused.clone()))

@@ -5,6 +5,7 @@
 //! the reader may allocate by its size ([`super::cap`]).
 
 use std::cell::RefCell;
+use std::collections::HashSet;
 use std::io;
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
@@ -21,6 +22,9 @@ pub(super) struct FolderResolver {
     /// The scene's folder, canonical.
     folder: PathBuf,
     refused: Refused,
+    /// The layers counted towards what the reader may allocate ([`super::cap`]): the
+    /// reader opens some more than once (the root layer twice), each counts once.
+    counted: RefCell<HashSet<PathBuf>>,
 }
 
 impl FolderResolver {
@@ -29,6 +33,7 @@ impl FolderResolver {
             inner: DefaultResolver::new(),
             folder,
             refused,
+            counted: RefCell::default(),
         }
     }
 
@@ -80,7 +85,13 @@ impl Resolver for FolderResolver {
     /// counts towards what the reader may allocate ([`super::cap`]) before it is read.
     fn open_asset(&self, resolved_path: &ResolvedPath) -> io::Result<Box<dyn Asset>> {
         let mut asset = self.inner.open_asset(resolved_path)?;
-        super::cap::layer(asset.size()?);
+        if self
+            .counted
+            .borrow_mut()
+            .insert(resolved_path.as_ref().to_path_buf())
+        {
+            super::cap::layer(asset.size()?);
+        }
         let bytes = asset.read_all()?;
         super::paths::check_layer(&bytes)
             .map_err(|why| io::Error::new(io::ErrorKind::InvalidData, why))?;
