@@ -328,20 +328,26 @@ def bad_inputs(bad):
     # allocation overflows), to 2^58 (an allocation no machine can make), to 2^29 (6 GiB:
     # one many machines can make, far more than the file can hold) and to 80,000,000
     # (0.9 GiB: within what a file may decode to, for a test under a memory limit).
-    s = Usd.Stage.CreateNew(os.path.join(bad, "counts.usdc"))
-    m = UsdGeom.Mesh.Define(s, "/World/Sheet")
-    pts = [(i * 0.5 + 0.25, 1.0, 2.0) for i in range(1237)]
-    m.CreatePointsAttr(pts)
-    m.CreateFaceVertexCountsAttr([3])
-    m.CreateFaceVertexIndicesAttr([0, 1, 2])
-    s.GetRootLayer().Save()
-    data = open(os.path.join(bad, "counts.usdc"), "rb").read()
-    os.remove(os.path.join(bad, "counts.usdc"))
-    first = struct.pack("<Q", len(pts)) + struct.pack("<3f", *pts[0])
-    at = data.find(first)
-    assert at >= 0 and data.find(first, at + 1) < 0, "points array not found once"
+    def points_file(n):
+        """A .usdc of one mesh with n points, its bytes, and where the points' length is."""
+        path = os.path.join(bad, "points_src.usdc")
+        s = Usd.Stage.CreateNew(path)
+        m = UsdGeom.Mesh.Define(s, "/World/Sheet")
+        pts = [(i * 0.5 + 0.25, 1.0, 2.0) for i in range(n)]
+        m.CreatePointsAttr(pts)
+        m.CreateFaceVertexCountsAttr([3])
+        m.CreateFaceVertexIndicesAttr([0, 1, 2])
+        s.GetRootLayer().Save()
+        data = open(path, "rb").read()
+        os.remove(path)
+        first = struct.pack("<Q", n) + struct.pack("<3f", *pts[0])
+        at = data.find(first)
+        assert at >= 0 and data.find(first, at + 1) < 0, "points array not found once"
+        return data, at
+
+    data, at = points_file(1237)
     for name, count in (
-        ("overflow.usdc", (1 << 63) | len(pts)),
+        ("overflow.usdc", (1 << 63) | 1237),
         ("huge.usdc", 1 << 58),
         ("big.usdc", 1 << 29),
         ("short.usdc", 80_000_000),
@@ -351,18 +357,7 @@ def bad_inputs(bad):
     # A file large enough that its bound is 8,192 times its size (not 1 GiB), with a
     # length of 1.5 times that bound: refused only when the reader's layers are counted
     # once each (it opens the root layer twice).
-    s = Usd.Stage.CreateNew(os.path.join(bad, "wide_src.usdc"))
-    m = UsdGeom.Mesh.Define(s, "/World/Sheet")
-    pts = [(i * 0.5 + 0.25, 1.0, 2.0) for i in range(20000)]
-    m.CreatePointsAttr(pts)
-    m.CreateFaceVertexCountsAttr([3])
-    m.CreateFaceVertexIndicesAttr([0, 1, 2])
-    s.GetRootLayer().Save()
-    data = open(os.path.join(bad, "wide_src.usdc"), "rb").read()
-    os.remove(os.path.join(bad, "wide_src.usdc"))
-    first = struct.pack("<Q", len(pts)) + struct.pack("<3f", *pts[0])
-    at = data.find(first)
-    assert at >= 0 and data.find(first, at + 1) < 0, "points array not found once"
+    data, at = points_file(20000)
     assert len(data) * 8192 > 1 << 30, "wide.usdc too small for its bound to pass 1 GiB"
     count = len(data) * 8192 * 3 // 2 // 12
     with open(os.path.join(bad, "wide.usdc"), "wb") as f:
