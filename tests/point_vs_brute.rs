@@ -266,23 +266,54 @@ fn towards(rng: &mut Rng, n: usize, light: Vec3) -> Vec<Ray> {
 
 /// The first ray on which `got` and `want` answer differently (closest hit, then any
 /// hit), described; `None` when they agree on every ray.
+/// `rs` cut into lists of uneven lengths, some empty, as a renderer's blocks hand
+/// their rays to `intersect_lists`.
+fn lists_of(rs: &[Ray]) -> Vec<&[Ray]> {
+    const LENGTHS: [usize; 10] = [0, 1, 37, 1024, 0, 500, 3, 2048, 0, 129];
+    let mut lists = Vec::new();
+    let mut at = 0;
+    for k in 0.. {
+        if at == rs.len() {
+            break;
+        }
+        let n = LENGTHS[k % LENGTHS.len()].min(rs.len() - at);
+        lists.push(&rs[at..at + n]);
+        at += n;
+    }
+    lists.push(&rs[at..]);
+    lists
+}
+
+/// The first ray whose answer differs between `got` and `want`, as batches, and with
+/// `got` given the rays as lists (`intersect_lists`, `occluded_lists`).
 fn first_difference(got: &dyn Intersector, want: &dyn Intersector, rs: &[Ray]) -> Option<String> {
     let n = rs.len();
-    let (mut a, mut b) = (vec![None; n], vec![None; n]);
+    let lists = lists_of(rs);
+    let (mut a, mut b, mut c) = (vec![None; n], vec![None; n], vec![None; n]);
     got.intersect_batch(rs, &mut a);
     want.intersect_batch(rs, &mut b);
-    if let Some(i) = (0..n).find(|&i| a[i] != b[i]) {
-        let (r, x, y) = (rs[i], a[i], b[i]);
-        return Some(format!(
-            "closest hit differs: ray {i} {r:?}: {x:?} against {y:?}"
-        ));
+    got.intersect_lists(&lists, &mut c);
+    for (how, a) in [("", &a), (" through lists", &c)] {
+        if let Some(i) = (0..n).find(|&i| a[i] != b[i]) {
+            let (r, x, y) = (rs[i], a[i], b[i]);
+            return Some(format!(
+                "closest hit{how} differs: ray {i} {r:?}: {x:?} against {y:?}"
+            ));
+        }
     }
-    let (mut a, mut b) = (vec![false; n], vec![false; n]);
+    let (mut a, mut b, mut c) = (vec![false; n], vec![false; n], vec![false; n]);
     got.occluded_batch(rs, &mut a);
     want.occluded_batch(rs, &mut b);
-    let i = (0..n).find(|&i| a[i] != b[i])?;
-    let (r, x, y) = (rs[i], a[i], b[i]);
-    Some(format!("any hit differs: ray {i} {r:?}: {x} against {y}"))
+    got.occluded_lists(&lists, &mut c);
+    for (how, a) in [("", &a), (" through lists", &c)] {
+        if let Some(i) = (0..n).find(|&i| a[i] != b[i]) {
+            let (r, x, y) = (rs[i], a[i], b[i]);
+            return Some(format!(
+                "any hit{how} differs: ray {i} {r:?}: {x} against {y}"
+            ));
+        }
+    }
+    None
 }
 
 fn assert_agrees(got: &dyn Intersector, want: &dyn Intersector, rs: &[Ray], what: &str) {

@@ -149,6 +149,20 @@ pub trait Intersector: Sync {
             .for_each(|(r, o)| *o = self.occluded(r));
     }
 
+    /// The rays of `lists` one list after another, traced as one batch: the answers of
+    /// [`intersect_batch`](Self::intersect_batch) of their concatenation, `out` holding
+    /// a slot per ray of every list in that order. A renderer hands its tasks' lists
+    /// over this way instead of copying them into one; the default copies them.
+    fn intersect_lists(&self, lists: &[&[Ray]], out: &mut [Option<Hit>]) {
+        self.intersect_batch(&lists.concat(), out);
+    }
+
+    /// [`occluded_batch`](Self::occluded_batch) of the concatenation of `lists`, as
+    /// [`intersect_lists`](Self::intersect_lists) is of `intersect_batch`.
+    fn occluded_lists(&self, lists: &[&[Ray]], out: &mut [bool]) {
+        self.occluded_batch(&lists.concat(), out);
+    }
+
     /// The structure's static and moving triangles traced apart ([`Layers`]), where it
     /// has the two; `None` (the default) where it is one set.
     fn layers(&self) -> Option<&dyn Layers> {

@@ -8,7 +8,7 @@ use glam::{DVec3, Vec3A, Vec4};
 
 use super::batch::binned;
 use super::bsp::{depth_mask, Block, LANES};
-use super::point::{trace_batch, Plan, Sources};
+use super::point::{trace_lists, Plan, Sources, POINT_CHUNK};
 use super::stats::{Counter, NoCount, RayStats};
 use super::{GridFrame, Psf};
 use crate::geometry::{intersect_pre, Aabb, Hit, Intersector, Ray, RayPre, TriPre};
@@ -432,35 +432,49 @@ impl Intersector for Psf {
     /// Through point grids for the rays that pass a point grids pay for
     /// ([`Psf::point_grid_for`]); the others binned by subfield (`psf::batch`).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
-        let bins = self.subfields.len().max(1);
-        let walk = |rays: &[Ray], out: &mut [Option<Hit>]| {
-            binned(
-                rays,
-                out,
-                bins,
-                |r| self.bin_of(r),
-                |r, k| self.trace_bin::<false>(r, k),
-            )
-        };
-        trace_batch::<false, _>(rays, out, &self.point_sources(), |h| h, walk);
+        let chunks: Vec<&[Ray]> = rays.chunks(POINT_CHUNK).collect();
+        self.traced::<false, _>(&chunks, Some(rays), out, |h| h);
     }
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
-        let bins = self.subfields.len().max(1);
-        let walk = |rays: &[Ray], out: &mut [bool]| {
-            binned(
-                rays,
-                out,
-                bins,
-                |r| self.bin_of(r),
-                |r, k| self.trace_bin::<true>(r, k).is_some(),
-            )
-        };
-        trace_batch::<true, _>(rays, out, &self.point_sources(), |h| h.is_some(), walk);
+        let chunks: Vec<&[Ray]> = rays.chunks(POINT_CHUNK).collect();
+        self.traced::<true, _>(&chunks, Some(rays), out, |h| h.is_some());
+    }
+
+    /// As `intersect_batch`, the lists traced in place (`psf::point::trace_lists`).
+    fn intersect_lists(&self, lists: &[&[Ray]], out: &mut [Option<Hit>]) {
+        self.traced::<false, _>(lists, None, out, |h| h);
+    }
+
+    fn occluded_lists(&self, lists: &[&[Ray]], out: &mut [bool]) {
+        self.traced::<true, _>(lists, None, out, |h| h.is_some());
     }
 }
 
 impl Psf {
+    /// The batch of `lists` (their concatenation `whole`, where the caller has it)
+    /// through point grids where they pay, the rest binned by subfield (`psf::batch`),
+    /// `wrap` making each answer.
+    fn traced<const ANY: bool, T: Send + Sync + Copy + Default>(
+        &self,
+        lists: &[&[Ray]],
+        whole: Option<&[Ray]>,
+        out: &mut [T],
+        wrap: impl Fn(Option<Hit>) -> T + Sync,
+    ) {
+        let bins = self.subfields.len().max(1);
+        let walk = |rays: &[Ray], out: &mut [T]| {
+            binned(
+                rays,
+                out,
+                bins,
+                |r| self.bin_of(r),
+                |r, k| wrap(self.trace_bin::<ANY>(r, k)),
+            )
+        };
+        trace_lists::<ANY, _>(lists, whole, out, &self.point_sources(), &wrap, walk);
+    }
+
     /// Whether [`intersect_batch`](Intersector::intersect_batch) and
     /// [`occluded_batch`](Intersector::occluded_batch) trace some of `rays` through point
     /// grids

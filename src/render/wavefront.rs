@@ -65,6 +65,9 @@ pub struct FrameScratch {
     paths: Vec<Split>,
     coverage: Vec<f32>,
     outs: Vec<BlockOut>,
+    /// The last level's blocks, where a level's rays are traced from the blocks' own
+    /// lists (`trace_pass`: a camera that moves); swapped with `outs` a level at a time.
+    outs_prev: Vec<BlockOut>,
     shadow_rays: Vec<Ray>,
     shadow_add: Vec<(u32, Vec3)>,
     shadow_split: Vec<Split>,
@@ -567,6 +570,7 @@ fn trace_pass<T: Intersector>(
         paths,
         coverage,
         outs,
+        outs_prev,
         shadow_rays,
         shadow_add,
         shadow_split,
@@ -597,6 +601,12 @@ fn trace_pass<T: Intersector>(
     // 140 ms of CPU at 640x480 (benches/PERF.md, issue 38, round 6). A camera that
     // moves every frame allocates and fills nothing.
     let replayed = replay.begin(ctx, mode != Mode::Off && !light_paths, w * h);
+    // Without the memo or the replay, which read a level's rays and bookkeeping as one
+    // array, the levels below the camera rays are traced and shaded from the lists the
+    // blocks of the level above made, and the shadow rays from the blocks' lists: their
+    // copies into one array each were 6 % of a moving camera's frame (40 MB a 640x480
+    // frame; `benches/PERF.md`, issue 38, round 17).
+    let in_lists = mode == Mode::Off && replayed == 0;
     // Where the replay serves, the samples whose every kept ray misses the moving
     // triangles take the last frame's sums whole (`ShadeReplay::settled`).
     let moving_bounds = layers.and_then(|l| l.moving_bounds());
@@ -715,12 +725,16 @@ fn trace_pass<T: Intersector>(
         // The depth level: 0 for the camera rays.
         let mut level = 0usize;
         let mut settled_chunk: Option<Vec<bool>> = None;
-        while !rays.is_empty() {
+        // The level's rays: `rays`, or (`in_lists`, below the camera rays) the
+        // `next_rays` of the first `listed` blocks of `outs_prev`, `count` in all.
+        let mut listed = 0usize;
+        let mut count = rays.len();
+        while count > 0 {
             let first = level == 0;
             let clock = Instant::now();
             hits.clear();
             hits.par_extend(
-                (0..rays.len())
+                (0..count)
                     .into_par_iter()
                     .with_min_len(4 * BLOCK)
                     .map(|_| None),
@@ -735,6 +749,13 @@ fn trace_pass<T: Intersector>(
                 Some(l) => {
                     let sample = |i: usize| items[i].sample;
                     memo.closest(level, l, &whole, px0, w * h, rays, &sample, hits)
+                }
+                None if listed > 0 => {
+                    let lists: Vec<&[Ray]> = outs_prev[..listed]
+                        .iter()
+                        .map(|o| &o.next_rays[..])
+                        .collect();
+                    tracer.intersect_lists(&lists, hits);
                 }
                 None => tracer.intersect_batch(rays, hits),
             }
@@ -776,7 +797,12 @@ fn trace_pass<T: Intersector>(
             }
             let settled = settled_chunk.as_deref().filter(|_| first);
 
-            let blocks = rays.len().div_ceil(BLOCK);
+            // A block a list of the level above's, or a `BLOCK` of `rays`.
+            let blocks = if listed > 0 {
+                listed
+            } else {
+                rays.len().div_ceil(BLOCK)
+            };
             if outs.len() < blocks {
                 outs.resize_with(blocks, BlockOut::default);
             }
@@ -859,6 +885,32 @@ fn trace_pass<T: Intersector>(
                             }
                         }),
                 }
+            } else if listed > 0 {
+                // Each list of the level above shaded as a block of its own, in order:
+                // the same rays, in the same order, as the copies made one array.
+                let mut parts = Vec::with_capacity(listed);
+                let mut rest = &hits[..];
+                for o in &outs_prev[..listed] {
+                    let (head, tail) = rest.split_at(o.next_rays.len());
+                    parts.push(head);
+                    rest = tail;
+                }
+                outs[..blocks]
+                    .par_iter_mut()
+                    .zip(outs_prev[..listed].par_iter())
+                    .zip(parts.into_par_iter())
+                    .for_each(|((out, prev), hs)| {
+                        out.clear();
+                        out.light_paths = light_paths;
+                        let (r, it) = (&prev.next_rays[..], &prev.next_items[..]);
+                        if ctx.lanes(out) {
+                            shade_in_fours(ctx, r, hs, |k| it[k], max_depth, spp as u32, out);
+                            return;
+                        }
+                        for ((ray, item), hit) in r.iter().zip(it).zip(hs) {
+                            shade_kept(ctx, ray, item, *hit, max_depth, spp as u32, out, None);
+                        }
+                    });
             } else {
                 outs[..blocks]
                     .par_iter_mut()
@@ -892,19 +944,21 @@ fn trace_pass<T: Intersector>(
             // The blocks' lists gathered in block order, on six tasks: the sums into the
             // samples (a sample's terms added in block order, as always), and each list
             // the next level reads copied on a task of its own (each the same elements
-            // in the same order as one serial pass). Two tasks before, 5.7 ms a frame at
-            // any thread count beyond two (benches/PERF.md, issue 38). Nested joins,
-            // not `rayon::scope` with six spawns: that was 1-4 ms a frame slower on 2
-            // threads (three alternating runs, museum class, 640x480).
-            let outs = &outs[..blocks];
+            // in the same order as one serial pass; `in_lists`, only the shadow rays'
+            // contributions, the rays and bookkeeping staying in the blocks). Two tasks
+            // before, 5.7 ms a frame at any thread count beyond two (benches/PERF.md,
+            // issue 38). Nested joins, not `rayon::scope` with six spawns: that was 1-4
+            // ms a frame slower on 2 threads (three alternating runs, museum class,
+            // 640x480).
+            let done = &outs[..blocks];
             // A light's rays together, in block order: each light's rays are one batch
             // through its point grid (which a batch mixing lights would not get).
-            let lights = outs.iter().map(|o| o.shadow.len()).max().unwrap_or(0);
+            let lights = done.iter().map(|o| o.shadow.len()).max().unwrap_or(0);
             let shadow_lists =
-                || (0..lights).flat_map(|l| outs.iter().filter_map(move |o| o.shadow.get(l)));
+                || (0..lights).flat_map(|l| done.iter().filter_map(move |o| o.shadow.get(l)));
             rayon::join(
                 || {
-                    for o in outs {
+                    for o in done {
                         for &(s, c) in &o.add {
                             radiance[s as usize] += c;
                         }
@@ -922,33 +976,40 @@ fn trace_pass<T: Intersector>(
                 || {
                     rayon::join(
                         || {
+                            if in_lists {
+                                return;
+                            }
                             rayon::join(
                                 || {
                                     rays.clear();
-                                    for o in outs {
+                                    for o in done {
                                         rays.extend_from_slice(&o.next_rays);
                                     }
                                 },
                                 || {
                                     items.clear();
-                                    for o in outs {
+                                    for o in done {
                                         items.extend_from_slice(&o.next_items);
                                     }
                                 },
-                            )
+                            );
                         },
                         || {
                             rayon::join(
                                 || {
                                     shadow_rays.clear();
                                     light_start.clear();
+                                    let mut n = 0;
                                     for l in 0..lights {
-                                        light_start.push(shadow_rays.len());
-                                        for list in outs.iter().filter_map(|o| o.shadow.get(l)) {
-                                            shadow_rays.extend_from_slice(&list.rays);
+                                        light_start.push(n);
+                                        for list in done.iter().filter_map(|o| o.shadow.get(l)) {
+                                            if !in_lists {
+                                                shadow_rays.extend_from_slice(&list.rays);
+                                            }
+                                            n += list.rays.len();
                                         }
                                     }
-                                    light_start.push(shadow_rays.len());
+                                    light_start.push(n);
                                 },
                                 || {
                                     rayon::join(
@@ -971,14 +1032,23 @@ fn trace_pass<T: Intersector>(
                     )
                 },
             );
-            work.rays.secondary += rays.len() as u64;
-            work.rays.shadow += shadow_rays.len() as u64;
+            // The next level's rays, and the shadow rays, stay in the blocks' lists.
+            if in_lists {
+                std::mem::swap(outs, outs_prev);
+                listed = blocks;
+                count = outs_prev[..listed].iter().map(|o| o.next_rays.len()).sum();
+            } else {
+                count = rays.len();
+            }
+            let shadows = light_start.last().copied().unwrap_or(0);
+            work.rays.secondary += count as u64;
+            work.rays.shadow += shadows as u64;
             work.shade += clock.elapsed();
 
             let clock = Instant::now();
             // The shadow rays leave the hits of the level just shaded.
             let shadow_level = level - 1;
-            refill(blocked, shadow_rays.len(), false);
+            refill(blocked, shadows, false);
             for (l, span) in light_start.windows(2).enumerate() {
                 let (a, b) = (span[0], span[1]);
                 if a >= b {
@@ -997,6 +1067,14 @@ fn trace_pass<T: Intersector>(
                             &shadow_add[a..b],
                             &mut blocked[a..b],
                         ),
+                    _ if in_lists => {
+                        let lists: Vec<&[Ray]> = outs_prev[..listed]
+                            .iter()
+                            .filter_map(|o| o.shadow.get(l))
+                            .map(|list| &list.rays[..])
+                            .collect();
+                        tracer.occluded_lists(&lists, &mut blocked[a..b]);
+                    }
                     _ => tracer.occluded_batch(&shadow_rays[a..b], &mut blocked[a..b]),
                 }
             }

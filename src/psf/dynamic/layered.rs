@@ -5,7 +5,7 @@ use rayon::prelude::*;
 use super::DynamicLayer;
 use crate::geometry::{closest_of, Aabb, Hit, Intersector, Layers, Ray, RayPre};
 use crate::psf::batch::binned;
-use crate::psf::point::{trace_batch, Plan, Sources};
+use crate::psf::point::{trace_batch, trace_lists, Plan, Sources, POINT_CHUNK};
 use crate::psf::stats::{Counter, NoCount, RayStats};
 use crate::psf::Psf;
 
@@ -203,6 +203,29 @@ impl Layered<'_> {
         trace_batch::<ANY, _>(rays, out, &src, &wrap, walk);
     }
 
+    /// The batch of `lists` (their concatenation `whole`, where the caller has it)
+    /// through point grids where they pay, the rest binned by the static PSF's subfield
+    /// (`psf::batch`), `wrap` making each answer.
+    fn traced<const ANY: bool, T: Send + Sync + Copy + Default>(
+        &self,
+        lists: &[&[Ray]],
+        whole: Option<&[Ray]>,
+        out: &mut [T],
+        wrap: impl Fn(Option<Hit>) -> T + Sync,
+    ) {
+        let bins = self.psf.subfields().len().max(1);
+        let walk = |rays: &[Ray], out: &mut [T]| {
+            binned(
+                rays,
+                out,
+                bins,
+                |r| self.psf.bin_of(r),
+                |r, k| wrap(self.trace::<ANY, _>(r, Some(k), &mut NoCount)),
+            )
+        };
+        trace_lists::<ANY, _>(lists, whole, out, &self.sources(), &wrap, walk);
+    }
+
     /// Whether [`intersect_batch`](Intersector::intersect_batch) and
     /// [`occluded_batch`](Intersector::occluded_batch) trace some of `rays` through point
     /// grids (grids by central projection around a point rays pass through): when a share
@@ -266,31 +289,22 @@ impl Intersector for Layered<'_> {
     /// [`Layered::point_grid_for`]); the others binned by the static PSF's subfield
     /// (`psf::batch`).
     fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
-        let bins = self.psf.subfields().len().max(1);
-        let walk = |rays: &[Ray], out: &mut [Option<Hit>]| {
-            binned(
-                rays,
-                out,
-                bins,
-                |r| self.psf.bin_of(r),
-                |r, k| self.trace::<false, _>(r, Some(k), &mut NoCount),
-            )
-        };
-        trace_batch::<false, _>(rays, out, &self.sources(), |h| h, walk);
+        let chunks: Vec<&[Ray]> = rays.chunks(POINT_CHUNK).collect();
+        self.traced::<false, _>(&chunks, Some(rays), out, |h| h);
     }
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
-        let bins = self.psf.subfields().len().max(1);
-        let walk = |rays: &[Ray], out: &mut [bool]| {
-            binned(
-                rays,
-                out,
-                bins,
-                |r| self.psf.bin_of(r),
-                |r, k| self.trace::<true, _>(r, Some(k), &mut NoCount).is_some(),
-            )
-        };
-        trace_batch::<true, _>(rays, out, &self.sources(), |h| h.is_some(), walk);
+        let chunks: Vec<&[Ray]> = rays.chunks(POINT_CHUNK).collect();
+        self.traced::<true, _>(&chunks, Some(rays), out, |h| h.is_some());
+    }
+
+    /// As `intersect_batch`, the lists traced in place (`psf::point::trace_lists`).
+    fn intersect_lists(&self, lists: &[&[Ray]], out: &mut [Option<Hit>]) {
+        self.traced::<false, _>(lists, None, out, |h| h);
+    }
+
+    fn occluded_lists(&self, lists: &[&[Ray]], out: &mut [bool]) {
+        self.traced::<true, _>(lists, None, out, |h| h.is_some());
     }
 
     fn layers(&self) -> Option<&dyn Layers> {

@@ -89,5 +89,5 @@ mod types;
 mod tests;
 
 pub(crate) use plan::Plan;
-pub(crate) use trace::trace_batch;
-pub(crate) use types::{FrameGrids, PointCache, Sources};
+pub(crate) use trace::{trace_batch, trace_lists};
+pub(crate) use types::{FrameGrids, PointCache, Sources, CHUNK as POINT_CHUNK};

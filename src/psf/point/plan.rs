@@ -12,6 +12,7 @@ use super::cache::{static_pre, Keep};
 use super::center::center;
 use super::project::aim;
 use super::spread::{spread, Spread};
+use super::trace::RayBatch;
 use super::types::{grown, union, Around, PointGrid, Sources, StaticGrid, WITHIN};
 use crate::geometry::{Ray, TriPre};
 
@@ -113,18 +114,23 @@ impl<'a> Plan<'a> {
     /// part is built when the point's rays pay for all of it, or when the point was seen
     /// in a recent batch (a camera or light that stays put); once kept, a batch pays only
     /// for the moving triangles' grid.
-    pub(crate) fn for_batch(rays: &[Ray], src: &'a Sources<'a>) -> Vec<Plan<'a>> {
+    pub(crate) fn for_batch<B: RayBatch + ?Sized>(rays: &B, src: &'a Sources<'a>) -> Vec<Plan<'a>> {
         let ntri = src.statics.len() + src.moving_pre.len();
         let n = rays.len();
         if ntri == 0 || n < MIN_RAYS || ntri >= u32::MAX as usize {
             return Vec::new();
         }
         let margin = src.margin as f64;
-        let valid = |i: usize| rays[i].is_valid();
+        let valid = |i: usize| rays.ray(i).is_valid();
         let sample: Vec<(&Ray, Option<&Ray>)> = (0..n)
             .step_by((n / SAMPLE).max(1))
             .filter(|&i| valid(i))
-            .map(|i| (&rays[i], (i + 1 < n && valid(i + 1)).then(|| &rays[i + 1])))
+            .map(|i| {
+                (
+                    rays.ray(i),
+                    (i + 1 < n && valid(i + 1)).then(|| rays.ray(i + 1)),
+                )
+            })
             .collect();
         // A point is tried when this many of the sample pass it.
         let least = (sample.len() / 32).max(8);

@@ -4,6 +4,7 @@
 use rayon::prelude::*;
 
 use super::project::{passes, project};
+use super::trace::RayBatch;
 use super::types::{union, Around, Rects, CHUNK, NO_RECT};
 use crate::geometry::Ray;
 
@@ -28,7 +29,7 @@ pub(super) struct Spread {
 
 /// For each point of `ats`, every `SPREAD`th ray of `rays` that qualifies by it and by
 /// none before it.
-pub(super) fn spread(rays: &[Ray], ats: &[Around]) -> Vec<Spread> {
+pub(super) fn spread<B: RayBatch + ?Sized>(rays: &B, ats: &[Around]) -> Vec<Spread> {
     let n = rays.len();
     let none = Spread {
         rects: [NO_RECT; 6],
@@ -42,11 +43,8 @@ pub(super) fn spread(rays: &[Ray], ats: &[Around]) -> Vec<Spread> {
             let mut b = empty.clone();
             let end = ((k + 1) * SPREAD * CHUNK).min(n);
             // The sampled rays copied first: a loop of loads alone keeps many in flight.
-            let local: Vec<Ray> = rays[k * SPREAD * CHUNK..end]
-                .iter()
-                .step_by(SPREAD)
-                .copied()
-                .collect();
+            let mut local: Vec<Ray> = Vec::with_capacity(CHUNK);
+            rays.stepped(k * SPREAD * CHUNK, end, SPREAD, &mut local);
             for ray in &local {
                 let first = ats
                     .iter()

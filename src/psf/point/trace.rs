@@ -7,6 +7,102 @@ use super::plan::Plan;
 use super::types::{Sources, CHUNK};
 use crate::geometry::{Hit, Ray};
 
+/// A batch's rays as the plans sample them: one slice, or several traced as one
+/// ([`Lists`]), numbered in order.
+pub(crate) trait RayBatch: Sync {
+    /// How many rays.
+    fn len(&self) -> usize;
+    /// Ray `i` (`i < len()`).
+    fn ray(&self, i: usize) -> &Ray;
+    /// Rays `from`, `from + step`, ... below `to` (`to <= len()`, `step > 0`), copied
+    /// into `into`.
+    fn stepped(&self, from: usize, to: usize, step: usize, into: &mut Vec<Ray>);
+}
+
+impl RayBatch for [Ray] {
+    #[inline]
+    fn len(&self) -> usize {
+        <[Ray]>::len(self)
+    }
+
+    #[inline]
+    fn ray(&self, i: usize) -> &Ray {
+        &self[i]
+    }
+
+    fn stepped(&self, from: usize, to: usize, step: usize, into: &mut Vec<Ray>) {
+        into.extend(self[from..to].iter().step_by(step).copied());
+    }
+}
+
+/// Lists of rays traced as one batch: the rays of the first list, then the second's,
+/// and so on (a renderer's rays as its tasks made them, not copied into one).
+pub(crate) struct Lists<'a> {
+    lists: &'a [&'a [Ray]],
+    /// Where each list starts in the batch's numbering, and the total after them.
+    start: Vec<usize>,
+}
+
+impl<'a> Lists<'a> {
+    pub(crate) fn new(lists: &'a [&'a [Ray]]) -> Lists<'a> {
+        let mut start = Vec::with_capacity(lists.len() + 1);
+        let mut n = 0;
+        start.push(0);
+        for l in lists {
+            n += l.len();
+            start.push(n);
+        }
+        Lists { lists, start }
+    }
+}
+
+impl RayBatch for Lists<'_> {
+    fn len(&self) -> usize {
+        self.start.last().copied().unwrap_or(0)
+    }
+
+    fn ray(&self, i: usize) -> &Ray {
+        let k = self.list_of(i);
+        &self.lists[k][i - self.start[k]]
+    }
+
+    /// The list found once, then followed (a search a ray cost a batch's sampling
+    /// 1–2 ms a frame).
+    fn stepped(&self, from: usize, to: usize, step: usize, into: &mut Vec<Ray>) {
+        if from >= to {
+            return;
+        }
+        let mut k = self.list_of(from);
+        let mut i = from;
+        while i < to {
+            while self.start[k + 1] <= i {
+                k += 1;
+            }
+            into.push(self.lists[k][i - self.start[k]]);
+            i += step;
+        }
+    }
+}
+
+impl Lists<'_> {
+    /// The list whose span holds ray `i` (`i < len()`): the last to start at or
+    /// before it (an empty list starts where the next one does, and is passed over).
+    fn list_of(&self, i: usize) -> usize {
+        self.start.partition_point(|&s| s <= i) - 1
+    }
+}
+
+/// `out` cut into one part per list, each as long as its list.
+fn cut<'o, T>(mut out: &'o mut [T], lists: &[&[Ray]]) -> Vec<&'o mut [T]> {
+    let mut parts = Vec::with_capacity(lists.len());
+    for l in lists {
+        let (head, tail) = std::mem::take(&mut out).split_at_mut(l.len());
+        parts.push(head);
+        out = tail;
+    }
+    parts
+}
+
 /// `out[i] = query(rays[i])` through point grids where the batch takes any
 /// ([`Plan::for_batch`]), `wrap` turning a grid's answer into `T`; the rays no grid takes
 /// (all of them, when the batch takes no grid) are answered together by `fallback`.
@@ -18,14 +114,37 @@ pub(crate) fn trace_batch<const ANY: bool, T: Send + Sync + Copy + Default>(
     fallback: impl Fn(&[Ray], &mut [T]),
 ) {
     assert_eq!(rays.len(), out.len(), "one output slot per ray");
-    let plans = Plan::for_batch(rays, src);
+    let chunks: Vec<&[Ray]> = rays.chunks(CHUNK).collect();
+    trace_lists::<ANY, T>(&chunks, Some(rays), out, src, wrap, fallback);
+}
+
+/// [`trace_batch`] of the rays of `lists` in turn, `out` holding a slot per ray of
+/// every list in that order, without copying the lists into one batch: each list is
+/// one task's rays (as each `CHUNK` of one batch is), and only the rays no grid takes
+/// are gathered for `fallback`. The answers are those of `trace_batch` of the
+/// concatenation. `whole` is that concatenation where the caller has it: a batch that
+/// no grid takes then goes to `fallback` without a copy.
+pub(crate) fn trace_lists<const ANY: bool, T: Send + Sync + Copy + Default>(
+    lists: &[&[Ray]],
+    whole: Option<&[Ray]>,
+    out: &mut [T],
+    src: &Sources,
+    wrap: impl Fn(Option<Hit>) -> T + Sync,
+    fallback: impl Fn(&[Ray], &mut [T]),
+) {
+    let batch = Lists::new(lists);
+    assert_eq!(batch.len(), out.len(), "one output slot per ray");
+    let plans = Plan::for_batch(&batch, src);
     if plans.is_empty() {
-        return fallback(rays, out);
+        return match (whole, lists) {
+            (Some(rays), _) | (None, &[rays]) => fallback(rays, out),
+            _ => fallback(&lists.concat(), out),
+        };
     }
-    // Each ray through a grid that takes it; per chunk, the others' places.
-    let missed: Vec<Vec<u32>> = rays
-        .par_chunks(CHUNK)
-        .zip(out.par_chunks_mut(CHUNK))
+    // Each ray through a grid that takes it; per list, the others' places.
+    let missed: Vec<Vec<u32>> = lists
+        .par_iter()
+        .zip(cut(&mut *out, lists))
         .map(|(rays, out)| {
             let mut miss = Vec::new();
             // Neighbouring rays mostly take the same grid (a mirror plane's reflections
@@ -54,10 +173,13 @@ pub(crate) fn trace_batch<const ANY: bool, T: Send + Sync + Copy + Default>(
         return;
     }
     // The rest traced as one batch (binned by subfield, in parallel), the answers put
-    // back chunk by chunk.
-    // In parallel, chunk by chunk into its own part (a serial gather of the 100,000 or
+    // back list by list.
+    // In parallel, list by list into its own part (a serial gather of the 100,000 or
     // so reflections that take the parallel subfields cost 1–2 ms a frame).
-    let mut gathered: Vec<Ray> = (0..total).into_par_iter().map(|_| rays[0]).collect();
+    let Some(any) = lists.iter().find_map(|l| l.first()) else {
+        return;
+    };
+    let mut gathered: Vec<Ray> = (0..total).into_par_iter().map(|_| *any).collect();
     let mut into = Vec::with_capacity(missed.len());
     let mut rest = &mut gathered[..];
     for m in &missed {
@@ -66,7 +188,7 @@ pub(crate) fn trace_batch<const ANY: bool, T: Send + Sync + Copy + Default>(
         rest = tail;
     }
     into.into_par_iter()
-        .zip(missed.par_iter().zip(rays.par_chunks(CHUNK)))
+        .zip(missed.par_iter().zip(lists.par_iter()))
         .for_each(|(out, (m, rays))| {
             for (o, &i) in out.iter_mut().zip(m) {
                 *o = rays[i as usize];
@@ -81,7 +203,8 @@ pub(crate) fn trace_batch<const ANY: bool, T: Send + Sync + Copy + Default>(
         parts.push(head);
         rest = tail;
     }
-    out.par_chunks_mut(CHUNK)
+    cut(out, lists)
+        .into_par_iter()
         .zip(missed.par_iter().zip(parts))
         .for_each(|(out, (m, a))| {
             for (&i, &x) in m.iter().zip(a) {

@@ -10,7 +10,7 @@ use super::project::aim;
 use crate::geometry::{Aabb, Ray, TriPre};
 
 /// Rays traced together by one task.
-pub(super) const CHUNK: usize = 1024;
+pub(crate) const CHUNK: usize = 1024;
 
 /// A triangle's entry in a tile: the depth range (along the face's axis) of its part
 /// beyond `r / 2`, and its number in the grid's own triangle array.
