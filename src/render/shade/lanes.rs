@@ -114,19 +114,26 @@ struct V3 {
 }
 
 impl V3 {
-    /// Four vectors across the lanes (a transpose of their rows, in shuffles).
+    /// Four vectors across the lanes, each lane's coordinates read one by one. Read as
+    /// four 16-byte rows and transposed in shuffles, as before round 17, the rows
+    /// spanned the stores that had just written the 12-byte vectors, and the CPU could
+    /// not forward them: 5 % of `shade4`'s time went to three such loads
+    /// (`benches/PERF.md`, issue 38, round 17).
+    #[inline(always)]
     fn of(v: [Vec3; 4]) -> V3 {
-        let m = Mat4::from_cols(
-            v[0].extend(0.0),
-            v[1].extend(0.0),
-            v[2].extend(0.0),
-            v[3].extend(0.0),
-        )
-        .transpose();
+        V3::from_fn(|k| v[k])
+    }
+
+    /// `V3::of([f(0), f(1), f(2), f(3)])` without the array: `array::map` built one on
+    /// the stack in 4- and 8-byte stores that a 16-byte load then read back, which the
+    /// CPU cannot forward either.
+    #[inline(always)]
+    fn from_fn(f: impl Fn(usize) -> Vec3) -> V3 {
+        let (a, b, c, d) = (f(0), f(1), f(2), f(3));
         V3 {
-            x: m.x_axis,
-            y: m.y_axis,
-            z: m.z_axis,
+            x: Vec4::new(a.x, b.x, c.x, d.x),
+            y: Vec4::new(a.y, b.y, c.y, d.y),
+            z: Vec4::new(a.z, b.z, c.z, d.z),
         }
     }
 
@@ -227,6 +234,14 @@ impl V3 {
     }
 }
 
+/// `Vec4::new(f(0), f(1), f(2), f(3))`: lanes filled from scalars, for values just
+/// stored one by one (`Vec4::from_array` of such an array is a 16-byte load over four
+/// 4-byte stores, which the CPU cannot forward; `benches/PERF.md`, issue 38, round 17).
+#[inline(always)]
+fn lanes4(f: impl Fn(usize) -> f32) -> Vec4 {
+    Vec4::new(f(0), f(1), f(2), f(3))
+}
+
 /// `f32::clamp(x, lo, hi)` in lanes, for finite `x`.
 fn clamp(x: Vec4, lo: f32, hi: f32) -> Vec4 {
     let x = Vec4::select(x.cmplt(Vec4::splat(lo)), Vec4::splat(lo), x);
@@ -258,8 +273,8 @@ impl Mats {
                 reflects: BVec4A::splat(m.reflects),
             };
         }
-        let v = |f: fn(&PlainMaterial) -> Vec3A| V3::of(m.map(|m| f(m).into()));
-        let s = |f: fn(&PlainMaterial) -> f32| Vec4::from_array(m.map(f));
+        let v = |f: fn(&PlainMaterial) -> Vec3A| V3::from_fn(|k| f(m[k]).into());
+        let s = |f: fn(&PlainMaterial) -> f32| lanes4(|k| f(m[k]));
         Mats {
             albedo: v(|m| m.albedo),
             f0: v(|m| m.f0),
@@ -358,9 +373,9 @@ impl ShadeContext<'_> {
         let mats = [m0, m1, m2, m3];
         let mat = Mats::of(mats);
         let (w, u, v) = (
-            Vec4::from_array(uvw[0]),
-            Vec4::from_array(uvw[1]),
-            Vec4::from_array(uvw[2]),
+            lanes4(|k| uvw[0][k]),
+            lanes4(|k| uvw[1][k]),
+            lanes4(|k| uvw[2][k]),
         );
 
         // The surface (`ShadeContext::surface`).
@@ -373,7 +388,7 @@ impl ShadeContext<'_> {
             y: e1.z * e2.x - e1.x * e2.z,
             z: e1.x * e2.y - e1.y * e2.x,
         };
-        let ray_dir = V3::of(rays.map(|r| r.dir));
+        let ray_dir = V3::from_fn(|k| rays[k].dir);
         let dir = ray_dir.normalize_or_zero();
         let mut ng = face.normalize_or_zero();
         ng = V3::select(ng.is_zero(), dir.neg(), ng);
@@ -412,12 +427,12 @@ impl ShadeContext<'_> {
         let eps = Vec4::splat(1e-4) * a.max_element().max(extent);
         let origin = point.add(ng.scale(eps));
         let length = (ray_dir.x * ray_dir.x + ray_dir.y * ray_dir.y + ray_dir.z * ray_dir.z).sqrt();
-        let distance = Vec4::from_array(t) * length;
-        let cone_width = Vec4::from_array(items.map(|i| i.cone.width));
-        let spread = Vec4::from_array(items.map(|i| i.cone.spread));
+        let distance = lanes4(|k| t[k]) * length;
+        let cone_width = lanes4(|k| items[k].cone.width);
+        let spread = lanes4(|k| items[k].cone.spread);
         let width = cone_width + spread * distance;
         // Times the opaque surface's coverage, 1, as `shade` multiplies it.
-        let weight = V3::of(items.map(|i| i.weight)).scale(Vec4::ONE);
+        let weight = V3::from_fn(|k| items[k].weight).scale(Vec4::ONE);
 
         // The lobes (`ShadeContext::lobes`, without textures or transmission).
         let view = dir.neg();
@@ -581,7 +596,7 @@ impl ShadeContext<'_> {
                 mats[3].glint.z,
             ),
         }
-        .scale(Vec4::from_array(glint));
+        .scale(lanes4(|k| glint[k]));
         let brdf = V3::select(g, brdf.add(glints), brdf);
         let c = weight.mul(brdf).mul(irradiance).scale(cos_i);
         let cmax = c.max_element();
