@@ -190,17 +190,22 @@ impl Layered<'_> {
             frame: None,
             ..all
         };
-        let bins = self.psf.subfields().len().max(1);
         let walk = |rays: &[Ray], out: &mut [T]| {
-            binned(
-                rays,
-                out,
-                bins,
-                |r| self.psf.bin_of(r),
-                |r, k| wrap(self.trace_moving::<ANY>(r, Some(k))),
-            )
+            self.binned(rays, out, |r, k| wrap(self.trace_moving::<ANY>(r, Some(k))))
         };
         trace_batch::<ANY, _>(rays, out, &src, &wrap, walk);
+    }
+
+    /// `out[i] = f(&rays[i], subfield)`, the rays binned by the static PSF's subfield
+    /// (`psf::batch`).
+    fn binned<T: Send + Copy>(
+        &self,
+        rays: &[Ray],
+        out: &mut [T],
+        f: impl Fn(&Ray, usize) -> T + Sync,
+    ) {
+        let bins = self.psf.subfields().len().max(1);
+        binned(rays, out, bins, |r| self.psf.bin_of(r), f);
     }
 
     /// The batch of `lists` (their concatenation `whole`, where the caller has it)
@@ -213,15 +218,10 @@ impl Layered<'_> {
         out: &mut [T],
         wrap: impl Fn(Option<Hit>) -> T + Sync,
     ) {
-        let bins = self.psf.subfields().len().max(1);
         let walk = |rays: &[Ray], out: &mut [T]| {
-            binned(
-                rays,
-                out,
-                bins,
-                |r| self.psf.bin_of(r),
-                |r, k| wrap(self.trace::<ANY, _>(r, Some(k), &mut NoCount)),
-            )
+            self.binned(rays, out, |r, k| {
+                wrap(self.trace::<ANY, _>(r, Some(k), &mut NoCount))
+            })
         };
         trace_lists::<ANY, _>(lists, whole, out, &self.sources(), &wrap, walk);
     }
