@@ -293,27 +293,30 @@ fn first_difference(got: &dyn Intersector, want: &dyn Intersector, rs: &[Ray]) -
     got.intersect_batch(rs, &mut a);
     want.intersect_batch(rs, &mut b);
     got.intersect_lists(&lists, &mut c);
-    for (how, a) in [("", &a), (" through lists", &c)] {
-        if let Some(i) = (0..n).find(|&i| a[i] != b[i]) {
-            let (r, x, y) = (rs[i], a[i], b[i]);
-            return Some(format!(
-                "closest hit{how} differs: ray {i} {r:?}: {x:?} against {y:?}"
-            ));
-        }
+    let closest = differs("closest hit", rs, &a, &b)
+        .or_else(|| differs("closest hit through lists", rs, &c, &b));
+    if closest.is_some() {
+        return closest;
     }
     let (mut a, mut b, mut c) = (vec![false; n], vec![false; n], vec![false; n]);
     got.occluded_batch(rs, &mut a);
     want.occluded_batch(rs, &mut b);
     got.occluded_lists(&lists, &mut c);
-    for (how, a) in [("", &a), (" through lists", &c)] {
-        if let Some(i) = (0..n).find(|&i| a[i] != b[i]) {
-            let (r, x, y) = (rs[i], a[i], b[i]);
-            return Some(format!(
-                "any hit{how} differs: ray {i} {r:?}: {x} against {y}"
-            ));
-        }
-    }
-    None
+    differs("any hit", rs, &a, &b).or_else(|| differs("any hit through lists", rs, &c, &b))
+}
+
+/// The first ray whose answer in `got` is not `want`'s, described.
+fn differs<T: PartialEq + std::fmt::Debug>(
+    what: &str,
+    rs: &[Ray],
+    got: &[T],
+    want: &[T],
+) -> Option<String> {
+    let i = (0..rs.len()).find(|&i| got[i] != want[i])?;
+    Some(format!(
+        "{what} differs: ray {i} {:?}: {:?} against {:?}",
+        rs[i], got[i], want[i]
+    ))
 }
 
 fn assert_agrees(got: &dyn Intersector, want: &dyn Intersector, rs: &[Ray], what: &str) {

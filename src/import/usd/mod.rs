@@ -103,8 +103,8 @@ fn load_stage(path: &Path, reading: &RefCell<String>) -> Result<Scene, ImportErr
         path: path.to_path_buf(),
         source,
     })?;
-    // Read the file once here: a missing or unreadable file is an I/O error like any
-    // other scene's, not a composition message.
+    // Look at the file here first: a missing or unreadable file is an I/O error like
+    // any other scene's, not a composition message.
     std::fs::metadata(path).map_err(|source| ImportError::Io {
         path: path.to_path_buf(),
         source,

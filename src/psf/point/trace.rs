@@ -134,7 +134,11 @@ pub(crate) fn trace_lists<const ANY: bool, T: Send + Sync + Copy + Default>(
 ) {
     let batch = Lists::new(lists);
     assert_eq!(batch.len(), out.len(), "one output slot per ray");
-    let plans = Plan::for_batch(&batch, src);
+    // The plans sample the same rays either way; from one slice without the search.
+    let plans = match whole {
+        Some(rays) => Plan::for_batch(rays, src),
+        None => Plan::for_batch(&batch, src),
+    };
     if plans.is_empty() {
         return match (whole, lists) {
             (Some(rays), _) | (None, &[rays]) => fallback(rays, out),
