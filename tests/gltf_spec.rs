@@ -421,6 +421,102 @@ fn accessor_without_buffer_view_is_zeros_plus_sparse() {
     render_ok(&path, &[]);
 }
 
+/// Float vectors stored interleaved (a byte stride, an accessor offset), as exporters
+/// write vertex buffers, and many morph targets: each element read from its own place.
+/// A non-finite value names the first bad target in the file's order, element and
+/// component (the targets are decoded side by side).
+#[test]
+fn interleaved_floats_and_many_morph_targets() {
+    let dir = temp_dir("interleaved");
+    let pos = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    let nrm = [Vec3::Z; 3];
+    // One view, 24 bytes a vertex: position then normal.
+    let mut bytes = Vec::new();
+    for k in 0..3 {
+        for f in pos[k].to_array().into_iter().chain(nrm[k].to_array()) {
+            bytes.extend_from_slice(&f.to_le_bytes());
+        }
+    }
+    let targets = 12;
+    let make = |bad: Option<(usize, usize, usize)>| {
+        let mut doc = Doc::new();
+        let view = doc.view(&bytes, Some(24));
+        let p = doc.push(
+            "accessors",
+            json!({"bufferView": view, "componentType": 5126, "count": 3, "type": "VEC3",
+                   "min": [0, 0, 0], "max": [1, 1, 0]}),
+        );
+        let n = doc.push(
+            "accessors",
+            json!({"bufferView": view, "byteOffset": 12, "componentType": 5126, "count": 3,
+                   "type": "VEC3"}),
+        );
+        // Target t moves vertex v by (t, v, t + v) / 16, 16 bytes a vertex (a pad).
+        let mut list = Vec::new();
+        for t in 0..targets {
+            let mut tb = Vec::new();
+            for v in 0..3 {
+                let mut d = [t as f32 / 16.0, v as f32 / 16.0, (t + v) as f32 / 16.0];
+                if let Some((bt, bv, bc)) = bad {
+                    if (t, v) == (bt, bv) {
+                        d[bc] = f32::NAN;
+                    } else if t > bt {
+                        d[0] = f32::INFINITY; // every later target bad too
+                    }
+                }
+                for f in d.into_iter().chain([7.0]) {
+                    tb.extend_from_slice(&f.to_le_bytes());
+                }
+            }
+            let tv = doc.view(&tb, Some(16));
+            let (lo, hi) = (
+                [0.0, 0.0, 0.0],
+                [t as f32 / 16.0, 2.0 / 16.0, (t + 2) as f32 / 16.0],
+            );
+            let a = doc.push(
+                "accessors",
+                json!({"bufferView": tv, "componentType": 5126, "count": 3, "type": "VEC3",
+                       "min": lo, "max": hi}),
+            );
+            list.push(json!({"POSITION": a}));
+        }
+        doc.set(
+            "meshes",
+            json!([{"primitives": [{"attributes": {"POSITION": p, "NORMAL": n},
+                                    "targets": list}],
+                    "weights": vec![0.0; targets]}]),
+        );
+        doc.set("nodes", json!([{"mesh": 0}]));
+        doc.set("scenes", json!([{"nodes": [0]}]));
+        doc
+    };
+    let (path, scene) = import_file(&dir, "interleaved.glb", &make(None).glb());
+    let scene = scene.unwrap();
+    let p = &scene.meshes[0].primitives[0];
+    assert_eq!(p.positions, pos.to_vec());
+    assert_eq!(p.normals.as_deref(), Some(&nrm[..]));
+    assert_eq!(p.morph_targets.len(), targets);
+    for (t, m) in p.morph_targets.iter().enumerate() {
+        let want: Vec<Vec3> = (0..3)
+            .map(|v| Vec3::new(t as f32, v as f32, (t + v) as f32) / 16.0)
+            .collect();
+        assert_eq!(m.positions, want, "target {t}");
+    }
+    assert_spec_valid(&path);
+    render_ok(&path, &[]);
+
+    let (_, bad) = import_file(&dir, "bad.glb", &make(Some((5, 2, 1))).glb());
+    let e = bad.unwrap_err();
+    let text = e.to_string();
+    assert!(
+        matches!(e, ImportError::Accessor { accessor: 7, .. }),
+        "{text}"
+    );
+    for part in ["targets[5].POSITION", "element 2 component 1", "not finite"] {
+        assert!(text.contains(part), "{part:?} not in: {text}");
+    }
+}
+
 #[test]
 fn texture_without_source_takes_the_webp_image() {
     let dir = temp_dir("webp");

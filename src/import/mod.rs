@@ -29,6 +29,7 @@ mod error;
 mod folder;
 mod gltf_read;
 mod gltf_write;
+mod read;
 #[cfg(feature = "usd")]
 mod usd;
 mod validate;

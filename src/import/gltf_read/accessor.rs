@@ -1,5 +1,6 @@
 //! Accessors: bounds against their buffer views, types, sparse storage, normalisation and
-//! finite floats. Every value is decoded exactly (`f64`) before conversion.
+//! finite floats. Every value is decoded exactly (`f64`) before conversion, except dense
+//! `FLOAT` vectors, read as they are stored (the same values).
 
 use glam::Vec3;
 
@@ -11,6 +12,16 @@ const MAX_COMPONENTS: usize = 1 << 28;
 /// An accessor without a buffer view is all zeros (plus sparse values): its count is not
 /// bounded by any buffer, so it gets a tighter cap (16 Mi components, 128 MiB decoded).
 const MAX_ZERO_COMPONENTS: usize = 1 << 24;
+
+/// Where an accessor's elements are: its bytes, the first's offset and the stride,
+/// where it has a buffer view (`None`: zeros before any sparse values).
+struct Layout<'i> {
+    acc: &'i json::Accessor,
+    data_type: DataType,
+    comps: usize,
+    count: usize,
+    dense: Option<(&'i [u8], usize, usize)>,
+}
 
 /// Decoded accessor contents, exact (f64 holds every u32 and f32 value).
 struct Raw {
@@ -76,7 +87,9 @@ impl Importer<'_> {
             .unwrap_or(0)
     }
 
-    fn read_raw(&self, ai: usize, usage: &str) -> Result<Raw, ImportError> {
+    /// Where an accessor's elements lie, checked against its buffer view (or zeros
+    /// without one): every error an accessor's layout can have, before any is decoded.
+    fn layout(&self, ai: usize, usage: &str) -> Result<Layout<'_>, ImportError> {
         let acc = self.accessor(ai, usage)?;
         let data_type = acc
             .component_type
@@ -105,8 +118,7 @@ impl Importer<'_> {
             .checked_mul(comps)
             .filter(|&n| n <= MAX_COMPONENTS)
             .ok_or_else(|| self.acc_err(ai, usage, format!("count {count} is too large")))?;
-        let mut values = Vec::new();
-        if let Some(view) = acc.buffer_view {
+        let dense = if let Some(view) = acc.buffer_view {
             let bytes = self.view_bytes(view, ai, usage)?;
             let stride = match self.root.buffer_views.get(view).and_then(|v| v.byte_stride) {
                 Some(s) if s < elem => {
@@ -140,32 +152,102 @@ impl Importer<'_> {
                     }
                 }
             }
-            values.resize(total, 0.0);
-            for e in 0..count {
-                let base = start + e * stride;
-                for c in 0..comps {
-                    let at = base + c * csize;
-                    values[e * comps + c] = component(&bytes[at..at + csize], data_type);
-                }
-            }
+            Some((bytes, start, stride))
         } else if total <= MAX_ZERO_COMPONENTS {
-            values.resize(total, 0.0); // no buffer view: zeros (then sparse values)
+            None // no buffer view: zeros (then sparse values)
         } else {
             return Err(self.acc_err(
                 ai,
                 usage,
                 format!("count {count} without a buffer view is too large"),
             ));
+        };
+        Ok(Layout {
+            acc,
+            data_type,
+            comps,
+            count,
+            dense,
+        })
+    }
+
+    fn read_raw(&self, ai: usize, usage: &str) -> Result<Raw, ImportError> {
+        let l = self.layout(ai, usage)?;
+        let (comps, csize) = (l.comps, l.data_type.size());
+        let mut values = vec![0.0; l.count * comps];
+        if let Some((bytes, start, stride)) = l.dense {
+            for e in 0..l.count {
+                let base = start + e * stride;
+                for c in 0..comps {
+                    let at = base + c * csize;
+                    values[e * comps + c] = component(&bytes[at..at + csize], l.data_type);
+                }
+            }
         }
-        if let Some(sparse) = &acc.sparse {
-            self.apply_sparse(ai, usage, sparse, (data_type, comps, count), &mut values)?;
+        if let Some(sparse) = &l.acc.sparse {
+            self.apply_sparse(
+                ai,
+                usage,
+                sparse,
+                (l.data_type, comps, l.count),
+                &mut values,
+            )?;
         }
         Ok(Raw {
             values,
             comps,
-            data_type,
-            normalized: acc.normalized,
+            data_type: l.data_type,
+            normalized: l.acc.normalized,
         })
+    }
+
+    /// An accessor of `FLOAT`s stored densely (a buffer view, no sparse storage), as
+    /// elements of `N` components read straight from the bytes; `None` for any other,
+    /// which [`read_raw`](Self::read_raw) decodes. The same values and errors as that
+    /// path (an `f32` goes through `f64` unchanged), without its three passes over
+    /// fresh memory: a morph-target cache is mostly such accessors, and decoding them
+    /// through `f64` was a third of the import's time (`benches/PERF.md`, issue 38,
+    /// round 19).
+    fn dense_f32<const N: usize>(
+        &self,
+        ai: usize,
+        usage: &str,
+    ) -> Result<Option<Vec<[f32; N]>>, ImportError> {
+        let l = self.layout(ai, usage)?;
+        let (DataType::F32, Some((bytes, start, stride)), None) =
+            (l.data_type, l.dense, &l.acc.sparse)
+        else {
+            return Ok(None);
+        };
+        if l.comps != N {
+            return Err(self.acc_err(
+                ai,
+                usage,
+                format!("has {} components per element, expected {N}", l.comps),
+            ));
+        }
+        let mut out = Vec::with_capacity(l.count);
+        for e in 0..l.count {
+            let base = start + e * stride;
+            // `layout` checked that every element lies inside `bytes`.
+            let Some(b) = bytes.get(base..base + 4 * N) else {
+                return Err(self.acc_err(ai, usage, "element past its buffer view"));
+            };
+            let mut v = [0.0f32; N];
+            for (c, x) in v.iter_mut().enumerate() {
+                let f = f32::from_le_bytes([b[4 * c], b[4 * c + 1], b[4 * c + 2], b[4 * c + 3]]);
+                if !f.is_finite() {
+                    return Err(self.acc_err(
+                        ai,
+                        usage,
+                        format!("element {e} component {c} is {f} (not finite)"),
+                    ));
+                }
+                *x = f;
+            }
+            out.push(v);
+        }
+        Ok(Some(out))
     }
 
     /// Overwrites the elements that sparse storage names (after the dense or zero data).
@@ -280,6 +362,9 @@ impl Importer<'_> {
     }
 
     pub(super) fn vec3s(&self, ai: usize, usage: &str) -> Result<Vec<Vec3>, ImportError> {
+        if let Some(v) = self.dense_f32::<3>(ai, usage)? {
+            return Ok(v.into_iter().map(Vec3::from_array).collect());
+        }
         let f = self.floats(ai, usage, 3, false)?;
         Ok(f.chunks_exact(3).map(Vec3::from_slice).collect())
     }

@@ -24,6 +24,7 @@ mod meshopt;
 mod node;
 mod uri;
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use glam::Vec3;
@@ -65,7 +66,7 @@ const UNDECODED_EXTENSIONS: &[(&str, &str)] = &[
 ];
 
 pub(crate) fn load(path: &Path) -> Result<Scene, ImportError> {
-    let bytes = std::fs::read(path).map_err(|source| ImportError::Io {
+    let bytes = super::read::read_whole(path).map_err(|source| ImportError::Io {
         path: path.to_path_buf(),
         source,
     })?;
@@ -73,7 +74,11 @@ pub(crate) fn load(path: &Path) -> Result<Scene, ImportError> {
     from_slice(&bytes, path, folder)
 }
 
-pub(crate) fn from_slice(bytes: &[u8], path: &Path, folder: &Path) -> Result<Scene, ImportError> {
+pub(crate) fn from_slice<'a>(
+    bytes: &'a [u8],
+    path: &'a Path,
+    folder: &'a Path,
+) -> Result<Scene, ImportError> {
     let (json, bin) = if bytes.starts_with(b"glTF") {
         split_glb(bytes).map_err(|reason| ImportError::Glb {
             path: path.to_path_buf(),
@@ -158,8 +163,9 @@ struct Importer<'a> {
     path: &'a Path,
     folder: &'a Path,
     root: &'a json::Root,
-    /// Per buffer, its bytes; `None` when it has none (`uri::load_buffers`).
-    buffers: Vec<Option<Vec<u8>>>,
+    /// Per buffer, its bytes; `None` when it has none (`uri::load_buffers`). A .glb's
+    /// binary chunk is borrowed from the file's bytes, not copied.
+    buffers: Vec<Option<Cow<'a, [u8]>>>,
     /// Per buffer view, its decoded bytes when it is meshopt-compressed (`meshopt`).
     decoded_views: Vec<Option<Vec<u8>>>,
     warnings: Vec<Warning>,

@@ -2,19 +2,20 @@
 //! files beside the scene, refusing any URI that leaves the scene's folder (the policy of
 //! `import::folder`).
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use super::{json, ImportError, Importer};
 
-impl Importer<'_> {
+impl<'a> Importer<'a> {
     /// Every buffer's bytes, `None` for a buffer that has none to load: a meshopt
     /// `fallback` buffer, or one without a URI that is not the GLB's binary chunk. Only
     /// a buffer view that is read needs its buffer's bytes ([`Self::buffer_bytes`]), so
     /// a buffer nothing reads may have none, as the specification allows.
     pub(super) fn load_buffers(
         &self,
-        bin: Option<&[u8]>,
-    ) -> Result<Vec<Option<Vec<u8>>>, ImportError> {
+        bin: Option<&'a [u8]>,
+    ) -> Result<Vec<Option<Cow<'a, [u8]>>>, ImportError> {
         let mut out = Vec::new();
         for (i, buffer) in self.root.buffers.iter().enumerate() {
             let err = |reason: String| ImportError::Buffer {
@@ -28,9 +29,9 @@ impl Importer<'_> {
                 out.push(None);
                 continue;
             }
-            let mut data = match (&buffer.uri, i, bin) {
-                (Some(uri), _, _) => self.load_uri(uri, &format!("buffers[{i}]"))?,
-                (None, 0, Some(b)) => b.to_vec(),
+            let data: Cow<'a, [u8]> = match (&buffer.uri, i, bin) {
+                (Some(uri), _, _) => Cow::Owned(self.load_uri(uri, &format!("buffers[{i}]"))?),
+                (None, 0, Some(b)) => Cow::Borrowed(b),
                 (None, _, _) => {
                     out.push(None);
                     continue;
@@ -43,8 +44,13 @@ impl Importer<'_> {
                     data.len(),
                 )));
             }
-            data.truncate(length);
-            out.push(Some(data));
+            out.push(Some(match data {
+                Cow::Borrowed(b) => Cow::Borrowed(&b[..length]),
+                Cow::Owned(mut v) => {
+                    v.truncate(length);
+                    Cow::Owned(v)
+                }
+            }));
         }
         Ok(out)
     }
