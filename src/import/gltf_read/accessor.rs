@@ -319,6 +319,17 @@ impl Importer<'_> {
         comps: usize,
         normalize_ints: bool,
     ) -> Result<Vec<f32>, ImportError> {
+        // Dense FLOATs as stored (no normalisation applies to them).
+        let dense = match comps {
+            1 => self.dense_f32::<1>(ai, usage)?.map(|v| v.into_flattened()),
+            2 => self.dense_f32::<2>(ai, usage)?.map(|v| v.into_flattened()),
+            3 => self.dense_f32::<3>(ai, usage)?.map(|v| v.into_flattened()),
+            4 => self.dense_f32::<4>(ai, usage)?.map(|v| v.into_flattened()),
+            _ => None,
+        };
+        if let Some(v) = dense {
+            return Ok(v);
+        }
         let raw = self.read_raw(ai, usage)?;
         if raw.comps != comps {
             return Err(self.acc_err(
