@@ -469,10 +469,8 @@ fn interleaved_floats_and_many_morph_targets() {
                 }
             }
             let tv = doc.view(&tb, Some(16));
-            let (lo, hi) = (
-                [0.0, 0.0, 0.0],
-                [t as f32 / 16.0, 2.0 / 16.0, (t + 2) as f32 / 16.0],
-            );
+            let (t16, hi_z) = (t as f32 / 16.0, (t + 2) as f32 / 16.0);
+            let (lo, hi) = ([t16, 0.0, t16], [t16, 2.0 / 16.0, hi_z]);
             let a = doc.push(
                 "accessors",
                 json!({"bufferView": tv, "componentType": 5126, "count": 3, "type": "VEC3",
