@@ -1,6 +1,6 @@
 //! A scene file's bytes, read by the render's threads side by side.
 //!
-//! `std::fs::read` of a 19 MB `.glb` took 32 ms of a render's start-up on one thread
+//! `std::fs::read` of a 19 MB `.glb` took 25–32 ms of a render's start-up on one thread
 //! (the kernel's copy into fresh pages, each first touched and zeroed by the reader), the
 //! largest serial step before the first frame (`benches/PERF.md`, issue 38, round 19).
 //! Here the buffer is allocated zeroed and untouched (`vec![0; n]`: fresh pages from the
