@@ -9,17 +9,21 @@
 //! start to end: a file that changes size while it is read is read again by
 //! `std::fs::read`, whose result (or error) stands.
 
+#[cfg(unix)]
 use std::fs::File;
 use std::io;
 use std::path::Path;
 
 /// Below this a file is read in one call: threads would not pay for themselves.
+#[cfg(unix)]
 const PARALLEL_FROM: u64 = 4 << 20;
 
 /// Bytes a task reads at a time.
+#[cfg(unix)]
 const CHUNK: usize = 1 << 20;
 
-/// The whole file, as `std::fs::read` returns it.
+/// The whole file, as `std::fs::read` returns it (read that way outside Unix: the
+/// positioned reads used here, `FileExt::read_exact_at`, are Unix's).
 pub(crate) fn read_whole(path: &Path) -> io::Result<Vec<u8>> {
     #[cfg(unix)]
     {
@@ -59,7 +63,7 @@ fn read_chunks(file: &File, n: usize) -> Option<Vec<u8>> {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, unix))]
 mod tests {
     use super::*;
 
