@@ -109,7 +109,7 @@ impl<'a> Importer<'a> {
         // The policy every reference to a file beside the scene follows (import::folder).
         let resolved = crate::import::folder::resolve_inside(self.folder, Path::new(&decoded))
             .map_err(|_| refuse())?;
-        std::fs::read(&resolved).map_err(|source| ImportError::MissingFile {
+        crate::import::read::read_whole(&resolved).map_err(|source| ImportError::MissingFile {
             path: self.path.to_path_buf(),
             what: what.to_string(),
             uri: uri.to_string(),
