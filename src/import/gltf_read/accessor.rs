@@ -171,8 +171,8 @@ impl Importer<'_> {
         })
     }
 
-    fn read_raw(&self, ai: usize, usage: &str) -> Result<Raw, ImportError> {
-        let l = self.layout(ai, usage)?;
+    /// Every value of the accessor laid out as `l`, exact.
+    fn read_raw(&self, l: Layout<'_>, ai: usize, usage: &str) -> Result<Raw, ImportError> {
         let (comps, csize) = (l.comps, l.data_type.size());
         let mut values = vec![0.0; l.count * comps];
         if let Some((bytes, start, stride)) = l.dense {
@@ -210,10 +210,10 @@ impl Importer<'_> {
     /// round 19).
     fn dense_f32<const N: usize>(
         &self,
+        l: &Layout<'_>,
         ai: usize,
         usage: &str,
     ) -> Result<Option<Vec<[f32; N]>>, ImportError> {
-        let l = self.layout(ai, usage)?;
         let (DataType::F32, Some((bytes, start, stride)), None) =
             (l.data_type, l.dense, &l.acc.sparse)
         else {
@@ -319,18 +319,39 @@ impl Importer<'_> {
         comps: usize,
         normalize_ints: bool,
     ) -> Result<Vec<f32>, ImportError> {
+        let l = self.layout(ai, usage)?;
+        self.floats_in(l, ai, usage, comps, normalize_ints)
+    }
+
+    /// [`floats`](Self::floats) of the accessor laid out as `l`.
+    fn floats_in(
+        &self,
+        l: Layout<'_>,
+        ai: usize,
+        usage: &str,
+        comps: usize,
+        normalize_ints: bool,
+    ) -> Result<Vec<f32>, ImportError> {
         // Dense FLOATs as stored (no normalisation applies to them).
         let dense = match comps {
-            1 => self.dense_f32::<1>(ai, usage)?.map(|v| v.into_flattened()),
-            2 => self.dense_f32::<2>(ai, usage)?.map(|v| v.into_flattened()),
-            3 => self.dense_f32::<3>(ai, usage)?.map(|v| v.into_flattened()),
-            4 => self.dense_f32::<4>(ai, usage)?.map(|v| v.into_flattened()),
+            1 => self
+                .dense_f32::<1>(&l, ai, usage)?
+                .map(|v| v.into_flattened()),
+            2 => self
+                .dense_f32::<2>(&l, ai, usage)?
+                .map(|v| v.into_flattened()),
+            3 => self
+                .dense_f32::<3>(&l, ai, usage)?
+                .map(|v| v.into_flattened()),
+            4 => self
+                .dense_f32::<4>(&l, ai, usage)?
+                .map(|v| v.into_flattened()),
             _ => None,
         };
         if let Some(v) = dense {
             return Ok(v);
         }
-        let raw = self.read_raw(ai, usage)?;
+        let raw = self.read_raw(l, ai, usage)?;
         if raw.comps != comps {
             return Err(self.acc_err(
                 ai,
@@ -373,10 +394,12 @@ impl Importer<'_> {
     }
 
     pub(super) fn vec3s(&self, ai: usize, usage: &str) -> Result<Vec<Vec3>, ImportError> {
-        if let Some(v) = self.dense_f32::<3>(ai, usage)? {
+        // Once, here: the layout's checks are the same for either path.
+        let l = self.layout(ai, usage)?;
+        if let Some(v) = self.dense_f32::<3>(&l, ai, usage)? {
             return Ok(v.into_iter().map(Vec3::from_array).collect());
         }
-        let f = self.floats(ai, usage, 3, false)?;
+        let f = self.floats_in(l, ai, usage, 3, false)?;
         Ok(f.chunks_exact(3).map(Vec3::from_slice).collect())
     }
 
@@ -387,7 +410,7 @@ impl Importer<'_> {
         usage: &str,
         comps: usize,
     ) -> Result<Vec<u32>, ImportError> {
-        let raw = self.read_raw(ai, usage)?;
+        let raw = self.read_raw(self.layout(ai, usage)?, ai, usage)?;
         if raw.comps != comps
             || !matches!(raw.data_type, DataType::U8 | DataType::U16 | DataType::U32)
         {
