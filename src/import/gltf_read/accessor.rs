@@ -310,6 +310,18 @@ impl Importer<'_> {
         Ok(())
     }
 
+    /// [`dense_f32`](Self::dense_f32)'s elements one component after the other.
+    fn dense_flat<const N: usize>(
+        &self,
+        l: &Layout<'_>,
+        ai: usize,
+        usage: &str,
+    ) -> Result<Option<Vec<f32>>, ImportError> {
+        Ok(self
+            .dense_f32::<N>(l, ai, usage)?
+            .map(|v| v.into_flattened()))
+    }
+
     /// Floats, with integer components normalised when the accessor says so or
     /// `normalize_ints` (weights, uvs, rotations: the spec only allows normalised ints).
     pub(super) fn floats(
@@ -334,18 +346,10 @@ impl Importer<'_> {
     ) -> Result<Vec<f32>, ImportError> {
         // Dense FLOATs as stored (no normalisation applies to them).
         let dense = match comps {
-            1 => self
-                .dense_f32::<1>(&l, ai, usage)?
-                .map(|v| v.into_flattened()),
-            2 => self
-                .dense_f32::<2>(&l, ai, usage)?
-                .map(|v| v.into_flattened()),
-            3 => self
-                .dense_f32::<3>(&l, ai, usage)?
-                .map(|v| v.into_flattened()),
-            4 => self
-                .dense_f32::<4>(&l, ai, usage)?
-                .map(|v| v.into_flattened()),
+            1 => self.dense_flat::<1>(&l, ai, usage)?,
+            2 => self.dense_flat::<2>(&l, ai, usage)?,
+            3 => self.dense_flat::<3>(&l, ai, usage)?,
+            4 => self.dense_flat::<4>(&l, ai, usage)?,
             _ => None,
         };
         if let Some(v) = dense {
