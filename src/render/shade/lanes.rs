@@ -23,7 +23,7 @@
 use glam::{BVec4A, Mat4, Vec3, Vec3A, Vec4};
 
 use super::block::{BlockOut, Item};
-use super::bsdf::{powi, Factors};
+use super::bsdf::{powi, powi4, Factors};
 use super::direct::{cone, PreLight};
 use super::{LightPath, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT};
 use crate::geometry::{Hit, Ray};
@@ -553,28 +553,48 @@ impl ShadeContext<'_> {
         if facing.bitmask() == 0 {
             return [None; 4];
         }
-        // The glint (`ShadeContext::glint`): the half vector in lanes, the power a lane
-        // at a time (its chain of squarings stops early, as the scalar one does).
+        // The glint (`ShadeContext::glint`): the half vector in lanes; the power in
+        // lanes where the four share a whole exponent (one material, or one roughness),
+        // else a lane at a time (each chain of squarings stops early, as the scalar one
+        // does).
         let h = to.add(view).normalize_or_zero();
         let nh = ns.dot(h);
-        let mut glint = [0.0f32; 4];
-        let mut has_glint = [false; 4];
-        for k in 0..4 {
-            let m = mats[k];
-            if m.shininess <= 0.0 || facing.bitmask() & (1 << k) == 0 {
-                continue;
+        let s = mats[0].shininess;
+        let whole = s as u32;
+        let (glint, g) = if s > 0.0
+            && whole as f32 == s
+            && mats[1..]
+                .iter()
+                .all(|m| m.shininess.to_bits() == s.to_bits())
+        {
+            // `f32::max` and `min` as `Vec4`'s in these lanes: `nh` is never NaN where
+            // it counts (a lane that is not facing is dropped) and `norm × lobe` is
+            // finite, so the two agree.
+            let lobe = powi4(nh.max(Vec4::ZERO), whole);
+            let norm = lanes4(|k| mats[k].norm);
+            let glint = (norm * lobe).min(Vec4::splat(1e3));
+            (Vec4::select(facing, glint, Vec4::ZERO), facing)
+        } else {
+            let mut glint = [0.0f32; 4];
+            let mut has_glint = [false; 4];
+            for k in 0..4 {
+                let m = mats[k];
+                if m.shininess <= 0.0 || facing.bitmask() & (1 << k) == 0 {
+                    continue;
+                }
+                let nh = nh[k].max(0.0);
+                let whole = m.shininess as u32;
+                let lobe = if whole as f32 == m.shininess {
+                    powi(nh, whole)
+                } else {
+                    nh.powf(m.shininess)
+                };
+                glint[k] = (m.norm * lobe).min(1e3);
+                has_glint[k] = true;
             }
-            let nh = nh[k].max(0.0);
-            let whole = m.shininess as u32;
-            let lobe = if whole as f32 == m.shininess {
-                powi(nh, whole)
-            } else {
-                nh.powf(m.shininess)
-            };
-            glint[k] = (m.norm * lobe).min(1e3);
-            has_glint[k] = true;
-        }
-        let g = BVec4A::new(has_glint[0], has_glint[1], has_glint[2], has_glint[3]);
+            let g = BVec4A::new(has_glint[0], has_glint[1], has_glint[2], has_glint[3]);
+            (lanes4(|k| glint[k]), g)
+        };
         let brdf = kd.scale(Vec4::splat(std::f32::consts::FRAC_1_PI));
         let glints = V3 {
             x: Vec4::new(
@@ -596,7 +616,7 @@ impl ShadeContext<'_> {
                 mats[3].glint.z,
             ),
         }
-        .scale(lanes4(|k| glint[k]));
+        .scale(glint);
         let brdf = V3::select(g, brdf.add(glints), brdf);
         let c = weight.mul(brdf).mul(irradiance).scale(cos_i);
         let cmax = c.max_element();
