@@ -7,6 +7,7 @@
 #
 #   benches/instructions.sh [--binary B] [--scene S.glb] [--camera still|dolly]
 #                           [--size WxH] [--frame N] [--only PATTERN] [--top K] [--sim]
+#                           [--warm]
 #
 # Defaults: target/release/subfield; the museum class in half mirrors with a dollying
 # camera (written as benches/scaling.sh writes it, by ../shared/peers, if missing);
@@ -18,13 +19,18 @@
 # (mispredicted conditional branches, first-level data misses): a change can run fewer
 # instructions and take longer (benches/PERF.md, issue 38, round 10), and these models
 # of a simple predictor and cache say why only roughly, so time it either way.
+# `--warm` counts frame N as a sequence renders it, after frame N-1 (N >= 1): the
+# buffers a render keeps from frame to frame have grown by then, where a frame rendered
+# alone also pays for growing them (some 50 M instructions of copies in a 640x480 dolly
+# frame's shading, benches/PERF.md, issue 38, round 20). Two runs, frames N-1..N and
+# N-1..N+1, and their difference, address by address; twice the time.
 # Needs valgrind (Debian's `valgrind`), addr2line (binutils) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 die() { echo "benches/instructions.sh: $*" >&2; exit 1; }
 
 BIN=target/release/subfield; SCENE=""; CAMERA=dolly; SIZE=320x240; FRAME=5
-ONLY='*Frames*trace*'; TOP=30; SIM=()
+ONLY='*Frames*trace*'; TOP=30; SIM=(); WARM=0
 while [ $# -gt 0 ]; do
     case "$1" in
         --binary) BIN=${2:?--binary needs a path}; shift ;;
@@ -35,7 +41,8 @@ while [ $# -gt 0 ]; do
         --only) ONLY=${2:?--only needs a pattern}; shift ;;
         --top) TOP=${2:?--top needs a number}; shift ;;
         --sim) SIM=(--branch-sim=yes --cache-sim=yes) ;;
-        -h|--help) sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        --warm) WARM=1 ;;
+        -h|--help) sed -n '2,26p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) die "unknown option $1 (see --help)" ;;
     esac
     shift
@@ -44,6 +51,8 @@ done
 [[ "$SIZE" =~ ^[1-9][0-9]*x[1-9][0-9]*$ ]] || die "--size takes WxH (got $SIZE)"
 [[ "$FRAME" =~ ^[0-9]+$ ]] || die "--frame takes a whole number (got $FRAME)"
 [[ "$TOP" =~ ^[1-9][0-9]*$ ]] || die "--top takes a whole number (got $TOP)"
+((WARM == 0 || FRAME >= 1)) || die "--warm counts frame N after frame N-1: --frame must be 1 or more"
+[ ${#SIM[@]} -eq 0 ] || ((WARM == 0)) || die "--sim and --warm do not go together (the simulations' totals are not differenced)"
 [ -x "$BIN" ] || die "no binary at $BIN (cargo build --release, or --binary)"
 command -v valgrind >/dev/null || die "valgrind is not installed (apt-get install valgrind)"
 command -v addr2line >/dev/null || die "addr2line is not installed (apt-get install binutils)"
@@ -64,46 +73,68 @@ fi
 
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-valgrind --tool=callgrind --dump-instr=yes --toggle-collect="$ONLY" "${SIM[@]}" \
-    --callgrind-out-file="$work/cg.out" "$BIN" render "$SCENE" -o "$work/f.####.exr" \
-    --frames "$FRAME..$((FRAME + 1))" --size "$SIZE" --max-depth 1 --threads 1 \
-    >"$work/render.log" 2>&1 || { tail -n 5 "$work/render.log" >&2; die "the render failed under valgrind"; }
+# count OUT FIRST: callgrind's counts of rendering frames FIRST..FRAME+1 into OUT.
+count() {
+    rm -rf "$work/frames"
+    valgrind --tool=callgrind --dump-instr=yes --toggle-collect="$ONLY" "${SIM[@]}" \
+        --callgrind-out-file="$1" "$BIN" render "$SCENE" -o "$work/frames/f.####.exr" \
+        --frames "$2..$((FRAME + 1))" --size "$SIZE" --max-depth 1 --threads 1 \
+        >"$work/render.log" 2>&1 || { tail -n 5 "$work/render.log" >&2; die "the render failed under valgrind"; }
+}
+if ((WARM)); then
+    count "$work/cold.out" "$((FRAME - 1))"
+    # The same run without frame N: what it counts is taken off, address by address.
+    FRAME=$((FRAME - 1)) count "$work/before.out" "$((FRAME - 1))"
+    cp "$work/cold.out" "$work/cg.out"
+    SUBTRACT="$work/before.out"
+    what="frame $FRAME after frame $((FRAME - 1)) (warm)"
+else
+    count "$work/cg.out" "$FRAME"
+    SUBTRACT=""
+    what="frame $FRAME rendered alone"
+fi
 
-echo "# Instructions: $BIN, $(basename "$SCENE"), frame $FRAME, $SIZE, --max-depth 1, 1 thread, counting $ONLY"
+echo "# Instructions: $BIN, $(basename "$SCENE"), $what, $SIZE, --max-depth 1, 1 thread, counting $ONLY"
 if [ ${#SIM[@]} -gt 0 ]; then
     echo
     grep -E "(Branches|Mispredicts|D1  misses|LLd misses):" "$work/render.log" | sed 's/^==[0-9]*== */    /'
 fi
-python3 - "$work/cg.out" "$BIN" "$TOP" "$(pwd)/src/" <<'EOF'
+python3 - "$work/cg.out" "$BIN" "$TOP" "$(pwd)/src/" "$SUBTRACT" <<'EOF'
 import collections, re, subprocess, sys
 
-out, binary, top, ours = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4]
+out, binary, top, ours, before = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5]
 # Callgrind's format with --dump-instr: "fn=(id) name" opens a function's costs,
 # "calls=" lines are followed by the call's inclusive cost (skipped: self costs only),
 # cost lines are "ADDR LINE Ir" with addresses absolute, relative (+n, -n) or "*".
-cost = collections.Counter()
-names, last, skip = {}, 0, False
-with open(out) as f:
-    for line in f:
-        m = re.match(r"^(c?fn)=\((\d+)\)(?: (.*))?$", line.rstrip("\n"))
-        if m:
-            kind, i, name = m.groups()
-            if name:
-                names[i] = name
-            continue
-        if line.startswith("calls="):
-            skip = True
-            continue
-        m = re.match(r"^(0x[0-9a-f]+|[+-]\d+|\*)\s+\S+\s+(\d+)", line)
-        if not m:
-            continue
-        a = m.group(1)
-        last = int(a, 16) if a.startswith("0x") else last + int(a) if a[0] in "+-" else last
-        if skip:
-            skip = False
-            continue
-        cost[last] += int(m.group(2))
+def read(path):
+    cost = collections.Counter()
+    last, skip = 0, False
+    with open(path) as f:
+        for line in f:
+            if re.match(r"^c?fn=", line):
+                continue
+            if line.startswith("calls="):
+                skip = True
+                continue
+            m = re.match(r"^(0x[0-9a-f]+|[+-]\d+|\*)\s+\S+\s+(\d+)", line)
+            if not m:
+                continue
+            a = m.group(1)
+            last = int(a, 16) if a.startswith("0x") else last + int(a) if a[0] in "+-" else last
+            if skip:
+                skip = False
+                continue
+            cost[last] += int(m.group(2))
+    return cost
+cost = read(out)
+if before:
+    # --warm: the run without the counted frame taken off. Its first frame is the same
+    # work in both runs, so what is left is the counted frame's (a few thousand
+    # instructions of the thread pool's own timing aside: the total is the difference, the
+    # tables show no address below 0).
+    cost.subtract(read(before))
 total = sum(cost.values())
+cost = collections.Counter({a: c for a, c in cost.items() if c > 0})
 if total == 0:
     # A pattern that names no function the binary has (inlined away, renamed) counts
     # nothing; a table of zeros would read as a result.
