@@ -2,7 +2,7 @@
 //! and near lists, scanned near to far with the early exit.
 
 use super::plan::{BatchGrid, Plan};
-use super::project::{down, face_coords, up};
+use super::project::face_coords;
 use super::types::{PointGrid, StaticGrid};
 use crate::geometry::{intersect_pre, intersect_pre4, Hit, Ray, RayPre, TriPre};
 
@@ -46,9 +46,12 @@ impl<'a> Plan<'a> {
     }
 
     /// The depth window of a ray on face `f` up to `t_far`, as a function of `t_far`, and
-    /// the margin in `t` of the early exit.
+    /// the margin in `t` of the early exit. The window stays in `f64`, and an entry's
+    /// `f32` depths are compared with it exactly (an `f32` is an `f64`): rounding the
+    /// window outwards to `f32` instead cost a query more than the two conversions an
+    /// entry now takes.
     #[inline]
-    fn window(&self, ray: &Ray, f: usize) -> (impl Fn(f64) -> (f32, f32), f64) {
+    fn window(&self, ray: &Ray, f: usize) -> (impl Fn(f64) -> (f64, f64), f64) {
         let o = ray.origin.as_dvec3();
         let d = ray.dir.as_dvec3();
         let (_, _, z0) = face_coords(f, o - self.at.c);
@@ -59,7 +62,7 @@ impl<'a> Plan<'a> {
         let t_min = ray.t_min as f64;
         let window = move |t_far: f64| {
             let (za, zb) = (z0 + t_min * dz, z0 + t_far * dz);
-            (down(za.min(zb) - m), up(za.max(zb) + m))
+            (za.min(zb) - m, za.max(zb) + m)
         };
         (window, m / d.length())
     }
@@ -107,10 +110,10 @@ impl<'a> Plan<'a> {
         let (window, slack) = self.window(ray, f);
         let (mut lo, mut hi) = window(best.map_or(ray.t_max as f64, |b| b.t as f64 + slack));
         for e in run {
-            if e.zmin > hi {
+            if f64::from(e.zmin) > hi {
                 break;
             }
-            if e.zmax < lo {
+            if f64::from(e.zmax) < lo {
                 continue;
             }
             if group.push(&tris[e.tri as usize], number(e.tri)) {
@@ -181,10 +184,10 @@ impl<'a> Plan<'a> {
                 j += 1;
                 &rb[j - 1]
             };
-            if e.zmin > hi {
+            if f64::from(e.zmin) > hi {
                 break;
             }
-            if e.zmax < lo {
+            if f64::from(e.zmax) < lo {
                 continue;
             }
             let (t, number) = tri(from_a, e.tri);
