@@ -42,13 +42,33 @@ pub(super) fn up(x: f64) -> f32 {
     pick(y as f64 >= x || x.is_nan(), y, above)
 }
 
-/// Face `f` (axis `f / 2`, negative when `f` is odd) coordinates `(u, v, z)` of `x`.
+/// Face `f` (axis `f / 2`, negative when `f` is odd) coordinates `(u, v, z)` of `x`:
+/// the axes after the face's, in turn (`f` above 5 counts as 5). A match on the face, not
+/// indices taken modulo 3 into the vector stored as an array: those were 2.6 % of a
+/// dolly frame's instructions, three times a query (`benches/PERF.md`, issue 38, round 20).
 #[inline]
 pub(super) fn face_coords(f: usize, x: DVec3) -> (f64, f64, f64) {
-    let k = f / 2;
-    let a = x.to_array();
-    let z = if f.is_multiple_of(2) { a[k] } else { -a[k] };
-    (a[(k + 1) % 3], a[(k + 2) % 3], z)
+    match f {
+        0 => (x.y, x.z, x.x),
+        1 => (x.y, x.z, -x.x),
+        2 => (x.z, x.x, x.y),
+        3 => (x.z, x.x, -x.y),
+        4 => (x.x, x.y, x.z),
+        _ => (x.x, x.y, -x.z),
+    }
+}
+
+/// The `z` of [`face_coords`] alone.
+#[inline]
+pub(super) fn face_z(f: usize, x: DVec3) -> f64 {
+    match f {
+        0 => x.x,
+        1 => -x.x,
+        2 => x.y,
+        3 => -x.y,
+        4 => x.z,
+        _ => -x.z,
+    }
 }
 
 /// The face whose frustum holds direction `a`.
