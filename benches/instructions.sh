@@ -23,7 +23,9 @@
 # buffers a render keeps from frame to frame have grown by then, where a frame rendered
 # alone also pays for growing them (some 50 M instructions of copies in a 640x480 dolly
 # frame's shading, benches/PERF.md, issue 38, round 20). Two runs, frames N-1..N and
-# N-1..N+1, and their difference, address by address; twice the time.
+# N-1..N+1, and their difference, address by address; twice the time. Not for a still
+# camera, whose frame N-1 works differently when frame N follows (it stops with a
+# message).
 # Needs valgrind (Debian's `valgrind`), addr2line (binutils) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -134,6 +136,16 @@ if before:
     # tables show no address below 0).
     cost.subtract(read(before))
 total = sum(cost.values())
+if before:
+    # Where the first frame's work depends on what follows it (a still camera looks
+    # ahead to keep its hits for the next frame), the runs' first frames differ and
+    # the difference is no frame's count: much below 0 says so.
+    below = -sum(c for c in cost.values() if c < 0)
+    if below > 0.01 * max(total, 1):
+        sys.exit(f"benches/instructions.sh: --warm: the two runs' first frames differ "
+                 f"({below:,} instructions more without the counted frame), so their "
+                 f"difference is not the frame's count (a still camera's frame looks ahead "
+                 f"to the next): count it without --warm")
 cost = collections.Counter({a: c for a, c in cost.items() if c > 0})
 if total == 0:
     # A pattern that names no function the binary has (inlined away, renamed) counts
