@@ -453,12 +453,6 @@ impl ShadeContext<'_> {
         let ambient_light = V3::splat(Vec3A::from(self.options.ambient));
         let added = weight.mul(V3::splat(Vec3A::ZERO).add(kd.mul(ambient_light)));
 
-        // Direct light, a light at a time (`ShadeContext::direct_light`).
-        let mut lit: [[Lit; 4]; LANE_LIGHTS] = [[None; 4]; LANE_LIGHTS];
-        for (slot, l) in lit.iter_mut().zip(&self.lights) {
-            *slot = self.light4(l, &mats, origin, ns, ng, view, kd, weight);
-        }
-
         // The mirror ray (`secondary`, without refraction or a glossy lobe).
         let kr_w = weight.mul(kr);
         let krmax = kr_w.max_element();
@@ -467,20 +461,30 @@ impl ShadeContext<'_> {
         let under = r.dot(ng).cmple(Vec4::ZERO);
         r = V3::select(under, reflect4(dir, ng, two), r);
 
-        // What the four calls would push, hit by hit.
-        let (added, origin, r, kr_w) = (added.lanes(), origin.lanes(), r.lanes(), kr_w.lanes());
+        // What the four calls would push, list by list: each list gets the hits' in
+        // their order, as the four calls push them (no list is read between them), and
+        // a light's shadow rays are pushed as it is shaded, not held for all the lights.
+        let added_lanes = added.lanes();
         for k in 0..4 {
             let item = items[k];
             out.cover(item.sample, item.coverage * 1.0);
-            let c = added[k];
+            let c = added_lanes[k];
             if c.cmpne(Vec3A::ZERO).any() & c.is_finite() {
                 out.add.push((item.sample, c.into()));
             }
-            for (li, lanes) in lit.iter().take(self.lights.len()).enumerate() {
-                if let Some((ray, add)) = lanes[k] {
-                    out.push_shadow(ray, li, (item.sample, add));
+        }
+        // Direct light, a light at a time (`ShadeContext::direct_light`).
+        for (li, l) in self.lights.iter().enumerate() {
+            let lanes = self.light4(l, &mats, origin, ns, ng, view, kd, weight);
+            for (k, lane) in lanes.into_iter().enumerate() {
+                if let Some((ray, add)) = lane {
+                    out.push_shadow(ray, li, (items[k].sample, add));
                 }
             }
+        }
+        let (origin, r, kr_w) = (origin.lanes(), r.lanes(), kr_w.lanes());
+        for k in 0..4 {
+            let item = items[k];
             if item.depth >= max_depth || krmax[k] <= MIN_WEIGHT {
                 continue;
             }
