@@ -461,8 +461,8 @@ impl ShadeContext<'_> {
         let under = r.dot(ng).cmple(Vec4::ZERO);
         r = V3::select(under, reflect4(dir, ng, two), r);
 
-        // What the four calls would push, list by list: each list gets the hits' in
-        // their order, as the four calls push them (no list is read between them), and
+        // What the four calls would push, list by list: each list gets the hits' entries
+        // in their order, as the four calls push them (no list is read between them), and
         // a light's shadow rays are pushed as it is shaded, not held for all the lights.
         let added_lanes = added.lanes();
         for k in 0..4 {
