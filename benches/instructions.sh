@@ -44,7 +44,7 @@ while [ $# -gt 0 ]; do
         --top) TOP=${2:?--top needs a number}; shift ;;
         --sim) SIM=(--branch-sim=yes --cache-sim=yes) ;;
         --warm) WARM=1 ;;
-        -h|--help) sed -n '2,26p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -h|--help) sed -n '2,29p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) die "unknown option $1 (see --help)" ;;
     esac
     shift
