@@ -22,10 +22,10 @@
 # `--warm` counts frame N as a sequence renders it, after frame N-1 (N >= 1): the
 # buffers a render keeps from frame to frame have grown by then, where a frame rendered
 # alone also pays for growing them (57 M instructions of growth and copies in a 640x480
-# dolly frame, 42 M of them in its shading: benches/PERF.md, issue 38, round 20). Two runs, frames N-1..N and
-# N-1..N+1, and their difference, address by address; twice the time. Not for a still
-# camera, whose frame N-1 works differently when frame N follows (it stops with a
-# message).
+# dolly frame, 42 M of them in its shading: benches/PERF.md, issue 38, round 20). Two
+# runs, frames N-1..N and N-1..N+1, and their difference, address by address; twice the
+# time. Not for a still camera, whose frame N-1 works differently when frame N follows
+# (it stops with a message).
 # Needs valgrind (Debian's `valgrind`), addr2line (binutils) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/.."
