@@ -286,9 +286,6 @@ impl Mats {
     }
 }
 
-/// What one lane's light leaves: its shadow ray and what it adds when unblocked.
-type Lit = Option<(Ray, Vec3)>;
-
 impl ShadeContext<'_> {
     /// Whether [`shade4`](Self::shade4) may take this frame's hits into `out`.
     #[inline]
@@ -473,14 +470,12 @@ impl ShadeContext<'_> {
                 out.add.push((item.sample, c.into()));
             }
         }
-        // Direct light, a light at a time (`ShadeContext::direct_light`).
+        // Direct light, a light at a time (`ShadeContext::direct_light`), each lane's
+        // shadow ray pushed as it is made.
+        let samples = items.map(|i| i.sample);
         for (li, l) in self.lights.iter().enumerate() {
-            let lanes = self.light4(l, &mats, origin, ns, ng, view, kd, weight);
-            for (k, lane) in lanes.into_iter().enumerate() {
-                if let Some((ray, add)) = lane {
-                    out.push_shadow(ray, li, (items[k].sample, add));
-                }
-            }
+            let at = (li, samples);
+            self.light4(l, &mats, origin, ns, ng, view, kd, weight, at, out);
         }
         let (origin, r, kr_w) = (origin.lanes(), r.lanes(), kr_w.lanes());
         for k in 0..4 {
@@ -511,7 +506,8 @@ impl ShadeContext<'_> {
     }
 
     /// One light's shadow ray and contribution in each lane (`light_at` and
-    /// `direct_light`'s body), `None` where the light adds nothing.
+    /// `direct_light`'s body), pushed to `out` as light `li`'s for the lanes' samples,
+    /// lane by lane; nothing where the light adds nothing.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn light4(
@@ -524,7 +520,9 @@ impl ShadeContext<'_> {
         view: V3,
         kd: V3,
         weight: V3,
-    ) -> [Lit; 4] {
+        (li, samples): (usize, [u32; 4]),
+        out: &mut BlockOut,
+    ) {
         let (to, dist, irradiance, there) = match l.kind {
             LightKind::Directional => (
                 V3::splat(-Vec3A::from(l.direction)),
@@ -555,7 +553,7 @@ impl ShadeContext<'_> {
         let cos_i = ns.dot(to);
         let facing = there & cos_i.cmpgt(Vec4::ZERO) & ng.dot(to).cmpgt(Vec4::ZERO);
         if facing.bitmask() == 0 {
-            return [None; 4];
+            return;
         }
         // The glint (`ShadeContext::glint`): the half vector in lanes; the power in
         // lanes where the four share a whole exponent (one material, or one roughness),
@@ -627,8 +625,7 @@ impl ShadeContext<'_> {
         let keep = facing & cmax.cmpgt(Vec4::splat(MIN_WEIGHT * 1e-2)) & c.is_finite();
         let far = dist * Vec4::splat(1.0 - 1e-4);
         let (origin, to, c) = (origin.lanes(), to.lanes(), c.lanes());
-        let mut lanes = [None; 4];
-        for (k, lane) in lanes.iter_mut().enumerate() {
+        for k in 0..4 {
             if keep.bitmask() & (1 << k) == 0 {
                 continue;
             }
@@ -637,9 +634,8 @@ impl ShadeContext<'_> {
             } else {
                 Ray::new(origin[k].into(), to[k].into())
             };
-            *lane = Some((ray, c[k].into()));
+            out.push_shadow(ray, li, (samples[k], c[k].into()));
         }
-        lanes
     }
 }
 
