@@ -201,8 +201,9 @@ impl Importer<'_> {
         })
     }
 
-    /// An accessor of `FLOAT`s stored densely (a buffer view, no sparse storage), as
-    /// elements of `N` components read straight from the bytes; `None` for any other,
+    /// An accessor of `FLOAT`s stored densely (a buffer view, no sparse storage), its
+    /// elements of `N` components read straight from the bytes, one component after the
+    /// other; `None` for any other,
     /// which [`read_raw`](Self::read_raw) decodes. The same values and errors as that
     /// path (an `f32` goes through `f64` unchanged), without its three passes over
     /// fresh memory: a morph-target cache is mostly such accessors, and decoding them
@@ -213,7 +214,7 @@ impl Importer<'_> {
         l: &Layout<'_>,
         ai: usize,
         usage: &str,
-    ) -> Result<Option<Vec<[f32; N]>>, ImportError> {
+    ) -> Result<Option<Vec<f32>>, ImportError> {
         let (DataType::F32, Some((bytes, start, stride)), None) =
             (l.data_type, l.dense, &l.acc.sparse)
         else {
@@ -226,7 +227,7 @@ impl Importer<'_> {
                 format!("has {} components per element, expected {N}", l.comps),
             ));
         }
-        let mut out = Vec::with_capacity(l.count);
+        let mut out = Vec::with_capacity(l.count * N);
         for e in 0..l.count {
             let base = start + e * stride;
             // `layout` checked that every element lies inside `bytes`.
@@ -245,7 +246,7 @@ impl Importer<'_> {
                 }
                 *x = f;
             }
-            out.push(v);
+            out.extend(v);
         }
         Ok(Some(out))
     }
@@ -310,18 +311,6 @@ impl Importer<'_> {
         Ok(())
     }
 
-    /// [`dense_f32`](Self::dense_f32)'s elements one component after the other.
-    fn dense_flat<const N: usize>(
-        &self,
-        l: &Layout<'_>,
-        ai: usize,
-        usage: &str,
-    ) -> Result<Option<Vec<f32>>, ImportError> {
-        Ok(self
-            .dense_f32::<N>(l, ai, usage)?
-            .map(|v| v.into_flattened()))
-    }
-
     /// Floats, with integer components normalised when the accessor says so or
     /// `normalize_ints` (weights, uvs, rotations: the spec only allows normalised ints).
     pub(super) fn floats(
@@ -332,24 +321,12 @@ impl Importer<'_> {
         normalize_ints: bool,
     ) -> Result<Vec<f32>, ImportError> {
         let l = self.layout(ai, usage)?;
-        self.floats_in(l, ai, usage, comps, normalize_ints)
-    }
-
-    /// [`floats`](Self::floats) of the accessor laid out as `l`.
-    fn floats_in(
-        &self,
-        l: Layout<'_>,
-        ai: usize,
-        usage: &str,
-        comps: usize,
-        normalize_ints: bool,
-    ) -> Result<Vec<f32>, ImportError> {
         // Dense FLOATs as stored (no normalisation applies to them).
         let dense = match comps {
-            1 => self.dense_flat::<1>(&l, ai, usage)?,
-            2 => self.dense_flat::<2>(&l, ai, usage)?,
-            3 => self.dense_flat::<3>(&l, ai, usage)?,
-            4 => self.dense_flat::<4>(&l, ai, usage)?,
+            1 => self.dense_f32::<1>(&l, ai, usage)?,
+            2 => self.dense_f32::<2>(&l, ai, usage)?,
+            3 => self.dense_f32::<3>(&l, ai, usage)?,
+            4 => self.dense_f32::<4>(&l, ai, usage)?,
             _ => None,
         };
         if let Some(v) = dense {
@@ -398,12 +375,8 @@ impl Importer<'_> {
     }
 
     pub(super) fn vec3s(&self, ai: usize, usage: &str) -> Result<Vec<Vec3>, ImportError> {
-        // Once, here: the layout's checks are the same for either path.
-        let l = self.layout(ai, usage)?;
-        if let Some(v) = self.dense_f32::<3>(&l, ai, usage)? {
-            return Ok(v.into_iter().map(Vec3::from_array).collect());
-        }
-        let f = self.floats_in(l, ai, usage, 3, false)?;
+        // `floats` reads dense FLOATs as stored too.
+        let f = self.floats(ai, usage, 3, false)?;
         Ok(f.chunks_exact(3).map(Vec3::from_slice).collect())
     }
 

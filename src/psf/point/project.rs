@@ -44,8 +44,8 @@ pub(super) fn up(x: f64) -> f32 {
 
 /// Face `f` (axis `f / 2`, negative when `f` is odd) coordinates `(u, v, z)` of `x`:
 /// the axes after the face's, in turn (`f` above 5 counts as 5). A match on the face, not
-/// indices taken modulo 3 into the vector stored as an array (with [`face_z`], 0.35 % of
-/// a dolly frame's instructions fewer: `benches/PERF.md`, issue 38, round 20).
+/// indices taken modulo 3 into the vector stored as an array (0.35 % of a dolly frame's
+/// instructions fewer: `benches/PERF.md`, issue 38, round 20).
 #[inline]
 pub(super) fn face_coords(f: usize, x: DVec3) -> (f64, f64, f64) {
     match f {
@@ -55,19 +55,6 @@ pub(super) fn face_coords(f: usize, x: DVec3) -> (f64, f64, f64) {
         3 => (x.z, x.x, -x.y),
         4 => (x.x, x.y, x.z),
         _ => (x.x, x.y, -x.z),
-    }
-}
-
-/// The `z` of [`face_coords`] alone.
-#[inline]
-pub(super) fn face_z(f: usize, x: DVec3) -> f64 {
-    match f {
-        0 => x.x,
-        1 => -x.x,
-        2 => x.y,
-        3 => -x.y,
-        4 => x.z,
-        _ => -x.z,
     }
 }
 

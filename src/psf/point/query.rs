@@ -2,7 +2,7 @@
 //! and near lists, scanned near to far with the early exit.
 
 use super::plan::{BatchGrid, Plan};
-use super::project::face_z;
+use super::project::face_coords;
 use super::types::{PointGrid, StaticGrid};
 use crate::geometry::{intersect_pre, intersect_pre4, Hit, Ray, RayPre, TriPre};
 
@@ -54,8 +54,8 @@ impl<'a> Plan<'a> {
     fn window(&self, ray: &Ray, f: usize) -> (impl Fn(f64) -> (f64, f64), f64) {
         let o = ray.origin.as_dvec3();
         let d = ray.dir.as_dvec3();
-        let z0 = face_z(f, o - self.at.c);
-        let dz = face_z(f, d);
+        let (_, _, z0) = face_coords(f, o - self.at.c);
+        let (_, _, dz) = face_coords(f, d);
         // How far (in t) a computed hit may sit from where the line truly meets its
         // triangle, as in the parallel subfields' early exit.
         let m = self.depth_margin;

@@ -3,7 +3,7 @@ use glam::{DVec3, Vec3};
 use super::build::{by_depth, RAYS_PER_TILE};
 use super::center::center;
 use super::plan::SAMPLE;
-use super::project::{aim, down, face_coords, face_z, passes, up, EPS_P};
+use super::project::{aim, down, face_coords, passes, up, EPS_P};
 use super::types::{Around, Item, PointGrid, NO_RECT};
 use crate::gen::synth::Rng;
 use crate::geometry::Ray;
@@ -83,7 +83,6 @@ fn face_coordinates_follow_the_axes() {
     ];
     for (f, w) in want.into_iter().enumerate() {
         assert_eq!(face_coords(f, DVec3::new(x, y, z)), w, "face {f}");
-        assert_eq!(face_z(f, DVec3::new(x, y, z)), w.2, "face {f}");
     }
 }
 

@@ -474,8 +474,7 @@ impl ShadeContext<'_> {
         // shadow ray pushed as it is made.
         let samples = items.map(|i| i.sample);
         for (li, l) in self.lights.iter().enumerate() {
-            let at = (li, samples);
-            self.light4(l, &mats, origin, ns, ng, view, kd, weight, at, out);
+            self.light4(l, &mats, origin, ns, ng, view, kd, weight, li, samples, out);
         }
         let (origin, r, kr_w) = (origin.lanes(), r.lanes(), kr_w.lanes());
         for k in 0..4 {
@@ -520,7 +519,8 @@ impl ShadeContext<'_> {
         view: V3,
         kd: V3,
         weight: V3,
-        (li, samples): (usize, [u32; 4]),
+        li: usize,
+        samples: [u32; 4],
         out: &mut BlockOut,
     ) {
         let (to, dist, irradiance, there) = match l.kind {
