@@ -108,8 +108,11 @@ impl RayPre {
 }
 
 /// A triangle laid out for [`intersect_pre`] (the paper's pre-processed triangle data):
-/// the x, y and z of its three vertices as three 4-wide vectors, lane 3 zero, so one
-/// test shears all three vertices at once. 48 bytes, 16-aligned.
+/// the x, y and z of its three vertices as three 4-wide vectors, so one test shears all
+/// three vertices at once. 48 bytes, 16-aligned. Lane 3 of `x` is 1 for a triangle
+/// [`is_degenerate`] (which no test hits), else 0, and lane 3 of `y` and `z` is 0: a test
+/// reads the flag where it would otherwise compute the triangle's area after every
+/// hit, 1.1 % of a dolly frame's instructions (`benches/PERF.md`, issue 38, round 21).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(C)]
 pub struct TriPre {
@@ -128,11 +131,18 @@ impl TriPre {
     };
 
     pub fn new(t: &[Vec3; 3]) -> TriPre {
+        let flat = if is_degenerate(t) { 1.0 } else { 0.0 };
         TriPre {
-            x: Vec4::new(t[0].x, t[1].x, t[2].x, 0.0),
+            x: Vec4::new(t[0].x, t[1].x, t[2].x, flat),
             y: Vec4::new(t[0].y, t[1].y, t[2].y, 0.0),
             z: Vec4::new(t[0].z, t[1].z, t[2].z, 0.0),
         }
+    }
+
+    /// Whether the triangle [`is_degenerate`], as [`new`](Self::new) found it.
+    #[inline(always)]
+    fn degenerate(&self) -> bool {
+        self.x.w != 0.0
     }
 
     /// The vertices back, exactly.
@@ -176,7 +186,7 @@ pub fn intersect_pre(r: &RayPre, tri: &TriPre, t_min: f32, t_max: f32) -> Option
     if !(t >= t_min && t <= t_max) {
         return None;
     }
-    if is_degenerate(&tri.vertices()) {
+    if tri.degenerate() {
         return None;
     }
     Some((t, v * inv, w * inv))
@@ -226,7 +236,10 @@ pub fn intersect_pre4(
     let t_scaled = u * az + v * bz + w * cz;
     let inv = Vec4::ONE / det;
     let t = t_scaled * inv;
+    // Lane k: triangle k's flag of `TriPre::new` (the rows' fourth entries).
+    let degenerate = xs.col(3).cmpne(zero);
     let met = !(neg & pos)
+        & !degenerate
         & det.cmpne(zero)
         & det.abs().cmplt(Vec4::INFINITY)
         & t.cmpge(Vec4::splat(t_min))
@@ -243,7 +256,7 @@ pub fn intersect_pre4(
             if let Some(h) = intersect_pre(r, tris[k], t_min, t_max) {
                 hit(k, h);
             }
-        } else if !is_degenerate(&tris[k].vertices()) {
+        } else {
             hit(k, (ts[k], vs[k], ws[k]));
         }
     }
