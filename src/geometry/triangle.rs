@@ -112,7 +112,7 @@ impl RayPre {
 /// three vertices at once. 48 bytes, 16-aligned. Lane 3 of `x` is 1 for a triangle
 /// [`is_degenerate`] (which no test hits), else 0, and lane 3 of `y` and `z` is 0: a test
 /// reads the flag where it would otherwise compute the triangle's area after every
-/// hit, 1.1 % of a dolly frame's instructions (`benches/PERF.md`, issue 38, round 21).
+/// hit, 2.4 % of a dolly frame's instructions (`benches/PERF.md`, issue 38, round 21).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(C)]
 pub struct TriPre {
