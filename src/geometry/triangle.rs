@@ -375,6 +375,46 @@ mod tests {
         assert!(hit(Vec3::new(-1.0, 0.2, 0.0), Vec3::X, tri).is_none());
     }
 
+    /// A triangle `is_degenerate` calls degenerate carries the flag in its test form,
+    /// and neither test reports it, in a group beside triangles that are hit; without
+    /// the flag the sliver below would be hit (so the flag is what the tests read).
+    #[test]
+    fn degenerate_triangles_flagged_and_never_hit() {
+        let sliver = [Vec3::ZERO, Vec3::X, Vec3::new(0.5, 1e-7, 0.0)];
+        let slivers = [
+            sliver,
+            [Vec3::ZERO, Vec3::X, Vec3::X * 2.0],
+            [Vec3::ZERO, Vec3::ZERO, Vec3::Y],
+        ];
+        let good = [
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(3.0, -1.0, 0.0),
+            Vec3::new(-1.0, 3.0, -0.5),
+        ];
+        let g = TriPre::new(&good);
+        assert!(!g.degenerate());
+        for s in &slivers {
+            assert!(is_degenerate(s));
+            let p = TriPre::new(s);
+            assert!(p.degenerate());
+            assert_eq!(p.vertices(), *s);
+            let pre = RayPre::new(Vec3::new(0.5, 2.5e-8, 1.0), Vec3::NEG_Z);
+            assert_eq!(intersect_pre(&pre, &p, 0.0, f32::INFINITY), None);
+            assert_eq!(intersect_triangle(&pre, s, 0.0, f32::INFINITY), None);
+            let want = intersect_pre(&pre, &g, 0.0, f32::INFINITY);
+            assert!(want.is_some());
+            let mut got = [None; 4];
+            intersect_pre4(&pre, [&p, &g, &p, &g], 0.0, f32::INFINITY, |k, h| {
+                got[k] = Some(h)
+            });
+            assert_eq!(got, [None, want, None, want]);
+        }
+        let mut unflagged = TriPre::new(&sliver);
+        unflagged.x.w = 0.0;
+        let pre = RayPre::new(Vec3::new(0.5, 2.5e-8, 1.0), Vec3::NEG_Z);
+        assert!(intersect_pre(&pre, &unflagged, 0.0, f32::INFINITY).is_some());
+    }
+
     /// A ray through the shared edge (and through the shared vertex) of a fan of
     /// triangles around a point must hit at least one of them.
     #[test]
