@@ -327,9 +327,32 @@ impl PointGrid {
                 parts.push((k, head));
                 rest = tail;
             }
+            // Each range's counts from a difference array: one add at the start and one
+            // subtract past the end of each row span of its tiles an item covers, then a
+            // running sum; the spans' lengths vary from item to item, and a loop over
+            // each span's tiles ended on a mispredicted branch about once a span
+            // (`benches/PERF.md`, issue 38, round 21).
             parts.into_par_iter().for_each(|(k, counts)| {
-                let lo = cut(k);
-                each_tile(k, &mut |t, _| counts[t - lo] += 1);
+                let (lo, hi) = (cut(k), cut(k + 1));
+                let mut diff = vec![0i32; hi - lo + 1];
+                for &i in &reach[k] {
+                    let it = &items[i as usize];
+                    let face = &faces[it.face as usize];
+                    for j in it.j0 as usize..=it.j1 as usize {
+                        let row = face.first + j * face.nu;
+                        let a = (row + it.i0 as usize).max(lo);
+                        let b = (row + it.i1 as usize + 1).min(hi);
+                        if a < b {
+                            diff[a - lo] += 1;
+                            diff[b - lo] -= 1;
+                        }
+                    }
+                }
+                let mut run = 0i32;
+                for (c, d) in counts.iter_mut().zip(&diff) {
+                    run += d;
+                    *c = run as u32;
+                }
             });
         }
         for k in 0..total {
