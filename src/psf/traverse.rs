@@ -384,7 +384,10 @@ impl Psf {
                 let base = h.first_slab as usize + s as usize;
                 count.scanned((starts[base + 1] - starts[base]) as usize);
                 for e in &entries[starts[base] as usize..starts[base + 1] as usize] {
-                    if e.zmax < lo || e.zmin > hi {
+                    // One branch for the two sides (`|`, not `||`): callgrind's model
+                    // put 290,000 of a dolly frame's mispredicts on this test; 60,000
+                    // fewer so (`benches/PERF.md`, issue 38, round 21).
+                    if (e.zmax < lo) | (e.zmin > hi) {
                         continue;
                     }
                     // Tested already in an earlier slab of this walk?
