@@ -303,7 +303,9 @@ impl PointGrid {
                 r.push(i as u32);
             }
         }
-        let each_tile = |k: usize, visit: &mut dyn FnMut(usize, &Item)| {
+        // The row spans `a..b` of range `k`'s tiles that each item reaching it covers,
+        // in the items' order (empty, `a >= b`, where the row's part lies outside it).
+        let each_span = |k: usize, visit: &mut dyn FnMut(usize, usize, &Item)| {
             let (lo, hi) = (cut(k), cut(k + 1));
             for &i in &reach[k] {
                 let it = &items[i as usize];
@@ -312,9 +314,7 @@ impl PointGrid {
                     let row = face.first + j * face.nu;
                     let a = (row + it.i0 as usize).max(lo);
                     let b = (row + it.i1 as usize + 1).min(hi);
-                    for t in a..b {
-                        visit(t, it);
-                    }
+                    visit(a, b, it);
                 }
             }
         };
@@ -333,21 +333,14 @@ impl PointGrid {
             // each span's tiles ended on a mispredicted branch about once a span
             // (`benches/PERF.md`, issue 38, round 21).
             parts.into_par_iter().for_each(|(k, counts)| {
-                let (lo, hi) = (cut(k), cut(k + 1));
-                let mut diff = vec![0i32; hi - lo + 1];
-                for &i in &reach[k] {
-                    let it = &items[i as usize];
-                    let face = &faces[it.face as usize];
-                    for j in it.j0 as usize..=it.j1 as usize {
-                        let row = face.first + j * face.nu;
-                        let a = (row + it.i0 as usize).max(lo);
-                        let b = (row + it.i1 as usize + 1).min(hi);
-                        if a < b {
-                            diff[a - lo] += 1;
-                            diff[b - lo] -= 1;
-                        }
+                let lo = cut(k);
+                let mut diff = vec![0i32; counts.len() + 1];
+                each_span(k, &mut |a, b, _| {
+                    if a < b {
+                        diff[a - lo] += 1;
+                        diff[b - lo] -= 1;
                     }
-                }
+                });
                 let mut run = 0i32;
                 for (c, d) in counts.iter_mut().zip(&diff) {
                     run += d;
@@ -368,14 +361,16 @@ impl PointGrid {
                 .for_each(|(k, (lo, hi, out))| {
                     let base = starts[lo] as usize;
                     let mut cursor: Vec<u32> = starts[lo..hi].to_vec();
-                    each_tile(k, &mut |t, it| {
-                        let c = &mut cursor[t - lo];
-                        out[*c as usize - base] = PEntry {
-                            zmin: it.zmin,
-                            zmax: it.zmax,
-                            tri: it.tri,
-                        };
-                        *c += 1;
+                    each_span(k, &mut |a, b, it| {
+                        for t in a..b {
+                            let c = &mut cursor[t - lo];
+                            out[*c as usize - base] = PEntry {
+                                zmin: it.zmin,
+                                zmax: it.zmax,
+                                tri: it.tri,
+                            };
+                            *c += 1;
+                        }
                     });
                 });
         }
