@@ -393,12 +393,12 @@ mod tests {
         ];
         let g = TriPre::new(&good);
         assert!(!g.degenerate());
+        let pre = RayPre::new(Vec3::new(0.5, 2.5e-8, 1.0), Vec3::NEG_Z);
         for s in &slivers {
             assert!(is_degenerate(s));
             let p = TriPre::new(s);
             assert!(p.degenerate());
             assert_eq!(p.vertices(), *s);
-            let pre = RayPre::new(Vec3::new(0.5, 2.5e-8, 1.0), Vec3::NEG_Z);
             assert_eq!(intersect_pre(&pre, &p, 0.0, f32::INFINITY), None);
             assert_eq!(intersect_triangle(&pre, s, 0.0, f32::INFINITY), None);
             let want = intersect_pre(&pre, &g, 0.0, f32::INFINITY);
@@ -411,7 +411,6 @@ mod tests {
         }
         let mut unflagged = TriPre::new(&sliver);
         unflagged.x.w = 0.0;
-        let pre = RayPre::new(Vec3::new(0.5, 2.5e-8, 1.0), Vec3::NEG_Z);
         assert!(intersect_pre(&pre, &unflagged, 0.0, f32::INFINITY).is_some());
     }
 

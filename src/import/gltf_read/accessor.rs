@@ -203,12 +203,11 @@ impl Importer<'_> {
 
     /// An accessor of `FLOAT`s stored densely (a buffer view, no sparse storage), its
     /// elements of `N` components read straight from the bytes, one component after the
-    /// other; `None` for any other,
-    /// which [`read_raw`](Self::read_raw) decodes. The same values and errors as that
-    /// path (an `f32` goes through `f64` unchanged), without its three passes over
-    /// fresh memory: a morph-target cache is mostly such accessors, and decoding them
-    /// through `f64` was a third of the import's time (`benches/PERF.md`, issue 38,
-    /// round 19).
+    /// other; `None` for any other, which [`read_raw`](Self::read_raw) decodes. The same
+    /// values and errors as that path (an `f32` goes through `f64` unchanged), without
+    /// its three passes over fresh memory: a morph-target cache is mostly such
+    /// accessors, and decoding them through `f64` was a third of the import's time
+    /// (`benches/PERF.md`, issue 38, round 19).
     fn dense_f32<const N: usize>(
         &self,
         l: &Layout<'_>,
