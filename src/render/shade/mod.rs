@@ -13,7 +13,7 @@
 //! | `surface` | the surface a ray meets: point, normals, normal maps, uvs, texture level of detail, textured factors |
 //! | `bsdf` | the lobes (Fresnel, reflected / transmitted / diffuse weights, the glint) and the rays they send on |
 //! | `direct` | direct light: shadow rays to the punctual lights and to samples of the emitters |
-//! | `lanes` | the same model on four hits at once in SSE lanes, for plain materials and up to four punctual lights (`shade4`, the same bits as `shade`) |
+//! | `lanes` | the same model on four hits at once in SSE lanes, for plain materials and punctual lights (`shade4`, the same bits as `shade`) |
 //! | `block` | a wavefront's bookkeeping: [`Item`], [`BlockOut`] |
 //! | `frame` | what a frame's shading fills and reports: [`FrameBuffers`], light-path passes, Cryptomatte, counts |
 //!
@@ -108,7 +108,7 @@ pub struct ShadeContext<'a> {
     plain: Vec<Option<lanes::PlainMaterial>>,
     plain_default: Option<lanes::PlainMaterial>,
     /// Whether the frame's hits may be shaded four at once ([`ShadeContext::shade4`]):
-    /// no random numbers, area lights or bounces, at most four punctual lights.
+    /// no random numbers, area lights or bounces (punctual lights only, any number).
     lanes: bool,
 }
 
@@ -193,7 +193,7 @@ impl<'a> ShadeContext<'a> {
                 .iter()
                 .chain(std::iter::once(&default_material))
                 .any(bsdf::may_be_glossy);
-        let lanes = !random && lanes::lanes_light(&pre);
+        let lanes = !random;
         ShadeContext {
             plain: scene
                 .materials
