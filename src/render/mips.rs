@@ -68,6 +68,35 @@ fn wrap(i: i64, n: i64, mode: Wrap) -> i64 {
     }
 }
 
+/// `(wrap(i, n, mode), wrap(i + 1, n, mode))`, the two texels a bilinear lookup reads
+/// along an axis, with at most one division (none for an `i` inside the image, the
+/// common case): a trilinear lookup had made sixteen `i64` remainders, most of a
+/// textured hit's shading (`benches/PERF.md`, issue 38, round 22).
+#[inline]
+fn wrap2(i: i64, n: i64, mode: Wrap) -> (i64, i64) {
+    let next = |a: i64, m: i64| if a + 1 == m { 0 } else { a + 1 };
+    match mode {
+        Wrap::Repeat => {
+            let a = if (0..n).contains(&i) {
+                i
+            } else {
+                i.rem_euclid(n)
+            };
+            (a, next(a, n))
+        }
+        Wrap::ClampToEdge => (i.clamp(0, n - 1), (i + 1).clamp(0, n - 1)),
+        Wrap::MirroredRepeat => {
+            let m = if (0..2 * n).contains(&i) {
+                i
+            } else {
+                i.rem_euclid(2 * n)
+            };
+            let fold = |m: i64| if m >= n { 2 * n - 1 - m } else { m };
+            (fold(m), fold(next(m, 2 * n)))
+        }
+    }
+}
+
 /// Half of `src` (`w × h`) in each direction (at least 1): each texel the mean of the
 /// 2×2 block above it (the last row or column of an odd side is folded into its
 /// neighbour's block), averaged in linear light when `srgb`.
@@ -257,9 +286,8 @@ impl TextureMips {
     ) -> Vec4 {
         let (w, h) = (i64::from(w), i64::from(h));
         let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
+        // Texel `(x, y)`, both wrapped already.
         let fetch = |x: i64, y: i64| -> Vec4 {
-            let x = wrap(x, w, tex.wrap_s);
-            let y = wrap(y, h, tex.wrap_t);
             let at = ((y * w + x) * 4) as usize;
             match data.get(at..at + 4) {
                 Some(p) => {
@@ -278,14 +306,18 @@ impl TextureMips {
         let x = f64::from(uv.x) * w as f64;
         let y = f64::from(uv.y) * h as f64;
         if nearest {
-            return fetch(x.floor() as i64, y.floor() as i64);
+            return fetch(
+                wrap(x.floor() as i64, w, tex.wrap_s),
+                wrap(y.floor() as i64, h, tex.wrap_t),
+            );
         }
         let (x, y) = (x - 0.5, y - 0.5);
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let top = fetch(x0, y0).lerp(fetch(x0 + 1, y0), fx);
-        let bottom = fetch(x0, y0 + 1).lerp(fetch(x0 + 1, y0 + 1), fx);
+        let (x0, x1) = wrap2(x0 as i64, w, tex.wrap_s);
+        let (y0, y1) = wrap2(y0 as i64, h, tex.wrap_t);
+        let top = fetch(x0, y0).lerp(fetch(x1, y0), fx);
+        let bottom = fetch(x0, y1).lerp(fetch(x1, y1), fx);
         top.lerp(bottom, fy)
     }
 }
@@ -350,6 +382,29 @@ mod tests {
         assert!((at(5.0).x - 0.5).abs() < 0.01, "the top level is the mean");
         let mid = at(1.5).x;
         assert!(mid > 0.4 && mid < 0.6, "trilinear blend {mid}");
+    }
+
+    #[test]
+    fn wrap_pairs_are_two_wraps() {
+        for mode in [Wrap::Repeat, Wrap::ClampToEdge, Wrap::MirroredRepeat] {
+            for n in 1..7 {
+                for i in -40..40 {
+                    assert_eq!(
+                        wrap2(i, n, mode),
+                        (wrap(i, n, mode), wrap(i + 1, n, mode)),
+                        "{mode:?} i={i} n={n}"
+                    );
+                }
+                // Far from the image, as a coordinate of a huge uv is.
+                for i in [i64::MIN / 4, -(1 << 40) - 3, 1 << 40, i64::MAX / 4] {
+                    assert_eq!(
+                        wrap2(i, n, mode),
+                        (wrap(i, n, mode), wrap(i + 1, n, mode)),
+                        "{mode:?} i={i} n={n}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
