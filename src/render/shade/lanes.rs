@@ -20,7 +20,7 @@
 //! shaded by `shade` instead. A property test holds the two to the same lists, bit for
 //! bit, over 400 random frames.
 
-use glam::{BVec4A, Mat4, Vec3, Vec3A, Vec4};
+use glam::{BVec4A, Mat4, Vec2, Vec3, Vec3A, Vec4};
 
 use super::block::{BlockOut, Item};
 use super::bsdf::{powi, powi4, Factors};
@@ -48,12 +48,17 @@ pub(super) struct PlainMaterial {
     shininess: f32,
     /// The glint's normalisation, `(shininess + 8) / 8π`.
     norm: f32,
+    /// The material's metallic, roughness and transmission factors, from which a
+    /// textured hit's constants are worked out again with its own albedo.
+    factors: (f32, f32, f32),
+    /// Whether the base colour has a texture: `albedo`, `f0` and `glint` are then the
+    /// factor's alone, and each hit gets its own ([`with_albedo`](Self::with_albedo)).
+    textured: bool,
 }
 
 impl PlainMaterial {
     pub(super) fn of(m: &Material) -> Option<PlainMaterial> {
-        let plain = m.base_color_texture.is_none()
-            && m.metallic_roughness_texture.is_none()
+        let plain = m.metallic_roughness_texture.is_none()
             && m.emissive_texture.is_none()
             && m.normal_texture.is_none()
             && matches!(m.alpha_mode, AlphaMode::Opaque)
@@ -65,21 +70,38 @@ impl PlainMaterial {
         if !plain {
             return None;
         }
-        // As `ShadeContext::lobes` computes them without textures.
-        let albedo: Vec3A = m.base_color.truncate().into();
+        // An emitter is an area light, whose samples draw random numbers: a frame
+        // with one is not the lanes' anyway. The emission must be +0 to the bit (the
+        // scalar model adds it to the ambient term, and -0 + -0 is not +0 + -0).
+        let emitted = Vec3A::from(m.emissive) * m.emissive_strength;
+        if emitted.to_array().iter().any(|c| c.to_bits() != 0) {
+            return None;
+        }
+        let factors = (m.metallic, m.roughness, m.transmission);
+        let mut p = Self::with(factors, m.base_color.truncate().into())?;
+        p.textured = m.base_color_texture.is_some();
+        Some(p)
+    }
+
+    /// The material's constants for a hit whose base colour is `albedo` (a textured
+    /// one's, factor times texture).
+    #[inline]
+    fn with_albedo(&self, albedo: Vec3A) -> Option<PlainMaterial> {
+        Self::with(self.factors, albedo)
+    }
+
+    /// As `ShadeContext::lobes` computes them for `albedo` (no metallic-roughness
+    /// texture); `None` where `f0` is not finite.
+    fn with(factors: (f32, f32, f32), albedo: Vec3A) -> Option<PlainMaterial> {
         let Factors {
             metallic,
             roughness,
             transmission,
             gloss,
             f0,
-        } = Factors::of(m.metallic, m.roughness, m.transmission, albedo);
+        } = Factors::of(factors.0, factors.1, factors.2, albedo);
         let shininess = ShadeContext::shininess(roughness);
-        // An emitter is an area light, whose samples draw random numbers: a frame
-        // with one is not the lanes' anyway. The emission must be +0 to the bit (the
-        // scalar model adds it to the ambient term, and -0 + -0 is not +0 + -0).
-        let emitted = Vec3A::from(m.emissive) * m.emissive_strength;
-        if !f0.is_finite() || emitted.to_array().iter().any(|c| c.to_bits() != 0) {
+        if !f0.is_finite() {
             return None;
         }
         Some(PlainMaterial {
@@ -92,6 +114,8 @@ impl PlainMaterial {
             reflects: roughness < GLOSSY_LIMIT,
             shininess,
             norm: (shininess + 8.0) / (8.0 * std::f32::consts::PI),
+            factors,
+            textured: false,
         })
     }
 }
@@ -320,6 +344,9 @@ impl ShadeContext<'_> {
         let mut mats: [Option<&PlainMaterial>; 4] = [None; 4];
         let mut uvw = [[0.0f32; 4]; 3];
         let mut t = [0.0f32; 4];
+        // A textured lane's uvs and material (`surface` and `shade` read them so).
+        let mut uvs: [Option<&[Vec2; 3]>; 4] = [None; 4];
+        let mut textured: [Option<&Material>; 4] = [None; 4];
         for k in 0..4 {
             let Some(hit) = hits[k] else {
                 return false;
@@ -340,6 +367,10 @@ impl ShadeContext<'_> {
                 return false;
             };
             mats[k] = Some(plain);
+            if plain.textured {
+                uvs[k] = soup.uvs.get(i);
+                textured[k] = Some(self.material(material).unwrap_or(&self.default_material));
+            }
             for c in 0..3 {
                 pos[c][k] = p[c];
             }
@@ -358,8 +389,7 @@ impl ShadeContext<'_> {
         let [Some(m0), Some(m1), Some(m2), Some(m3)] = mats else {
             return false;
         };
-        let mats = [m0, m1, m2, m3];
-        let mat = Mats::of(mats);
+        let mut mats = [m0, m1, m2, m3];
         let (w, u, v) = (
             lanes4(|k| uvw[0][k]),
             lanes4(|k| uvw[1][k]),
@@ -419,6 +449,28 @@ impl ShadeContext<'_> {
         let cone_width = lanes4(|k| items[k].cone.width);
         let spread = lanes4(|k| items[k].cone.spread);
         let width = cone_width + spread * distance;
+        // A textured lane's material with its own base colour.
+        let mut own = [None; 4];
+        if textured.iter().any(Option::is_some) {
+            let (face, ng_l, dir_l) = (face.lanes(), ng.lanes(), dir.lanes());
+            for k in 0..4 {
+                let Some(m) = textured[k] else {
+                    continue;
+                };
+                let b = (uvw[0][k], uvw[1][k], uvw[2][k]);
+                let base = self.textured_base(m, uvs[k], b, face[k], ng_l[k], dir_l[k], width[k]);
+                match mats[k].with_albedo(base.truncate().into()) {
+                    Some(p) => own[k] = Some(p),
+                    None => return false,
+                }
+            }
+        }
+        for k in 0..4 {
+            if let Some(p) = &own[k] {
+                mats[k] = p;
+            }
+        }
+        let mat = Mats::of(mats);
         // Times the opaque surface's coverage, 1, as `shade` multiplies it.
         let weight = V3::from_fn(|k| items[k].weight).scale(Vec4::ONE);
 
@@ -493,6 +545,39 @@ impl ShadeContext<'_> {
             );
         }
         true
+    }
+
+    /// A textured hit's base colour, as `surface` and `shade` find it: the uv at
+    /// barycentrics `(w, u, v)`, the level of detail from the cone's `width`, the
+    /// triangle's `face` (unnormalised) and uv area, the normal `ng` facing the ray and
+    /// the ray's unit `dir`; then the factor times the texture.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn textured_base(
+        &self,
+        m: &Material,
+        uvs: Option<&[Vec2; 3]>,
+        (w, u, v): (f32, f32, f32),
+        face: Vec3A,
+        ng: Vec3A,
+        dir: Vec3A,
+        width: f32,
+    ) -> Vec4 {
+        let uv = uvs.map_or(Vec2::ZERO, |t| t[0] * w + t[1] * u + t[2] * v);
+        let lod = match uvs {
+            Some(t) if width > 0.0 => {
+                let uv_area = (t[1] - t[0]).perp_dot(t[2] - t[0]).abs();
+                let world_area = face.length();
+                let cos = ng.dot(dir).abs().max(1e-4);
+                if uv_area > 0.0 && world_area > 0.0 {
+                    (width / cos).log2() + 0.5 * (uv_area / world_area).log2()
+                } else {
+                    f32::NEG_INFINITY
+                }
+            }
+            _ => f32::NEG_INFINITY,
+        };
+        self.base_color(m, uv, lod)
     }
 
     /// One light's shadow ray and contribution in each lane (`light_at` and
@@ -664,7 +749,7 @@ mod tests {
     use crate::render::mips::TextureMips;
     use crate::render::options::ShadingOptions;
     use crate::render::sampling::Seed;
-    use crate::scene::{Light, Scene, TriangleSoup};
+    use crate::scene::{Image, Light, Scene, Texture, TextureRef, TriangleSoup, UvTransform, Wrap};
 
     /// The crate's deterministic generator, with what these tests draw from it.
     trait Draw {
@@ -733,7 +818,37 @@ mod tests {
             // Not a plain material: its groups are shaded one hit at a time.
             m.transmission = 0.5;
         }
+        if rng.next().is_multiple_of(3) {
+            // A base colour texture (the scene's texture 0), now and then through a
+            // uv transform: the lanes take it, each hit with its own albedo.
+            m.base_color_texture = Some(TextureRef {
+                texture: 0,
+                tex_coord: 0,
+                transform: rng.next().is_multiple_of(2).then(|| UvTransform {
+                    offset: Vec2::new(rng.f32(), rng.f32()),
+                    rotation: rng.range(0.0, 3.0),
+                    scale: Vec2::new(rng.range(0.5, 3.0), rng.range(0.5, 3.0)),
+                }),
+            });
+        }
         m
+    }
+
+    /// A small random RGBA image as the scene's texture 0.
+    fn texture(rng: &mut Rng, scene: &mut Scene) {
+        let (w, h) = (1 + (rng.next() % 8) as u32, 1 + (rng.next() % 8) as u32);
+        scene.images.push(Image {
+            name: None,
+            width: w,
+            height: h,
+            rgba8: (0..w * h * 4).map(|_| (rng.next() % 256) as u8).collect(),
+        });
+        scene.textures.push(Texture {
+            image: 0,
+            wrap_s: rng.pick(&[Wrap::Repeat, Wrap::MirroredRepeat, Wrap::ClampToEdge]),
+            wrap_t: rng.pick(&[Wrap::Repeat, Wrap::ClampToEdge]),
+            nearest: rng.next().is_multiple_of(2),
+        });
     }
 
     fn light(rng: &mut Rng) -> Light {
@@ -755,7 +870,7 @@ mod tests {
         }
     }
 
-    fn soup(rng: &mut Rng, n: usize, materials: u32, normals: bool) -> TriangleSoup {
+    fn soup(rng: &mut Rng, n: usize, materials: u32, normals: bool, uvs: bool) -> TriangleSoup {
         let mut s = TriangleSoup::default();
         for k in 0..n {
             let a = rng.vec(2.0);
@@ -770,6 +885,18 @@ mod tests {
                     n = [Vec3::ZERO; 3];
                 }
                 s.normals.push(n);
+            }
+            if uvs {
+                let a = Vec2::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0));
+                let mut t = [
+                    a,
+                    a + Vec2::new(rng.f32(), rng.f32()),
+                    a + Vec2::new(rng.f32(), rng.f32()),
+                ];
+                if k % 7 == 0 {
+                    t[2] = t[1]; // no uv area: the finest level
+                }
+                s.uvs.push(t);
             }
             // Now and then a material out of range: the default one.
             s.material
@@ -788,8 +915,9 @@ mod tests {
                 scene.materials.push(material(&mut rng));
             }
             let nm = scene.materials.len() as u32;
-            let statics = soup(&mut rng, 24, nm, true);
-            let moving = soup(&mut rng, 16, nm, false);
+            texture(&mut rng, &mut scene);
+            let statics = soup(&mut rng, 24, nm, true, true);
+            let moving = soup(&mut rng, 16, nm, false, false);
             // Up to eight lights: the lanes take any number (each light's shadow rays
             // are pushed as it is shaded).
             let lights: Vec<Light> = (0..1 + rng.next() % 8).map(|_| light(&mut rng)).collect();
