@@ -5,10 +5,11 @@
 //! the same operations run on four hits side by side (`V3`: the x, y and z of four
 //! vectors), for the common case of a frame without random numbers, area lights or
 //! light-path passes, lit by punctual lights (point, spot, directional; any number),
-//! and hits on plain materials (no textures, opaque, not transmissive, not emissive, no
-//! ambient colour of their own). The museum class's dolly: 883 → 817 M instructions a
-//! frame, its shading 67–70 → 52–56 ms a frame at 1 thread (benches/PERF.md, issue 38,
-//! round 13).
+//! and hits on plain materials (no texture but the base colour's, opaque, not
+//! transmissive, not emissive, no ambient colour of their own); a textured hit's base
+//! colour is looked up lane by lane, as `shade` looks it up. The museum class's dolly:
+//! 883 → 817 M instructions a frame, its shading 67–70 → 52–56 ms a frame at 1 thread
+//! (benches/PERF.md, issue 38, round 13).
 //!
 //! The answers are those of four calls of `shade`, bit for bit: each lane does the
 //! scalar model's operations in the scalar model's order (glam's `Vec3A` dot product is
