@@ -26,6 +26,7 @@ use glam::{BVec4A, Mat4, Vec2, Vec3, Vec3A, Vec4};
 use super::block::{BlockOut, Item};
 use super::bsdf::{powi, powi4, Factors};
 use super::direct::{cone, PreLight};
+use super::surface::level_of_detail;
 use super::{LightPath, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT};
 use crate::geometry::{Hit, Ray};
 use crate::psf::Prim;
@@ -565,19 +566,9 @@ impl ShadeContext<'_> {
         width: f32,
     ) -> Vec4 {
         let uv = uvs.map_or(Vec2::ZERO, |t| t[0] * w + t[1] * u + t[2] * v);
-        let lod = match uvs {
-            Some(t) if width > 0.0 => {
-                let uv_area = (t[1] - t[0]).perp_dot(t[2] - t[0]).abs();
-                let world_area = face.length();
-                let cos = ng.dot(dir).abs().max(1e-4);
-                if uv_area > 0.0 && world_area > 0.0 {
-                    (width / cos).log2() + 0.5 * (uv_area / world_area).log2()
-                } else {
-                    f32::NEG_INFINITY
-                }
-            }
-            _ => f32::NEG_INFINITY,
-        };
+        let lod = uvs.map_or(f32::NEG_INFINITY, |t| {
+            level_of_detail(t, face, ng, dir, width)
+        });
         self.base_color(m, uv, lod)
     }
 

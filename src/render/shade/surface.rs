@@ -38,6 +38,30 @@ pub(super) fn cross(a: Vec3A, b: Vec3A) -> Vec3A {
     a.yzx() * b.zxy() - a.zxy() * b.yzx()
 }
 
+/// The texture level of detail at a hit (`Surface::lod`): log2 of the footprint's
+/// width in uv units for a unit texture (Akenine-Möller et al. 2021, eq. 34), from the
+/// ray cone's `width` there, the triangle's uvs `t` and unnormalised `face` normal, the
+/// normal `ng` facing the ray and its unit direction `dir`; `-∞` (the finest level) for
+/// a cone of no width or a triangle without uv or world area.
+#[inline]
+pub(super) fn level_of_detail(
+    t: &[Vec2; 3],
+    face: Vec3A,
+    ng: Vec3A,
+    dir: Vec3A,
+    width: f32,
+) -> f32 {
+    if width > 0.0 {
+        let uv_area = (t[1] - t[0]).perp_dot(t[2] - t[0]).abs();
+        let world_area = face.length();
+        let cos = ng.dot(dir).abs().max(1e-4);
+        if uv_area > 0.0 && world_area > 0.0 {
+            return (width / cos).log2() + 0.5 * (uv_area / world_area).log2();
+        }
+    }
+    f32::NEG_INFINITY
+}
+
 /// The material's coverage at a point of base colour `base`.
 pub(super) fn alpha_of(m: &Material, base: Vec4) -> f32 {
     match m.alpha_mode {
@@ -127,16 +151,7 @@ impl ShadeContext<'_> {
                 || m.normal_texture.is_some()
         });
         let lod = match uvs {
-            Some(t) if textured && width > 0.0 => {
-                let uv_area = (t[1] - t[0]).perp_dot(t[2] - t[0]).abs();
-                let world_area = face.length();
-                let cos = ng.dot(dir).abs().max(1e-4);
-                if uv_area > 0.0 && world_area > 0.0 {
-                    (width / cos).log2() + 0.5 * (uv_area / world_area).log2()
-                } else {
-                    f32::NEG_INFINITY
-                }
-            }
+            Some(t) if textured => level_of_detail(t, face, ng, dir, width),
             _ => f32::NEG_INFINITY,
         };
         if let (Some(m), Some(t)) = (self.material(material), uvs) {
