@@ -26,11 +26,22 @@ struct Chain {
 }
 
 /// The chains of every texture a material uses, in both colour spaces it is used in.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct TextureMips {
     /// Per texture: (sRGB chain, linear chain).
     chains: Vec<(Option<Chain>, Option<Chain>)>,
-    lut: Vec<f32>,
+    /// An sRGB byte's linear value (a fixed-size table: a lookup needs no bounds check).
+    lut: Box<[f32; 256]>,
+}
+
+impl Default for TextureMips {
+    /// No chains; the table all zeros (nothing looks a texture up through it).
+    fn default() -> TextureMips {
+        TextureMips {
+            chains: Vec::new(),
+            lut: Box::new([0.0; 256]),
+        }
+    }
 }
 
 pub(super) fn srgb_to_linear(c: f32) -> f32 {
@@ -72,7 +83,7 @@ fn wrap(i: i64, n: i64, mode: Wrap) -> i64 {
 /// along an axis, with at most one division (none for an `i` inside the image, the
 /// common case): a trilinear lookup had made sixteen `i64` remainders, most of a
 /// textured hit's shading (`benches/PERF.md`, issue 38, round 22).
-#[inline]
+#[inline(always)]
 fn wrap2(i: i64, n: i64, mode: Wrap) -> (i64, i64) {
     let next = |a: i64, m: i64| if a + 1 == m { 0 } else { a + 1 };
     match mode {
@@ -171,7 +182,8 @@ impl TextureMips {
     /// Chains for every texture the scene's materials use (colour slots in sRGB, the
     /// others linear); images of the wrong size are left without one.
     pub fn build(scene: &Scene) -> TextureMips {
-        let lut: Vec<f32> = (0..256).map(|i| srgb_to_linear(i as f32 / 255.0)).collect();
+        let lut: Box<[f32; 256]> =
+            Box::new(std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)));
         let want = Self::wanted(scene);
         let chains = scene
             .textures
@@ -189,7 +201,7 @@ impl TextureMips {
                     let mut levels: Vec<Level> = Vec::new();
                     while w > 1 || h > 1 {
                         let src = levels.last().map_or(&img.rgba8[..], |l| &l.rgba8[..]);
-                        let next = reduce(src, w, h, srgb, &lut);
+                        let next = reduce(src, w, h, srgb, &lut[..]);
                         (w, h) = (next.width, next.height);
                         levels.push(next);
                     }
@@ -221,7 +233,7 @@ impl TextureMips {
     /// The sRGB decoding table lookups use (byte to linear value).
     #[cfg(feature = "gpu")]
     pub(super) fn srgb_table(&self) -> &[f32] {
-        &self.lut
+        &self.lut[..]
     }
 
     fn chain(&self, t: usize, srgb: bool) -> Option<&Chain> {
@@ -293,7 +305,7 @@ impl TextureMips {
                 Some(p) => {
                     let c = |b: u8| {
                         if srgb {
-                            self.lut.get(b as usize).copied().unwrap_or(0.0)
+                            self.lut[b as usize]
                         } else {
                             b as f32 / 255.0
                         }
