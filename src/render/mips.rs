@@ -35,12 +35,9 @@ pub struct TextureMips {
 }
 
 impl Default for TextureMips {
-    /// No chains; the table all zeros (nothing looks a texture up through it).
+    /// No chains (the chains of a scene without textures), the sRGB table filled.
     fn default() -> TextureMips {
-        TextureMips {
-            chains: Vec::new(),
-            lut: Box::new([0.0; 256]),
-        }
+        TextureMips::build(&Scene::default())
     }
 }
 
