@@ -97,15 +97,32 @@ fn frame_of(dir: &Path, sub: &str, k: u32) -> Vec<u8> {
 fn sequence_is_its_frames_alone(
     dir: &Path,
     scene: &Path,
+    camera: (&str, &str),
+    frames: &str,
+    check: &[u32],
+    aovs: &str,
+) {
+    sequence_is_its_frames_alone_keeping(dir, scene, camera, frames, check, aovs, "0");
+}
+
+/// [`sequence_is_its_frames_alone`] with `--replay-bytes keep` on every render: `1`
+/// leaves a still camera's replay no room for slots, so that it keeps only the records
+/// of the samples that settle (as at 1920x1080 by default).
+fn sequence_is_its_frames_alone_keeping(
+    dir: &Path,
+    scene: &Path,
     (name, camera): (&str, &str),
     frames: &str,
     check: &[u32],
     aovs: &str,
+    keep: &str,
 ) {
     let render_cut = |sub: &str, frames: &str, threads: &str, in_flight: &str, chunk: &str| {
         let out = dir.join(format!("{sub}/f.##.exr"));
         ok(&[
             "render",
+            "--replay-bytes",
+            keep,
             s(scene),
             "-o",
             s(&out),
@@ -259,6 +276,22 @@ fn a_still_camera_replays_its_shading_and_frames_stay_the_same() {
     // The light moves: frames 2 and 7 differ; the cube moves: 7 and 11 differ.
     assert!(frame_of(&dir, "seq", 2) != frame_of(&dir, "seq", 7));
     assert!(frame_of(&dir, "seq", 7) != frame_of(&dir, "seq", 11));
+    // The records alone (no room for slots), the same bytes.
+    sequence_is_its_frames_alone_keeping(
+        &dir,
+        &scene,
+        ("rec", "side camera"),
+        "0..12",
+        &checked,
+        "Z,N",
+        "1",
+    );
+    for k in checked {
+        assert!(
+            frame_of(&dir, "seq", k) == frame_of(&dir, "rec", k),
+            "frame {k}"
+        );
+    }
 }
 
 /// A still camera ("still") over a floor with a mirror behind, one point light, and a red
@@ -375,6 +408,68 @@ fn settled_samples_follow_what_moves_into_and_out_of_their_rays() {
     // The cube's shadow leaves the floor at frame 2 and its image enters the mirror at 4.
     assert!(frame_of(&dir, "jumps", 1) != frame_of(&dir, "jumps", 2));
     assert!(frame_of(&dir, "jumps", 3) != frame_of(&dir, "jumps", 4));
+    // The records alone (no room for slots, as at 1920x1080), the same bytes.
+    sequence_is_its_frames_alone_keeping(
+        &dir,
+        &scene,
+        ("jumpr", "still"),
+        "0..8",
+        &[0, 1, 2, 3, 4, 5, 7],
+        "Z",
+        "1",
+    );
+    for k in 0..8 {
+        assert!(
+            frame_of(&dir, "jumps", k) == frame_of(&dir, "jumpr", k),
+            "frame {k}"
+        );
+    }
+    // Both forms settle most samples once a frame has kept them (frame 1 replays what
+    // frame 0 kept, but frame 0's sums are not complete until it ends: from frame 1 on,
+    // one frame in flight), and none in the first.
+    for keep in ["0", "1"] {
+        let settled = settled_counts(&dir, &scene, "still", "0..8", keep);
+        let pixels = 96 * 72;
+        assert_eq!(settled[0], 0, "--replay-bytes {keep}: {settled:?}");
+        assert!(
+            settled[3] > pixels / 2 && settled[7] > pixels / 2,
+            "--replay-bytes {keep}: {settled:?}"
+        );
+    }
+}
+
+/// Each frame's `settled` count of the JSON log, `frames` of `scene` through `camera`
+/// (96x72, `--max-depth 2`, one frame in flight) with `--replay-bytes keep`.
+fn settled_counts(dir: &Path, scene: &Path, camera: &str, frames: &str, keep: &str) -> Vec<u64> {
+    let out = dir.join(format!("count{keep}/f.##.exr"));
+    let o = ok(&[
+        "render",
+        s(scene),
+        "-o",
+        s(&out),
+        "--frames",
+        frames,
+        "--size",
+        "96x72",
+        "--camera",
+        camera,
+        "--max-depth",
+        "2",
+        "--frames-in-flight",
+        "1",
+        "--threads",
+        "2",
+        "--replay-bytes",
+        keep,
+        "--log-format",
+        "json",
+    ]);
+    String::from_utf8_lossy(&o.stderr)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|v| v["event"] == "frame")
+        .map(|v| v["settled"].as_u64().expect("a settled count"))
+        .collect()
 }
 
 /// The jumping cube under the floor, in the camera's view for one frame (4; for each
@@ -402,6 +497,22 @@ fn a_pixel_that_saw_a_mover_is_not_settled_after_it_leaves() {
     assert!(frame_of(&dir, "seen", 3) != frame_of(&dir, "seen", 4));
     assert!(frame_of(&dir, "seen", 4) != frame_of(&dir, "seen", 5));
     assert!(frame_of(&dir, "seen", 3) == frame_of(&dir, "seen", 5));
+    // The records alone: a record dropped as its sample is shaded, the same bytes.
+    sequence_is_its_frames_alone_keeping(
+        &dir,
+        &scene,
+        ("seer", "still"),
+        "0..8",
+        &[3, 4, 5, 6, 7],
+        "Z",
+        "1",
+    );
+    for k in [3, 4, 5, 6, 7] {
+        assert!(
+            frame_of(&dir, "seen", k) == frame_of(&dir, "seer", k),
+            "frame {k}"
+        );
+    }
 }
 
 #[test]

@@ -174,6 +174,11 @@ pub struct Args {
     /// which hold that frames do not depend on it.
     #[arg(long, value_name = "N", hide = true)]
     pub chunk_samples: Option<usize>,
+    /// Bytes a still camera's kept shading may take in slots, a frame in flight (0 or
+    /// absent: 256 MB; beyond, only the settled samples' records); for tests, which hold
+    /// that frames do not depend on it.
+    #[arg(long, value_name = "BYTES", hide = true)]
+    pub replay_bytes: Option<usize>,
     /// No progress or report.
     #[arg(long, short)]
     pub quiet: bool,
@@ -361,6 +366,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
             None => 0,
         },
         chunk_samples: a.chunk_samples.unwrap_or(0),
+        replay_bytes: a.replay_bytes.unwrap_or(0),
     })
 }
 
@@ -669,6 +675,7 @@ fn frame_event(f: &render::FrameReport) -> serde_json::Value {
             "total": s.rays.total(),
         });
         v["kept"] = s.kept.word().into();
+        v["settled"] = s.settled.into();
     }
     v
 }

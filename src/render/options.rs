@@ -597,6 +597,12 @@ pub struct RenderOptions {
     /// more often. Not an option of the pixels: the tests render with small chunks to
     /// hold that a frame is the same bytes however it is cut.
     pub chunk_samples: usize,
+    /// The memory a still camera's kept shading may take in slots, a frame in flight (0:
+    /// the default, 256 MB, which holds two levels at 640x480 and none at 1920x1080,
+    /// where only the records of the samples that settle are kept; `render::replay`).
+    /// Not an option of the pixels: the tests set it to hold that a frame is the same
+    /// bytes whatever is kept.
+    pub replay_bytes: usize,
 }
 
 impl Default for RenderOptions {
@@ -630,6 +636,7 @@ impl Default for RenderOptions {
             cancel: CancelFlag::default(),
             frames_in_flight: 0,
             chunk_samples: 0,
+            replay_bytes: 0,
         }
     }
 }

@@ -27,11 +27,22 @@
 //!
 //! Memory: 216 bytes a pixel and level ([`Kept`]) plus 52 a pixel, light and level,
 //! within [`REPLAY_BYTES`] for every level together: the camera rays and the mirror
-//! level at 640x480 with one light (157 MB), the camera rays alone at 1280x720 (247 MB),
-//! nothing at 1920x1080; nothing either with more than [`REPLAY_LIGHTS`] lights. A test
-//! holds these numbers. The last frame's sums take 16 bytes a pixel besides, and the
-//! settled samples' records ([`Settle`]) `20 + 32 · (2 · lights + 1)` (116 with one
-//! light, 34 MB at 640x480; none beyond [`SETTLE_LIGHTS`] lights).
+//! level at 640x480 with one light (157 MB), the camera rays alone at 1280x720 (247 MB);
+//! nothing either with more than [`REPLAY_LIGHTS`] lights. A test holds these numbers.
+//! The last frame's sums take 16 bytes a pixel besides, and the settled samples' records
+//! ([`Settle`]) `20 + 32 · (2 · lights + 1)` (116 with one light, 34 MB at 640x480; none
+//! beyond [`SETTLE_LIGHTS`] lights).
+//!
+//! Where no level's slots fit (1920x1080 and beyond with the default), the records are
+//! kept alone, within [`RECORD_BYTES`], and the shading writes them as it shades a
+//! sample ([`ShadeReplay::records`]): what the settled check would have found in the
+//! slots (the camera ray's static hit, the shadow rays of both levels, the mirror ray up
+//! to its static hit, nothing sent further) is what the shading just pushed, so a
+//! record made so is one the check would have made. Without slots nothing is replayed
+//! for the samples that do not settle, and a record serves only a frame through the
+//! camera it was made with. 132 bytes a pixel with the sums (274 MB at 1920x1080, one
+//! light), against 536 for two levels of slots: a still camera's 1920x1080 frames on 2
+//! threads went from 440 to 349 ms a frame (benches/PERF.md, issue 38, round 24).
 
 use glam::Vec3;
 
@@ -105,6 +116,9 @@ pub(super) struct ShadeReplay {
     /// Per sample, [`Settle`]'s rays: the kept shadow rays of both levels, then (last of
     /// `2 · lights + 1`) the mirror ray up to its kept hit.
     segments: Vec<Ray>,
+    /// Only the [`Settle`] records are kept, written by the shading itself (where two
+    /// levels of slots would not fit: [`records_fit`]); `kept` and `shadows` are empty.
+    records_only: bool,
 }
 
 /// What a settled sample's check needs of its slots, kept apart from them: later frames
@@ -116,14 +130,18 @@ pub(super) struct ShadeReplay {
 /// shaded, which may rewrite them, so it is made ineligible, and every sample is when the
 /// camera is not the one of the lane's frame before (a camera ray is then another ray).
 #[derive(Clone, Copy)]
-struct Settle {
+pub(super) struct Settle {
     /// The camera ray's kept hit.
     hit: Hit,
-    /// The kept shadow rays of both levels (the first `segments`).
-    shadows: u16,
+    /// The kept shadow rays of both levels (the first `segments`; at most
+    /// `2 · SETTLE_LIGHTS`).
+    shadows: u8,
     /// Whether the kept shading sends a mirror ray (the last segment).
     mirror: bool,
     eligible: bool,
+    /// Records only ([`ShadeReplay::records`]): the camera ray's shading was recorded
+    /// this frame and its mirror ray's is still to come (not yet eligible).
+    pending: bool,
 }
 
 const NOT_SETTLED: Settle = Settle {
@@ -131,6 +149,7 @@ const NOT_SETTLED: Settle = Settle {
     shadows: 0,
     mirror: false,
     eligible: false,
+    pending: false,
 };
 
 /// The most punctual lights for which [`Settle`] records are kept: beyond, its rays
@@ -152,13 +171,34 @@ struct Last {
 
 /// The levels the replay keeps for `samples` samples and `lights` punctual lights (none
 /// beyond [`REPLAY_LIGHTS`] lights).
-pub(super) fn levels_replayed(samples: usize, lights: usize) -> usize {
+#[cfg(test)]
+fn levels_replayed(samples: usize, lights: usize) -> usize {
+    levels_within(samples, lights, REPLAY_BYTES)
+}
+
+/// The levels whose slots fit within `budget` bytes ([`REPLAY_BYTES`] by default).
+fn levels_within(samples: usize, lights: usize, budget: usize) -> usize {
     if lights > REPLAY_LIGHTS {
         return 0;
     }
     let per_level =
         samples.max(1) * (std::mem::size_of::<Kept>() + lights * std::mem::size_of::<KeptShadow>());
-    (REPLAY_BYTES / per_level).min(REPLAY_LEVELS)
+    (budget / per_level).min(REPLAY_LEVELS)
+}
+
+/// The memory a frame's [`Settle`] records may take where no slots are kept (records
+/// only): 132 bytes a pixel with one light (the record, its three rays and the last
+/// frame's sums), 274 MB at 1920x1080, 196 bytes with two.
+pub(super) const RECORD_BYTES: usize = 512 << 20;
+
+/// Whether `samples` samples' records and last sums, with `lights` punctual lights, fit
+/// within `budget` bytes (none beyond [`SETTLE_LIGHTS`] lights).
+fn records_fit(samples: usize, lights: usize, budget: usize) -> bool {
+    let per = std::mem::size_of::<Settle>()
+        + (2 * lights + 1) * std::mem::size_of::<Ray>()
+        + std::mem::size_of::<Vec3>()
+        + std::mem::size_of::<f32>();
+    lights <= SETTLE_LIGHTS && samples.saturating_mul(per) <= budget
 }
 
 /// The bits of the shading context that may change from frame to frame.
@@ -174,13 +214,32 @@ impl ShadeReplay {
     /// Starts a frame of `samples` samples: `on` where the replay may serve (see the
     /// module's notes). Kept shading made in another context is dropped. The levels it
     /// keeps this frame.
-    pub(super) fn begin(&mut self, ctx: &ShadeContext<'_>, on: bool, samples: usize) -> usize {
+    ///
+    /// `budget`: the bytes the slots may take ([`REPLAY_BYTES`] unless the options say
+    /// otherwise). Where two levels of slots do not fit (1920x1080 with the default) but
+    /// the [`Settle`] records do (within [`RECORD_BYTES`]), only the records are kept,
+    /// written by the shading itself ([`ShadeReplay::records`]): the samples that settle
+    /// are most of a still camera's frame, and what the slots add beyond them (shading
+    /// replayed for the samples that do not settle) is not worth their 536 bytes a
+    /// pixel there. The levels returned are then the two the records cover.
+    pub(super) fn begin(
+        &mut self,
+        ctx: &ShadeContext<'_>,
+        on: bool,
+        samples: usize,
+        budget: usize,
+    ) -> usize {
         let lights = ctx.punctual_lights();
-        let levels = if on && !ctx.random {
-            levels_replayed(samples, lights)
+        let allowed = on && !ctx.random;
+        let mut levels = if allowed {
+            levels_within(samples, lights, budget)
         } else {
             0
         };
+        let records_only = allowed && levels == 0 && records_fit(samples, lights, RECORD_BYTES);
+        if records_only {
+            levels = REPLAY_LEVELS;
+        }
         if levels == 0 {
             // Nothing kept while off: the memory goes back.
             *self = ShadeReplay::default();
@@ -189,8 +248,12 @@ impl ShadeReplay {
         let key = key_of(ctx);
         let fits = self.key == key
             && self.lights == lights
-            && self.kept.len() == levels
-            && self.kept.iter().all(|k| k.len() == samples);
+            && self.records_only == records_only
+            && if records_only {
+                self.settle.len() == samples
+            } else {
+                self.kept.len() == levels && self.kept.iter().all(|k| k.len() == samples)
+            };
         if let Some(l) = &mut self.last {
             l.complete = l.written == samples && l.radiance.len() == samples;
             l.written = 0;
@@ -199,23 +262,43 @@ impl ShadeReplay {
             self.last = None;
             self.key = key;
             self.lights = lights;
-            // Set up on every thread (`memo::fill_par`).
-            self.kept.resize_with(levels, Vec::new);
-            for k in &mut self.kept {
-                fill_par(k, samples, EMPTY);
+            self.records_only = records_only;
+            if records_only {
+                self.kept = Vec::new();
+                self.shadows = Vec::new();
+                self.fill_records(samples);
+            } else {
+                // Set up on every thread (`memo::fill_par`).
+                self.kept.resize_with(levels, Vec::new);
+                for k in &mut self.kept {
+                    fill_par(k, samples, EMPTY);
+                }
+                self.shadows.resize_with(levels, Vec::new);
+                for k in &mut self.shadows {
+                    fill_par(k, samples * lights, None);
+                }
+                self.reset_settle(samples);
             }
-            self.shadows.resize_with(levels, Vec::new);
-            for k in &mut self.shadows {
-                fill_par(k, samples * lights, None);
-            }
-            self.reset_settle(samples);
         }
         levels
+    }
+
+    /// Every sample's record made ineligible and its rays emptied, `samples` of them.
+    fn fill_records(&mut self, samples: usize) {
+        fill_par(&mut self.settle, samples, NOT_SETTLED);
+        fill_par(
+            &mut self.segments,
+            samples * (2 * self.lights + 1),
+            EMPTY.ray,
+        );
     }
 
     /// Takes what `from` keeps, as if this replay had kept it: each kept push is tied
     /// to the ray, item and hit it was shaded for and to the context's key, so any frame
     /// may replay it (see [`StaticMemo::copy_kept`](super::memo::StaticMemo::copy_kept)).
+    ///
+    /// Records alone are not taken: each stands for its lane's last frame, whose sums
+    /// this lane does not have; this lane makes its own as it shades.
     pub(super) fn copy_kept(&mut self, from: &ShadeReplay) {
         // The sums of this lane's last frame are not those of the kept shading copied.
         self.last = None;
@@ -223,7 +306,12 @@ impl ShadeReplay {
         copy_all(&mut self.kept, &from.kept);
         copy_all(&mut self.shadows, &from.shadows);
         self.lights = from.lights;
-        self.reset_settle(self.kept.first().map_or(0, Vec::len));
+        self.records_only = from.records_only;
+        if self.records_only {
+            self.fill_records(from.settle.len());
+        } else {
+            self.reset_settle(self.kept.first().map_or(0, Vec::len));
+        }
     }
 
     /// Every sample's [`Settle`] record made ineligible (none kept beyond
@@ -289,14 +377,19 @@ impl ShadeReplay {
             });
         let ready = (|| {
             let last = self.last.as_ref().filter(|l| l.complete)?;
-            Some((
-                last.bounds,
-                BoxTest::new(bounds?),
-                self.kept.first()?,
-                self.shadows.first()?,
-            ))
+            Some((last.bounds, BoxTest::new(bounds?)))
         })();
-        let Some((before, now, level0, shadows0)) = ready else {
+        // Records alone (no slots to check them against) serve only where the camera
+        // is the one they were made with.
+        let first_slots = (self.kept.first(), self.shadows.first());
+        let ready = ready.filter(|_| !self.records_only || same_camera);
+        let records_only = self.records_only;
+        let slots_or_records = match first_slots {
+            (Some(k), Some(s)) => Some((&k[..], &s[..])),
+            _ if records_only && records.is_some() => Some((&[][..], &[][..])),
+            _ => None,
+        };
+        let (Some((before, now)), Some((level0, shadows0))) = (ready, slots_or_records) else {
             // No sample is settled: each is shaded, which may rewrite its slots.
             if let Some((records, _)) = records {
                 records.par_iter_mut().for_each(|r| r.eligible = false);
@@ -368,9 +461,10 @@ impl ShadeReplay {
                 }
                 *rec = Settle {
                     hit: k0.hit,
-                    shadows: k as u16,
+                    shadows: k as u8,
                     mirror: to_hit.is_some(),
                     eligible: true,
+                    pending: false,
                 };
             }
             Some(counts)
@@ -512,6 +606,25 @@ impl ShadeReplay {
             _ => None,
         }
     }
+
+    /// Where only the records are kept, what level `level`'s shading writes them into
+    /// (the camera rays' and their mirror rays'): the records and their rays, a sample's
+    /// `2 · lights + 1` of them.
+    pub(super) fn records(&mut self, level: usize) -> Option<(&mut [Settle], &mut [Ray], usize)> {
+        (self.records_only && level < REPLAY_LEVELS)
+            .then(|| (&mut self.settle[..], &mut self.segments[..], self.lights))
+    }
+}
+
+/// A sample's kept shading at one level: its slot and shadow slots, or (records only,
+/// [`ShadeReplay::records`]) its record and rays at level 0 or 1.
+pub(super) enum Slot<'a> {
+    Kept(&'a mut Kept, &'a mut [KeptShadow]),
+    Record {
+        level: usize,
+        rec: &'a mut Settle,
+        rays: &'a mut [Ray],
+    },
 }
 
 /// Shades `ray` (its `item`, its `hit`) into `out`, or replays what `slot` kept for the
@@ -527,11 +640,18 @@ pub(super) fn shade_kept(
     max_depth: u32,
     spp: u32,
     out: &mut BlockOut,
-    slot: Option<(&mut Kept, &mut [KeptShadow])>,
+    slot: Option<Slot<'_>>,
 ) {
-    let Some((kept, shadows)) = slot else {
-        ctx.shade(ray, item, hit, max_depth, spp, out);
-        return;
+    let (kept, shadows) = match slot {
+        None => {
+            ctx.shade(ray, item, hit, max_depth, spp, out);
+            return;
+        }
+        Some(Slot::Record { level, rec, rays }) => {
+            shade_recorded(ctx, ray, item, hit, max_depth, spp, out, level, rec, rays);
+            return;
+        }
+        Some(Slot::Kept(kept, shadows)) => (kept, shadows),
     };
     let static_hit = hit.filter(|h| {
         matches!(
@@ -586,12 +706,101 @@ pub(super) fn shade_kept(
     kept.valid = true;
 }
 
-/// The kept slots one block of rays owns: from sample `start` on.
+/// Shades `ray` (its `item`, its `hit`) into `out` and writes what a settled sample's
+/// check will need into its record `rec` and rays `rays` (records only,
+/// [`ShadeReplay::records`]): at level 0 (the camera ray) its hit and shadow rays, and
+/// whether it sends a mirror ray; at level 1 (that mirror ray) the ray up to its hit and
+/// its shadow rays. The record is eligible once both are written, or after level 0
+/// where no mirror ray is sent, and only where every shading involved met a static
+/// triangle, pushed at most one element of each kind and (at level 1) no ray further:
+/// what [`ShadeReplay::settled`]'s whole check asks of the slots. A record is written
+/// whenever its sample is shaded, so an eligible one always describes the last frame
+/// that shaded the sample.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn shade_recorded(
+    ctx: &ShadeContext<'_>,
+    ray: &Ray,
+    item: &Item,
+    hit: Option<Hit>,
+    max_depth: u32,
+    spp: u32,
+    out: &mut BlockOut,
+    level: usize,
+    rec: &mut Settle,
+    rays: &mut [Ray],
+) {
+    let lights = rays.len() / 2;
+    let before = out.lengths(lights);
+    ctx.shade(ray, item, hit, max_depth, spp, out);
+    let static_hit = hit.filter(|h| {
+        matches!(
+            Prim::from_index(h.tri, ctx.static_soup.len()),
+            Prim::Static(_)
+        )
+    });
+    let pushed = out.pushed_since(&before, lights);
+    let (Some(h), Some(pushed), Some(last)) = (static_hit, pushed, rays.len().checked_sub(1))
+    else {
+        *rec = NOT_SETTLED;
+        return;
+    };
+    // This shading's shadow rays, after those recorded before it (level 1's after
+    // level 0's).
+    let from = if level == 0 { 0 } else { rec.shadows as usize };
+    if level > 0 && !rec.pending {
+        // The camera ray's shading was not recorded: neither is this.
+        *rec = NOT_SETTLED;
+        return;
+    }
+    let mut k = from;
+    for light in 0..lights {
+        if let Some((r, _)) = out.last_shadow_since(&before, light) {
+            let Some(slot) = rays.get_mut(k).filter(|_| k < last) else {
+                *rec = NOT_SETTLED;
+                return;
+            };
+            *slot = r;
+            k += 1;
+        }
+    }
+    if level == 0 {
+        *rec = Settle {
+            hit: h,
+            shadows: k as u8,
+            mirror: pushed.next,
+            eligible: !pushed.next,
+            pending: pushed.next,
+        };
+    } else if pushed.next {
+        // A ray further down: the check covers two levels only.
+        *rec = NOT_SETTLED;
+    } else {
+        rays[last] = Ray { t_max: h.t, ..*ray };
+        rec.shadows = k as u8;
+        rec.eligible = true;
+        rec.pending = false;
+    }
+}
+
+/// The kept slots (or records) one block of rays owns: from sample `start` on.
 pub(super) struct BlockSlots<'a> {
     start: usize,
-    kept: &'a mut [Kept],
-    shadows: &'a mut [KeptShadow],
-    lights: usize,
+    parts: Parts<'a>,
+}
+
+enum Parts<'a> {
+    Kept {
+        kept: &'a mut [Kept],
+        shadows: &'a mut [KeptShadow],
+        lights: usize,
+    },
+    Records {
+        level: usize,
+        settle: &'a mut [Settle],
+        rays: &'a mut [Ray],
+        per: usize,
+    },
 }
 
 /// Asks the cache for a kept slot's four lines and its first shadow slot (either may be
@@ -630,65 +839,131 @@ impl BlockSlots<'_> {
     /// page holds 19 of them and the hardware's stream prefetcher, which stops at page
     /// boundaries, left the first read of each slot waiting on memory (11 % of a still
     /// camera's CPU at 640x480 on the `valid` flag's line; benches/PERF.md, issue 38,
-    /// round 11).
+    /// round 11). Records are written, not read: nothing to ask for.
     #[inline(always)]
     pub(super) fn prefetch(&self, s: usize) {
         let Some(i) = s.checked_sub(self.start) else {
             return;
         };
-        prefetch_slot(self.kept.get(i), self.shadows.get(i * self.lights));
+        if let Parts::Kept {
+            kept,
+            shadows,
+            lights,
+        } = &self.parts
+        {
+            prefetch_slot(kept.get(i), shadows.get(i * lights));
+        }
     }
 
     /// Sample `s`'s slot, if this block owns it.
     #[inline]
-    pub(super) fn get(&mut self, s: usize) -> Option<(&mut Kept, &mut [KeptShadow])> {
+    pub(super) fn get(&mut self, s: usize) -> Option<Slot<'_>> {
         let i = s.checked_sub(self.start)?;
-        let kept = self.kept.get_mut(i)?;
-        let shadows = self
-            .shadows
-            .get_mut(i * self.lights..(i + 1) * self.lights)?;
-        Some((kept, shadows))
+        match &mut self.parts {
+            Parts::Kept {
+                kept,
+                shadows,
+                lights,
+            } => {
+                let kept = kept.get_mut(i)?;
+                let shadows = shadows.get_mut(i * *lights..(i + 1) * *lights)?;
+                Some(Slot::Kept(kept, shadows))
+            }
+            Parts::Records {
+                level,
+                settle,
+                rays,
+                per,
+            } => {
+                let rec = settle.get_mut(i)?;
+                let rays = rays.get_mut(i * *per..(i + 1) * *per)?;
+                Some(Slot::Record {
+                    level: *level,
+                    rec,
+                    rays,
+                })
+            }
+        }
     }
 }
 
-/// A level's slots cut into what each block of rays owns: block `b` the samples from
-/// `starts[b]` up to the next block's start (the last block up to the end). `starts`
-/// must not decrease (a level's rays are in sample order); a sample two blocks share
-/// belongs to the first, and is not kept anyway (it has more than one ray).
+/// `a` (one element a sample) and `b` (`stride` a sample) cut into what each block owns:
+/// block `b` the samples from `starts[b]` up to the next block's start (the last block up
+/// to the end), with the first sample each part holds. `starts` must not decrease (a
+/// level's rays are in sample order); a sample two blocks share belongs to the first,
+/// and is not kept anyway (it has more than one ray).
+fn owned<'a, A, B>(
+    a: &'a mut [A],
+    b: &'a mut [B],
+    stride: usize,
+    starts: &[usize],
+) -> Vec<(usize, &'a mut [A], &'a mut [B])> {
+    let mut out = Vec::with_capacity(starts.len());
+    let (mut a, mut b) = (a, b);
+    let mut at = starts.first().copied().unwrap_or(0).min(a.len());
+    let skip = (at * stride).min(b.len());
+    a = &mut a[at..];
+    b = &mut b[skip..];
+    for (k, &start) in starts.iter().enumerate() {
+        let end = starts
+            .get(k + 1)
+            .copied()
+            .unwrap_or(usize::MAX)
+            .max(start)
+            .min(at + a.len());
+        let n = end.saturating_sub(at);
+        let (x, rest) = std::mem::take(&mut a).split_at_mut(n);
+        let cut = (n * stride).min(b.len());
+        let (y, yrest) = std::mem::take(&mut b).split_at_mut(cut);
+        out.push((at, x, y));
+        a = rest;
+        b = yrest;
+        at = end;
+    }
+    out
+}
+
+/// A level's slots cut into what each block of rays owns ([`owned`]'s rule).
 pub(super) fn block_slots<'a>(
     kept: &'a mut [Kept],
     shadows: &'a mut [KeptShadow],
     lights: usize,
     starts: &[usize],
 ) -> Vec<BlockSlots<'a>> {
-    let mut out = Vec::with_capacity(starts.len());
-    let (mut kept, mut shadows) = (kept, shadows);
-    let mut at = starts.first().copied().unwrap_or(0).min(kept.len());
-    let skip = (at * lights).min(shadows.len());
-    kept = &mut kept[at..];
-    shadows = &mut shadows[skip..];
-    for (b, &start) in starts.iter().enumerate() {
-        let end = starts
-            .get(b + 1)
-            .copied()
-            .unwrap_or(usize::MAX)
-            .max(start)
-            .min(at + kept.len());
-        let n = end.saturating_sub(at);
-        let (k, rest) = std::mem::take(&mut kept).split_at_mut(n);
-        let cut = (n * lights).min(shadows.len());
-        let (s, srest) = std::mem::take(&mut shadows).split_at_mut(cut);
-        out.push(BlockSlots {
-            start: at,
-            kept: k,
-            shadows: s,
-            lights,
-        });
-        kept = rest;
-        shadows = srest;
-        at = end;
-    }
-    out
+    owned(kept, shadows, lights, starts)
+        .into_iter()
+        .map(|(start, kept, shadows)| BlockSlots {
+            start,
+            parts: Parts::Kept {
+                kept,
+                shadows,
+                lights,
+            },
+        })
+        .collect()
+}
+
+/// Level `level`'s records and their rays (`per` a sample) cut into what each block of
+/// rays owns ([`owned`]'s rule), for the shading to write ([`ShadeReplay::records`]).
+pub(super) fn block_records<'a>(
+    level: usize,
+    settle: &'a mut [Settle],
+    rays: &'a mut [Ray],
+    per: usize,
+    starts: &[usize],
+) -> Vec<BlockSlots<'a>> {
+    owned(settle, rays, per, starts)
+        .into_iter()
+        .map(|(start, settle, rays)| BlockSlots {
+            start,
+            parts: Parts::Records {
+                level,
+                settle,
+                rays,
+                per,
+            },
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -714,6 +989,19 @@ mod tests {
         assert_eq!(record, 116);
         let records = 640 * 480 * record;
         assert!((33 << 20..=35 << 20).contains(&records), "{records} bytes");
+        // Records alone where no slots fit: 1920x1080 with one or two lights, not 4K
+        // (the module's notes and `RECORD_BYTES`).
+        let hd = 1920 * 1080;
+        assert!(records_fit(hd, 1, RECORD_BYTES) && records_fit(hd, 2, RECORD_BYTES));
+        assert!(!records_fit(hd, SETTLE_LIGHTS + 1, RECORD_BYTES));
+        assert!(!records_fit(3840 * 2160, 1, RECORD_BYTES));
+        let one = record + std::mem::size_of::<Vec3>() + std::mem::size_of::<f32>();
+        assert_eq!(one, 132);
+        assert!(
+            (270_000_000..=275_000_000).contains(&(hd * one)),
+            "{} bytes",
+            hd * one
+        );
     }
 
     #[test]
@@ -730,7 +1018,9 @@ mod tests {
             vec![vec![1, 2], vec![], vec![3, 4, 5, 6], vec![7, 8, 9]]
         );
         // Sample 4's two shadow slots are its own.
-        let (_, sh) = views[2].get(4).unwrap();
+        let Some(Slot::Kept(_, sh)) = views[2].get(4) else {
+            panic!("sample 4 has a slot")
+        };
         assert_eq!(sh.len(), 2);
         sh[1] = Some((EMPTY.ray, (4, Vec3::ONE)));
         drop(views);

@@ -443,12 +443,12 @@ struct Lane {
 }
 
 impl Lane {
-    fn new(tracing: Tracing, chunk_samples: usize) -> Lane {
+    fn new(tracing: Tracing, opts: &RenderOptions) -> Lane {
         Lane {
             tracing,
             dyn_soup: TriangleSoup::new(),
             next_soup: TriangleSoup::new(),
-            scratch: FrameScratch::with_chunk(chunk_samples),
+            scratch: FrameScratch::with_budgets(opts.chunk_samples, opts.replay_bytes),
         }
     }
 
@@ -686,9 +686,9 @@ impl Frames<'_> {
                 #[cfg(feature = "gpu")]
                 Tracing::Gpu(g) => Tracing::Gpu(Box::new(g.another()?)),
             };
-            lanes.push(Lane::new(more, opts.chunk_samples));
+            lanes.push(Lane::new(more, opts));
         }
-        lanes.insert(0, Lane::new(tracing, opts.chunk_samples));
+        lanes.insert(0, Lane::new(tracing, opts));
 
         std::thread::scope(|sc| {
             // A round's frames wait here while the writer writes the round before.
@@ -1131,6 +1131,7 @@ impl Frames<'_> {
                 cpu_ms: None,
                 threads: 0,
                 kept: work.kept,
+                settled: work.settled,
             },
         ))
     }

@@ -56,6 +56,8 @@ pub struct FrameStats {
     pub threads: usize,
     /// What the frame did with what a still camera keeps.
     pub kept: Kept,
+    /// Samples that took the last frame's sums (a still camera's settled samples).
+    pub settled: u64,
 }
 
 /// The CSV's first line.
@@ -554,6 +556,7 @@ mod tests {
                 cpu_ms: (i != 1).then_some(30.0),
                 threads: 2,
                 kept: [Kept::Fill, Kept::Reuse, Kept::None][i as usize],
+                settled: 0,
             })
             .collect()
     }

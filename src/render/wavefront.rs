@@ -12,7 +12,9 @@ use super::aov::{project, rank, CryptoNames};
 use super::camera::CameraModel;
 use super::memo::{levels_kept, lights_kept, Mode, StaticMemo};
 use super::options::Aovs;
-use super::replay::{block_slots, shade_kept, BlockSlots, ShadeReplay, PREFETCH_AHEAD};
+use super::replay::{
+    block_records, block_slots, shade_kept, BlockSlots, ShadeReplay, PREFETCH_AHEAD, REPLAY_BYTES,
+};
 use super::sampling::Seed;
 use super::shade::{
     BlockOut, Cone, CryptoBuffers, FrameBuffers, FrameWork, Item, LightPathBuffers, ShadeContext,
@@ -87,14 +89,19 @@ pub struct FrameScratch {
     crypto_ids: Vec<[Option<u32>; 2]>,
     /// Samples a chunk traces at most (0: [`CHUNK_SAMPLES`]).
     chunk_samples: usize,
+    /// The memory the replay's slots may take (0: `REPLAY_BYTES`).
+    replay_bytes: usize,
 }
 
 impl FrameScratch {
     /// Buffers that trace `chunk_samples` samples at a time at most (0: the default,
-    /// 2^19); the pixels do not depend on it.
-    pub fn with_chunk(chunk_samples: usize) -> FrameScratch {
+    /// 2^19), and whose still camera's kept shading may take `replay_bytes` in slots (0:
+    /// the default, 256 MB; beyond it only the records of the samples that settle are
+    /// kept, see `render::replay`); the pixels depend on neither.
+    pub fn with_budgets(chunk_samples: usize, replay_bytes: usize) -> FrameScratch {
         FrameScratch {
             chunk_samples,
+            replay_bytes,
             ..FrameScratch::default()
         }
     }
@@ -583,6 +590,7 @@ fn trace_pass<T: Intersector>(
         picked,
         crypto_ids,
         chunk_samples,
+        replay_bytes,
     } = scratch;
     let layers = tracer.layers();
     // The memo keeps a still camera's rays from frame to frame; a blurred frame's steps
@@ -600,7 +608,11 @@ fn trace_pass<T: Intersector>(
     // frame replays instead of keeping, which had cost a still camera's second frame
     // 140 ms of CPU at 640x480 (benches/PERF.md, issue 38, round 6). A camera that
     // moves every frame allocates and fills nothing.
-    let replayed = replay.begin(ctx, mode != Mode::Off && !light_paths, w * h);
+    let budget = match *replay_bytes {
+        0 => REPLAY_BYTES,
+        n => n,
+    };
+    let replayed = replay.begin(ctx, mode != Mode::Off && !light_paths, w * h, budget);
     // Without the memo or the replay, which read a level's rays and bookkeeping as one
     // array, the levels below the camera rays are traced and shaded from the lists the
     // blocks of the level above made, and the shadow rays from the blocks' lists: their
@@ -789,6 +801,7 @@ fn trace_pass<T: Intersector>(
                 if let Some((settled, (shadow, secondary))) =
                     replay.settled(px0, rays, hits, &item, moving_bounds, mode == Mode::Reuse)
                 {
+                    work.settled += settled.iter().filter(|&&s| s).count() as u64;
                     settled_chunk = Some(settled);
                     // The picture's rays: those the settled samples stand for too.
                     work.rays.shadow += shadow;
@@ -808,24 +821,35 @@ fn trace_pass<T: Intersector>(
             }
             // The kept shading of this level's samples, cut by the blocks that own them
             // (one sample a pixel: sample `s` of the chunk is slot `px0 + s`).
-            let mut slots: Vec<Option<BlockSlots<'_>>> = match replay.level(level) {
-                Some((kept, shadows, lights)) if level < replayed => {
-                    let (kept, shadows) = (&mut kept[px0..], &mut shadows[px0 * lights..]);
-                    let starts: Vec<usize> = (0..blocks)
-                        .map(|b| {
-                            if first {
-                                b * BLOCK
-                            } else {
-                                items[b * BLOCK].sample as usize
-                            }
-                        })
-                        .collect();
-                    block_slots(kept, shadows, lights, &starts)
-                        .into_iter()
-                        .map(Some)
-                        .collect()
-                }
-                _ => (0..blocks).map(|_| None).collect(),
+            let starts = || -> Vec<usize> {
+                (0..blocks)
+                    .map(|b| {
+                        if first {
+                            b * BLOCK
+                        } else {
+                            items[b * BLOCK].sample as usize
+                        }
+                    })
+                    .collect()
+            };
+            let mut slots: Vec<Option<BlockSlots<'_>>> = if level >= replayed {
+                (0..blocks).map(|_| None).collect()
+            } else if let Some((kept, shadows, lights)) = replay.level(level) {
+                let (kept, shadows) = (&mut kept[px0..], &mut shadows[px0 * lights..]);
+                block_slots(kept, shadows, lights, &starts())
+                    .into_iter()
+                    .map(Some)
+                    .collect()
+            } else if let Some((settle, segments, lights)) = replay.records(level) {
+                // Records only: the shading writes what a settled sample's check needs.
+                let per = 2 * lights + 1;
+                let (settle, segments) = (&mut settle[px0..], &mut segments[px0 * per..]);
+                block_records(level, settle, segments, per, &starts())
+                    .into_iter()
+                    .map(Some)
+                    .collect()
+            } else {
+                (0..blocks).map(|_| None).collect()
             };
             // A deeper ray's slot: only a sample's one ray at the level is kept.
             let alone = |i: usize| {

@@ -159,4 +159,7 @@ pub struct FrameWork {
     pub rays: RayCounts,
     /// What the frame did with what a still camera keeps (its last pass's).
     pub kept: super::super::stats::Kept,
+    /// Samples whose sums were the last frame's, neither shaded nor traced below their
+    /// camera ray (`render::replay`'s settled samples).
+    pub settled: u64,
 }
