@@ -642,16 +642,10 @@ pub(super) fn shade_kept(
     out: &mut BlockOut,
     slot: Option<Slot<'_>>,
 ) {
-    let (kept, shadows) = match slot {
-        None => {
-            ctx.shade(ray, item, hit, max_depth, spp, out);
-            return;
-        }
-        Some(Slot::Record { level, rec, rays }) => {
-            shade_recorded(ctx, ray, item, hit, max_depth, spp, out, level, rec, rays);
-            return;
-        }
-        Some(Slot::Kept(kept, shadows)) => (kept, shadows),
+    // Records are written after the block's shading (`record_block`), not here.
+    let Some(Slot::Kept(kept, shadows)) = slot else {
+        ctx.shade(ray, item, hit, max_depth, spp, out);
+        return;
     };
     let static_hit = hit.filter(|h| {
         matches!(
@@ -706,80 +700,109 @@ pub(super) fn shade_kept(
     kept.valid = true;
 }
 
-/// Shades `ray` (its `item`, its `hit`) into `out` and writes what a settled sample's
-/// check will need into its record `rec` and rays `rays` (records only,
-/// [`ShadeReplay::records`]): at level 0 (the camera ray) its hit and shadow rays, and
-/// whether it sends a mirror ray; at level 1 (that mirror ray) the ray up to its hit and
-/// its shadow rays. The record is eligible once both are written, or after level 0
-/// where no mirror ray is sent, and only where every shading involved met a static
-/// triangle, pushed at most one element of each kind and (at level 1) no ray further:
-/// what [`ShadeReplay::settled`]'s whole check asks of the slots. A record is written
-/// whenever its sample is shaded, so an eligible one always describes the last frame
-/// that shaded the sample.
-#[allow(clippy::too_many_arguments)]
-#[inline]
-fn shade_recorded(
+/// Records only: writes the records of a block's samples from what the block's shading
+/// pushed (`out`, the block shaded in lanes or a ray at a time), what
+/// [`ShadeReplay::settled`]'s whole check would have found in the slots: at level 0 (the
+/// camera ray) its static hit and shadow rays, and whether it sends a mirror ray; at
+/// level 1 (that mirror ray) the ray up to its static hit and its shadow rays. The
+/// record is eligible once both are written, or after level 0 where no mirror ray is
+/// sent, and only where every shading involved met a static triangle, pushed at most one
+/// element of each kind and (at level 1) no ray further. A record is written whenever
+/// its sample is shaded, so an eligible one describes the last frame that shaded it.
+/// `rays` gives each of the block's rays that were shaded, in order: its sample, the
+/// ray, its hit and whether it is its sample's only ray at the level. Each list of `out` holds a ray's
+/// pushes after the ones of the rays before it, each tagged with the ray's sample (the
+/// lanes push as the rays would one at a time), so a sample's pushes are the run of its
+/// entries at each list's cursor.
+pub(super) fn record_block<'r>(
     ctx: &ShadeContext<'_>,
-    ray: &Ray,
-    item: &Item,
-    hit: Option<Hit>,
-    max_depth: u32,
-    spp: u32,
-    out: &mut BlockOut,
-    level: usize,
-    rec: &mut Settle,
-    rays: &mut [Ray],
+    slots: &mut BlockSlots<'_>,
+    rays: impl Iterator<Item = (usize, &'r Ray, Option<Hit>, bool)>,
+    out: &BlockOut,
 ) {
-    let lights = rays.len() / 2;
-    let before = out.lengths(lights);
-    ctx.shade(ray, item, hit, max_depth, spp, out);
-    let static_hit = hit.filter(|h| {
-        matches!(
-            Prim::from_index(h.tri, ctx.static_soup.len()),
-            Prim::Static(_)
-        )
-    });
-    let pushed = out.pushed_since(&before, lights);
-    let (Some(h), Some(pushed), Some(last)) = (static_hit, pushed, rays.len().checked_sub(1))
-    else {
-        *rec = NOT_SETTLED;
+    let Parts::Records { per, .. } = slots.parts else {
         return;
     };
-    // This shading's shadow rays, after those recorded before it (level 1's after
-    // level 0's).
-    let from = if level == 0 { 0 } else { rec.shadows as usize };
-    if level > 0 && !rec.pending {
-        // The camera ray's shading was not recorded: neither is this.
-        *rec = NOT_SETTLED;
-        return;
+    let lights = per / 2;
+    // Lists the check does not cover (the passes' split, batches past the punctual
+    // lights): nothing recorded.
+    let covered = out.split.is_empty() && out.shadow.len() <= lights && lights <= SETTLE_LIGHTS;
+    let (mut add, mut cover, mut next) = (0usize, 0usize, 0usize);
+    let mut shadow = [0usize; 2 * SETTLE_LIGHTS];
+    // The entries at `*at` on tagged with sample `s`: how many, the cursor moved past.
+    fn run(at: &mut usize, len: usize, s: usize, tag: impl Fn(usize) -> u32) -> usize {
+        let from = *at;
+        while *at < len && tag(*at) as usize == s {
+            *at += 1;
+        }
+        *at - from
     }
-    let mut k = from;
-    for light in 0..lights {
-        if let Some((r, _)) = out.last_shadow_since(&before, light) {
-            let Some(slot) = rays.get_mut(k).filter(|_| k < last) else {
-                *rec = NOT_SETTLED;
-                return;
-            };
-            *slot = r;
+    for (s, ray, hit, alone) in rays {
+        let n_add = run(&mut add, out.add.len(), s, |i| out.add[i].0);
+        let n_cover = run(&mut cover, out.cover.len(), s, |i| out.cover[i].0);
+        let n_next = run(&mut next, out.next_items.len(), s, |i| {
+            out.next_items[i].sample
+        });
+        let mut sent: [Option<Ray>; 2 * SETTLE_LIGHTS] = [None; 2 * SETTLE_LIGHTS];
+        let mut single = n_add <= 1 && n_cover <= 1 && n_next <= 1;
+        for (l, list) in out.shadow.iter().enumerate().take(lights) {
+            let at = &mut shadow[l];
+            let before = *at;
+            let n = run(at, list.add.len(), s, |i| list.add[i].0);
+            single &= n <= 1;
+            if n == 1 {
+                sent[l] = list.rays.get(before).copied();
+            }
+        }
+        let Some(Slot::Record { level, rec, rays }) = slots.get(s) else {
+            continue;
+        };
+        let static_hit = hit.filter(|h| {
+            matches!(
+                Prim::from_index(h.tri, ctx.static_soup.len()),
+                Prim::Static(_)
+            )
+        });
+        let (Some(h), true, true, Some(last)) = (
+            static_hit,
+            single && covered,
+            alone,
+            rays.len().checked_sub(1),
+        ) else {
+            *rec = NOT_SETTLED;
+            continue;
+        };
+        if level > 0 && !rec.pending {
+            *rec = NOT_SETTLED;
+            continue;
+        }
+        let mut k = if level == 0 { 0 } else { rec.shadows as usize };
+        let mut fits = true;
+        for r in sent.iter().take(lights).flatten() {
+            match rays.get_mut(k).filter(|_| k < last) {
+                Some(slot) => *slot = *r,
+                None => fits = false,
+            }
             k += 1;
         }
-    }
-    if level == 0 {
-        *rec = Settle {
-            hit: h,
-            shadows: k as u8,
-            mirror: pushed.next,
-            eligible: !pushed.next,
-            pending: pushed.next,
-        };
-    } else if pushed.next {
-        // A ray further down: the check covers two levels only.
-        *rec = NOT_SETTLED;
-    } else {
-        rays[last] = Ray { t_max: h.t, ..*ray };
-        rec.shadows = k as u8;
-        rec.eligible = true;
-        rec.pending = false;
+        if !fits {
+            *rec = NOT_SETTLED;
+        } else if level == 0 {
+            *rec = Settle {
+                hit: h,
+                shadows: k as u8,
+                mirror: n_next == 1,
+                eligible: n_next == 0,
+                pending: n_next == 1,
+            };
+        } else if n_next > 0 {
+            *rec = NOT_SETTLED;
+        } else {
+            rays[last] = Ray { t_max: h.t, ..*ray };
+            rec.shadows = k as u8;
+            rec.eligible = true;
+            rec.pending = false;
+        }
     }
 }
 
@@ -834,6 +857,12 @@ fn prefetch_slot(kept: Option<&Kept>, shadow: Option<&KeptShadow>) {
 pub(super) const PREFETCH_AHEAD: usize = 8;
 
 impl BlockSlots<'_> {
+    /// Whether these are records, which the shading writes ([`record_block`]) and
+    /// nothing replays: a block may then be shaded in lanes.
+    pub(super) fn records_only(&self) -> bool {
+        matches!(self.parts, Parts::Records { .. })
+    }
+
     /// Asks the cache for sample `s`'s slot (its kept shading and shadow rays), which
     /// the loop will read [`PREFETCH_AHEAD`] samples later: a slot is 216 bytes, so a
     /// page holds 19 of them and the hardware's stream prefetcher, which stops at page

@@ -13,7 +13,8 @@ use super::camera::CameraModel;
 use super::memo::{levels_kept, lights_kept, Mode, StaticMemo};
 use super::options::Aovs;
 use super::replay::{
-    block_records, block_slots, shade_kept, BlockSlots, ShadeReplay, PREFETCH_AHEAD, REPLAY_BYTES,
+    block_records, block_slots, record_block, shade_kept, BlockSlots, ShadeReplay, PREFETCH_AHEAD,
+    REPLAY_BYTES,
 };
 use super::sampling::Seed;
 use super::shade::{
@@ -870,13 +871,20 @@ fn trace_pass<T: Intersector>(
                             out.clear();
                             out.light_paths = light_paths;
                             let mut at = walk(b * BLOCK);
-                            if slots.is_none() && settled.is_none() && ctx.lanes(out) {
+                            // Records (no slots to replay) are written after the lanes.
+                            let records = slots.as_ref().is_some_and(|v| v.records_only());
+                            if (slots.is_none() || records) && settled.is_none() && ctx.lanes(out) {
                                 let item = |k: usize| {
                                     let item = primary_item(b * BLOCK + k, &at);
                                     at.advance();
                                     item
                                 };
                                 shade_in_fours(ctx, r, hs, item, max_depth, spp as u32, out);
+                                if let Some(v) = slots.as_mut() {
+                                    let each = r.iter().zip(hs).enumerate();
+                                    let each = each.map(|(k, (r, h))| (b * BLOCK + k, r, *h, true));
+                                    record_block(ctx, v, each, out);
+                                }
                                 return;
                             }
                             for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
@@ -889,9 +897,18 @@ fn trace_pass<T: Intersector>(
                                 if let Some(v) = slots.as_ref() {
                                     v.prefetch(s + PREFETCH_AHEAD);
                                 }
-                                let slot = slots.as_mut().and_then(|v| v.get(s));
+                                let slot = match slots.as_mut() {
+                                    Some(v) if !records => v.get(s),
+                                    _ => None,
+                                };
                                 shade_kept(ctx, ray, &item, *hit, max_depth, spp as u32, out, slot);
                                 at.advance();
+                            }
+                            if let Some(v) = slots.as_mut().filter(|_| records) {
+                                let each = r.iter().zip(hs).enumerate();
+                                let each = each.map(|(k, (r, h))| (b * BLOCK + k, r, *h, true));
+                                let shaded = each.filter(|e| !settled.is_some_and(|v| v[e.0]));
+                                record_block(ctx, v, shaded, out);
                             }
                         }),
                     // A step's camera rays: ray `i` is sample `sel[i]`.
@@ -946,8 +963,16 @@ fn trace_pass<T: Intersector>(
                     .for_each(|(b, ((((out, r), it), hs), slots))| {
                         out.clear();
                         out.light_paths = light_paths;
-                        if slots.is_none() && ctx.lanes(out) {
+                        let records = slots.as_ref().is_some_and(|v| v.records_only());
+                        if (slots.is_none() || records) && ctx.lanes(out) {
                             shade_in_fours(ctx, r, hs, |k| it[k], max_depth, spp as u32, out);
+                            if let Some(v) = slots.as_mut() {
+                                let each = r.iter().zip(it).zip(hs).enumerate();
+                                let each = each.map(|(k, ((r, i), h))| {
+                                    (i.sample as usize, r, *h, alone(b * BLOCK + k))
+                                });
+                                record_block(ctx, v, each, out);
+                            }
                             return;
                         }
                         for (k, ((ray, item), hit)) in r.iter().zip(it).zip(hs).enumerate() {
@@ -957,10 +982,19 @@ fn trace_pass<T: Intersector>(
                                 v.prefetch(ahead.sample as usize);
                             }
                             let slot = match slots.as_mut() {
-                                Some(v) if alone(b * BLOCK + k) => v.get(item.sample as usize),
+                                Some(v) if !records && alone(b * BLOCK + k) => {
+                                    v.get(item.sample as usize)
+                                }
                                 _ => None,
                             };
                             shade_kept(ctx, ray, item, *hit, max_depth, spp as u32, out, slot);
+                        }
+                        if let Some(v) = slots.as_mut().filter(|_| records) {
+                            let each = r.iter().zip(it).zip(hs).enumerate();
+                            let each = each.map(|(k, ((r, i), h))| {
+                                (i.sample as usize, r, *h, alone(b * BLOCK + k))
+                            });
+                            record_block(ctx, v, each, out);
                         }
                     });
             }
