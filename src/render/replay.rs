@@ -710,10 +710,10 @@ pub(super) fn shade_kept(
 /// element of each kind and (at level 1) no ray further. A record is written whenever
 /// its sample is shaded, so an eligible one describes the last frame that shaded it.
 /// `rays` gives each of the block's rays that were shaded, in order: its sample, the
-/// ray, its hit and whether it is its sample's only ray at the level. Each list of `out` holds a ray's
-/// pushes after the ones of the rays before it, each tagged with the ray's sample (the
-/// lanes push as the rays would one at a time), so a sample's pushes are the run of its
-/// entries at each list's cursor.
+/// ray, its hit and whether it is its sample's only ray at the level. Each list of `out`
+/// holds a ray's pushes after the ones of the rays before it, each tagged with the ray's
+/// sample (the lanes push as the rays would one at a time), so a sample's pushes are the
+/// run of its entries at each list's cursor.
 pub(super) fn record_block<'r>(
     ctx: &ShadeContext<'_>,
     slots: &mut BlockSlots<'_>,
