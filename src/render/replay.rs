@@ -48,7 +48,7 @@ use glam::Vec3;
 
 use rayon::prelude::*;
 
-use super::memo::{copy_all, fill_par};
+use super::memo::{copy_all, copy_par, fill_par};
 use super::shade::{BlockOut, Item, ShadeContext, REPLAY_LIGHTS};
 use crate::geometry::{same_words, Aabb, Hit, Ray};
 use crate::psf::{BoxTest, Prim};
@@ -186,6 +186,15 @@ fn levels_within(samples: usize, lights: usize, budget: usize) -> usize {
     (budget / per_level).min(REPLAY_LEVELS)
 }
 
+/// Whether a still camera's frames of `samples` samples have no room for slots within
+/// `budget` (0: [`REPLAY_BYTES`]) even with one light, so that they keep the records
+/// alone (or nothing): the frame that fills them is worth rendering alone and copying,
+/// rather than one a frame in flight (`render::sequence`).
+pub(super) fn slots_do_not_fit(samples: usize, budget: usize) -> bool {
+    let budget = if budget == 0 { REPLAY_BYTES } else { budget };
+    levels_within(samples, 1, budget) == 0
+}
+
 /// The memory a frame's [`Settle`] records may take where no slots are kept (records
 /// only): 132 bytes a pixel with one light (the record, its three rays and the last
 /// frame's sums), 274 MB at 1920x1080, 196 bytes with two.
@@ -297,19 +306,38 @@ impl ShadeReplay {
     /// to the ray, item and hit it was shaded for and to the context's key, so any frame
     /// may replay it (see [`StaticMemo::copy_kept`](super::memo::StaticMemo::copy_kept)).
     ///
-    /// Records alone are not taken: each stands for its lane's last frame, whose sums
-    /// this lane does not have; this lane makes its own as it shades.
+    /// Records alone are taken with `from`'s last frame's sums and moving bounds: an
+    /// eligible record's rays were answered by the static triangles alone in the last
+    /// frame that shaded its sample, and the sums `from` keeps are those answers' sums,
+    /// whichever lane renders next; the settled check then holds the rays to `from`'s
+    /// last frame's moving triangles and to this frame's, as it would in `from`. So the
+    /// frame a lane renders after the copy settles its samples as `from`'s next would.
     pub(super) fn copy_kept(&mut self, from: &ShadeReplay) {
-        // The sums of this lane's last frame are not those of the kept shading copied.
-        self.last = None;
         self.key.clone_from(&from.key);
         copy_all(&mut self.kept, &from.kept);
         copy_all(&mut self.shadows, &from.shadows);
         self.lights = from.lights;
         self.records_only = from.records_only;
         if self.records_only {
-            self.fill_records(from.settle.len());
+            copy_par(&mut self.settle, &from.settle);
+            copy_par(&mut self.segments, &from.segments);
+            self.last = from.last.as_ref().map(|l| {
+                let mut radiance = Vec::new();
+                let mut coverage = Vec::new();
+                copy_par(&mut radiance, &l.radiance);
+                copy_par(&mut coverage, &l.coverage);
+                Last {
+                    bounds: l.bounds,
+                    radiance,
+                    coverage,
+                    written: l.written,
+                    complete: l.complete,
+                }
+            });
         } else {
+            // The sums of this lane's last frame are not those of the kept shading
+            // copied.
+            self.last = None;
             self.reset_settle(self.kept.first().map_or(0, Vec::len));
         }
     }

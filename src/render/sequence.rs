@@ -534,6 +534,7 @@ const GPU_LANES: usize = 2;
 /// lanes ([`Frames::starts_still`]). 24 still frames at 640x480 on 2 threads: four in
 /// flight 2.08 → 1.84 s with it; two in flight no faster (1.69 s either way), and a
 /// stretch of three frames slower (0.59 → 0.65 s) (benches/PERF.md, issue 38, round 7).
+/// Two where the replay keeps records alone ([`Frames::seed_lanes`]).
 const SEED_LANES: usize = 3;
 
 /// The threads a frame in flight gets when `--frames-in-flight` is left to the render.
@@ -753,7 +754,7 @@ impl Frames<'_> {
                         // A still camera from here on: this frame alone, on every
                         // thread, fills what it keeps, and the other lanes copy it
                         // (below) rather than each filling its own.
-                        if round.len() == 1 && room >= SEED_LANES {
+                        if round.len() == 1 && room >= self.seed_lanes() {
                             let after = [ahead.at(index + 1), ahead.at(index + room + 2)];
                             if self.starts_still(&lanes, frame, after) {
                                 room = 1;
@@ -903,6 +904,22 @@ impl Frames<'_> {
             let source = std::mem::take(&mut lanes[from].scratch);
             lanes[i].scratch.copy_kept(&source);
             lanes[from].scratch = source;
+        }
+    }
+
+    /// Lanes from which a still stretch is filled once ([`SEED_LANES`]); two where the
+    /// frame has no room for the replay's slots (1920x1080 and beyond): its records and
+    /// sums, copied, let the other lane's first frame settle its samples, where filling
+    /// its own was a whole frame's tracing and shading again (benches/PERF.md, issue 38,
+    /// round 24).
+    fn seed_lanes(&self) -> usize {
+        let opts = self.opts;
+        let pixels =
+            u64::from(opts.width + 2 * opts.overscan) * u64::from(opts.height + 2 * opts.overscan);
+        if super::replay::slots_do_not_fit(pixels as usize, opts.replay_bytes) {
+            2
+        } else {
+            SEED_LANES
         }
     }
 
