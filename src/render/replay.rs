@@ -42,7 +42,7 @@
 //! for the samples that do not settle, and a record serves only a frame through the
 //! camera it was made with. 132 bytes a pixel with the sums (274 MB at 1920x1080, one
 //! light), against 536 for two levels of slots: a still camera's 1920x1080 frames on 2
-//! threads went from 440 to 321–340 ms a frame (benches/PERF.md, issue 38, round 24).
+//! threads went from 440 to 306–340 ms a frame (benches/PERF.md, issue 38, round 24).
 
 use glam::Vec3;
 
