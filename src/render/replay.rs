@@ -409,15 +409,11 @@ impl ShadeReplay {
         })();
         // Records alone (no slots to check them against) serve only where the camera
         // is the one they were made with.
-        let first_slots = (self.kept.first(), self.shadows.first());
         let ready = ready.filter(|_| !self.records_only || same_camera);
-        let records_only = self.records_only;
-        let slots_or_records = match first_slots {
-            (Some(k), Some(s)) => Some((&k[..], &s[..])),
-            _ if records_only && records.is_some() => Some((&[][..], &[][..])),
-            _ => None,
-        };
-        let (Some((before, now)), Some((level0, shadows0))) = (ready, slots_or_records) else {
+        // No slots with records alone: the whole check finds nothing, the quick one serves.
+        let level0 = self.kept.first().map_or(&[][..], Vec::as_slice);
+        let shadows0 = self.shadows.first().map_or(&[][..], Vec::as_slice);
+        let Some((before, now)) = ready else {
             // No sample is settled: each is shaded, which may rewrite its slots.
             if let Some((records, _)) = records {
                 records.par_iter_mut().for_each(|r| r.eligible = false);

@@ -872,6 +872,8 @@ fn trace_pass<T: Intersector>(
                             out.light_paths = light_paths;
                             let mut at = walk(b * BLOCK);
                             // Records (no slots to replay) are written after the lanes.
+                            // Records (no slots to replay) are written from the block's
+                            // lists once it is shaded, in lanes where it can be.
                             let records = slots.as_ref().is_some_and(|v| v.records_only());
                             if (slots.is_none() || records) && settled.is_none() && ctx.lanes(out) {
                                 let item = |k: usize| {
@@ -880,29 +882,26 @@ fn trace_pass<T: Intersector>(
                                     item
                                 };
                                 shade_in_fours(ctx, r, hs, item, max_depth, spp as u32, out);
-                                if let Some(v) = slots.as_mut() {
-                                    let each = r.iter().zip(hs).enumerate();
-                                    let each = each.map(|(k, (r, h))| (b * BLOCK + k, r, *h, true));
-                                    record_block(ctx, v, each, out);
-                                }
-                                return;
-                            }
-                            for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
-                                let s = b * BLOCK + k;
-                                if settled.is_some_and(|v| v[s]) {
+                            } else {
+                                for (k, (ray, hit)) in r.iter().zip(hs).enumerate() {
+                                    let s = b * BLOCK + k;
+                                    if settled.is_some_and(|v| v[s]) {
+                                        at.advance();
+                                        continue;
+                                    }
+                                    let item = primary_item(s, &at);
+                                    if let Some(v) = slots.as_ref() {
+                                        v.prefetch(s + PREFETCH_AHEAD);
+                                    }
+                                    let slot = match slots.as_mut() {
+                                        Some(v) if !records => v.get(s),
+                                        _ => None,
+                                    };
+                                    shade_kept(
+                                        ctx, ray, &item, *hit, max_depth, spp as u32, out, slot,
+                                    );
                                     at.advance();
-                                    continue;
                                 }
-                                let item = primary_item(s, &at);
-                                if let Some(v) = slots.as_ref() {
-                                    v.prefetch(s + PREFETCH_AHEAD);
-                                }
-                                let slot = match slots.as_mut() {
-                                    Some(v) if !records => v.get(s),
-                                    _ => None,
-                                };
-                                shade_kept(ctx, ray, &item, *hit, max_depth, spp as u32, out, slot);
-                                at.advance();
                             }
                             if let Some(v) = slots.as_mut().filter(|_| records) {
                                 let each = r.iter().zip(hs).enumerate();
@@ -966,28 +965,21 @@ fn trace_pass<T: Intersector>(
                         let records = slots.as_ref().is_some_and(|v| v.records_only());
                         if (slots.is_none() || records) && ctx.lanes(out) {
                             shade_in_fours(ctx, r, hs, |k| it[k], max_depth, spp as u32, out);
-                            if let Some(v) = slots.as_mut() {
-                                let each = r.iter().zip(it).zip(hs).enumerate();
-                                let each = each.map(|(k, ((r, i), h))| {
-                                    (i.sample as usize, r, *h, alone(b * BLOCK + k))
-                                });
-                                record_block(ctx, v, each, out);
-                            }
-                            return;
-                        }
-                        for (k, ((ray, item), hit)) in r.iter().zip(it).zip(hs).enumerate() {
-                            if let (Some(v), Some(ahead)) =
-                                (slots.as_ref(), it.get(k + PREFETCH_AHEAD))
-                            {
-                                v.prefetch(ahead.sample as usize);
-                            }
-                            let slot = match slots.as_mut() {
-                                Some(v) if !records && alone(b * BLOCK + k) => {
-                                    v.get(item.sample as usize)
+                        } else {
+                            for (k, ((ray, item), hit)) in r.iter().zip(it).zip(hs).enumerate() {
+                                if let (Some(v), Some(ahead)) =
+                                    (slots.as_ref(), it.get(k + PREFETCH_AHEAD))
+                                {
+                                    v.prefetch(ahead.sample as usize);
                                 }
-                                _ => None,
-                            };
-                            shade_kept(ctx, ray, item, *hit, max_depth, spp as u32, out, slot);
+                                let slot = match slots.as_mut() {
+                                    Some(v) if !records && alone(b * BLOCK + k) => {
+                                        v.get(item.sample as usize)
+                                    }
+                                    _ => None,
+                                };
+                                shade_kept(ctx, ray, item, *hit, max_depth, spp as u32, out, slot);
+                            }
                         }
                         if let Some(v) = slots.as_mut().filter(|_| records) {
                             let each = r.iter().zip(it).zip(hs).enumerate();
