@@ -14,6 +14,7 @@ use glam::Vec3;
 use proptest::prelude::*;
 use subfield::gen::synth::{self, Rng};
 use subfield::geometry::{closest_of, BruteForce, Intersector, Ray};
+use subfield::psf::RayStats;
 use subfield::{DynamicLayer, Psf, PsfParams};
 
 #[derive(Clone, Debug)]
@@ -46,6 +47,7 @@ fn check_with(c: &Case, frame_tris: FrameGen) -> Result<(), TestCaseError> {
         None => DynamicLayer::new(&psf),
     };
     let mut before: Vec<[Vec3; 3]> = Vec::new();
+    let mut stats = RayStats::default();
     for frame in 0..c.frames {
         let (moving, mode) = frame_tris(&mut rng, c.moving);
         layer.update(&moving).expect("update");
@@ -74,6 +76,28 @@ fn check_with(c: &Case, frame_tris: FrameGen) -> Result<(), TestCaseError> {
                 og[i],
                 ow[i],
                 "any hit differs: frame {} ({}), ray {} {:?}, seed {}",
+                frame,
+                mode,
+                i,
+                rs[i],
+                c.seed
+            );
+            // The batches take the static part through the box tree; a counted query
+            // walks the subfields: both are brute force's.
+            prop_assert_eq!(
+                both.intersect_counted(&rs[i], &mut stats),
+                want[i],
+                "the walk's closest hit differs: frame {} ({}), ray {} {:?}, seed {}",
+                frame,
+                mode,
+                i,
+                rs[i],
+                c.seed
+            );
+            prop_assert_eq!(
+                both.occluded_counted(&rs[i], &mut stats),
+                ow[i],
+                "the walk's any hit differs: frame {} ({}), ray {} {:?}, seed {}",
                 frame,
                 mode,
                 i,

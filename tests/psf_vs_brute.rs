@@ -9,7 +9,7 @@ use glam::Vec3;
 use proptest::prelude::*;
 use subfield::gen::synth::{self, Rng};
 use subfield::geometry::{BruteForce, Intersector, Ray};
-use subfield::psf::{subfield_directions, GridFrame};
+use subfield::psf::{subfield_directions, GridFrame, RayStats};
 use subfield::{Aabb, Psf, PsfParams};
 
 #[derive(Clone, Debug)]
@@ -185,11 +185,38 @@ fn check(c: &Case) -> Result<(), TestCaseError> {
     let mut occ_want = vec![false; rays.len()];
     psf.occluded_batch(&rays, &mut occ_got);
     brute.occluded_batch(&rays, &mut occ_want);
+    // The batches and single rays go through the box tree, counted queries through the
+    // walk: both must be brute force's.
+    let mut stats = RayStats::default();
     for i in 0..rays.len() {
         prop_assert_eq!(
             got[i],
             want[i],
             "closest hit differs on ray {} {:?} (seed {})",
+            i,
+            rays[i],
+            c.seed
+        );
+        prop_assert_eq!(
+            psf.intersect(&rays[i]),
+            want[i],
+            "closest hit of one ray differs on ray {} {:?} (seed {})",
+            i,
+            rays[i],
+            c.seed
+        );
+        prop_assert_eq!(
+            psf.intersect_counted(&rays[i], &mut stats),
+            want[i],
+            "the walk's closest hit differs on ray {} {:?} (seed {})",
+            i,
+            rays[i],
+            c.seed
+        );
+        prop_assert_eq!(
+            psf.occluded_counted(&rays[i], &mut stats),
+            occ_want[i],
+            "the walk's any hit differs on ray {} {:?} (seed {})",
             i,
             rays[i],
             c.seed

@@ -22,10 +22,12 @@ mod point;
 mod stats;
 mod storage;
 mod traverse;
+mod tree;
 pub(crate) use traverse::BoxTest;
 pub mod tune;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::OnceLock;
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -208,6 +210,9 @@ pub struct Psf {
     table: DirectionTable,
     /// Point grids over `triangles` kept from batch to batch (`point/cache.rs`).
     points: PointCache,
+    /// The box tree over `triangles` (`tree.rs`), made on the first query that needs it;
+    /// `None` inside where the coordinates are beyond its range.
+    tree: OnceLock<Option<tree::BoxTree>>,
 }
 
 /// Refuses more triangles than a `u32` can number, and non-finite coordinates (naming
@@ -343,6 +348,7 @@ impl Rasters {
             subfields,
             table: DirectionTable::new(&self.dirs),
             points: PointCache::default(),
+            tree: OnceLock::new(),
         }
     }
 }
@@ -506,6 +512,7 @@ impl Psf {
             subfields,
             table: DirectionTable::new(&dirs),
             points: PointCache::default(),
+            tree: OnceLock::new(),
         })
     }
 
@@ -590,6 +597,28 @@ impl Psf {
 
     pub fn margin(&self) -> f32 {
         self.margin
+    }
+
+    /// The box tree over the triangles (`None` where the coordinates are beyond its
+    /// range): the one [`prepare_tree`](Self::prepare_tree) built, or built now on this
+    /// thread alone while any other query that needs it waits (a build forked on the
+    /// pool here could take, while it waits for a half, another query's task that would
+    /// find the lock held by its own thread).
+    #[inline]
+    pub(crate) fn tree(&self) -> Option<&tree::BoxTree> {
+        self.tree
+            .get_or_init(|| tree::BoxTree::build(&self.triangles, self.margin, false))
+            .as_ref()
+    }
+
+    /// Builds the box tree on the pool's threads, unless it is built: for a caller about
+    /// to trace, while no query runs (a render before its frames). 5 ms for the museum's
+    /// 10,284 triangles; half a second for a million on 2 threads.
+    pub fn prepare_tree(&self) {
+        if self.tree.get().is_none() {
+            let built = tree::BoxTree::build(&self.triangles, self.margin, true);
+            let _ = self.tree.set(built);
+        }
     }
 
     pub fn triangles(&self) -> &[[Vec3; 3]] {

@@ -38,6 +38,9 @@ impl std::ops::AddAssign for RayStats {
 
 /// What the traversal counts; `NoCount` compiles to nothing.
 pub(crate) trait Counter {
+    /// Whether the count is of the parallel subfields' walk: a query that counts is
+    /// answered by the walk, never by the box tree (`Psf::static_pre`).
+    const WALK: bool;
     fn tile(&mut self);
     fn candidate(&mut self);
     fn scanned(&mut self, n: usize);
@@ -47,6 +50,7 @@ pub(crate) trait Counter {
 pub(crate) struct NoCount;
 
 impl Counter for NoCount {
+    const WALK: bool = false;
     #[inline(always)]
     fn tile(&mut self) {}
     #[inline(always)]
@@ -58,6 +62,7 @@ impl Counter for NoCount {
 }
 
 impl Counter for RayStats {
+    const WALK: bool = true;
     #[inline(always)]
     fn tile(&mut self) {
         self.tiles_visited += 1;

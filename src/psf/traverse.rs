@@ -306,7 +306,30 @@ impl Psf {
         if !ray.is_valid() {
             return None;
         }
-        self.trace_pre::<ANY, C>(ray, &RayPre::new(ray.origin, ray.dir), None, count)
+        self.static_pre::<ANY, C>(ray, &RayPre::new(ray.origin, ray.dir), None, count)
+    }
+
+    /// The static hit of a valid ray with its [`RayPre`]: through the box tree
+    /// ([`BoxTree`](super::tree::BoxTree)) where it takes the ray and nothing counts the
+    /// walk's work, else the walk ([`trace_pre`](Self::trace_pre)). The same hit either
+    /// way: both report the least by [`Hit::is_closer_than`] over the triangles
+    /// [`intersect_pre`] meets (benches/PERF.md, issue 38, round 25).
+    #[inline]
+    pub(crate) fn static_pre<const ANY: bool, C: Counter>(
+        &self,
+        ray: &Ray,
+        pre: &RayPre,
+        sub: Option<usize>,
+        count: &mut C,
+    ) -> Option<Hit> {
+        if !C::WALK {
+            if let Some(tree) = self.tree() {
+                if tree.takes(ray) {
+                    return tree.trace::<ANY>(ray, pre);
+                }
+            }
+        }
+        self.trace_pre::<ANY, C>(ray, pre, sub, count)
     }
 
     /// [`trace`](Self::trace) of a valid ray with its [`RayPre`] given: the layered
@@ -509,7 +532,7 @@ impl Psf {
             return None;
         }
         let pre = RayPre::new(ray.origin, ray.dir);
-        self.trace_pre::<ANY, _>(ray, &pre, Some(sub), &mut NoCount)
+        self.static_pre::<ANY, _>(ray, &pre, Some(sub), &mut NoCount)
     }
 
     /// The subfield a ray's direction picks (0 for a direction without one).

@@ -287,7 +287,12 @@ fn tracing(
     frame_path: Option<(&TriangleSoup, &Scene, &TextureMips)>,
 ) -> Result<Tracing, RenderError> {
     match device {
-        None => Ok(Tracing::Cpu(Box::new(DynamicLayer::for_triangles(moving)))),
+        None => {
+            // The static queries no point grid takes go through the box tree: built
+            // here on every thread, before any frame traces.
+            psf.prepare_tree();
+            Ok(Tracing::Cpu(Box::new(DynamicLayer::for_triangles(moving))))
+        }
         #[cfg(feature = "gpu")]
         Some(dev) => {
             let stat = crate::gpu::GpuStatic::upload(&dev, psf).map_err(RenderError::gpu)?;

@@ -85,7 +85,7 @@ impl Layered<'_> {
         }
         // One shear for both layers: the dynamic walk's ray differs in `t_max` alone.
         let pre = RayPre::new(ray.origin, ray.dir);
-        let s = self.psf.trace_pre::<ANY, C>(ray, &pre, sub, count);
+        let s = self.psf.static_pre::<ANY, C>(ray, &pre, sub, count);
         if ANY && s.is_some() {
             return s;
         }

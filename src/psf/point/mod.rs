@@ -89,5 +89,6 @@ mod types;
 mod tests;
 
 pub(crate) use plan::Plan;
+pub(crate) use query::Group;
 pub(crate) use trace::{trace_batch, trace_lists};
 pub(crate) use types::{FrameGrids, PointCache, Sources, CHUNK as POINT_CHUNK};

@@ -220,10 +220,10 @@ impl<'a> Plan<'a> {
 /// closer than that hit (the early exit's argument), so they change nothing. An
 /// any-hit query is answered by any hit of the group: every caller asks only whether
 /// there is one.
-struct Group<'t> {
+pub(crate) struct Group<'t> {
     tris: [&'t TriPre; 4],
     number: [u32; 4],
-    n: usize,
+    pub(crate) n: usize,
 }
 
 impl Default for Group<'_> {
@@ -239,7 +239,7 @@ impl Default for Group<'_> {
 impl<'t> Group<'t> {
     /// Adds a candidate; `true` when the group is full.
     #[inline(always)]
-    fn push(&mut self, tri: &'t TriPre, number: u32) -> bool {
+    pub(crate) fn push(&mut self, tri: &'t TriPre, number: u32) -> bool {
         // `n < 4` here (a full group is tested and emptied at once); the mask tells
         // the compiler so.
         let k = self.n & 3;
@@ -253,7 +253,7 @@ impl<'t> Group<'t> {
     /// empties the group: (whether an any-hit query is answered, whether a triangle
     /// was met).
     #[inline(always)]
-    fn test<const ANY: bool>(
+    pub(crate) fn test<const ANY: bool>(
         &mut self,
         pre: &RayPre,
         ray: &Ray,
