@@ -475,7 +475,7 @@ mod tests {
     #[test]
     fn the_tree_finds_what_brute_force_finds() {
         for seed in 1..=40u64 {
-            let mut r = Rng(seed * 0x9E37_79B9_7F4A_7C15);
+            let mut r = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15));
             let scale = [1.0f32, 1e-3, 1e4][seed as usize % 3];
             let mut tris = Vec::new();
             for _ in 0..(50 + r.next() % 400) {
