@@ -1,11 +1,12 @@
 //! A four-wide box tree over the static triangles: what answers a static query on the CPU
-//! where no point grid takes the ray (reflections off curved and moving surfaces, a
-//! still camera's static answers, every ray of a deeper Whitted level), in place of the
-//! parallel subfields' walk, which it beat on every scene measured (benches/PERF.md,
-//! issue 38, round 25: a dolly frame's trace 3.7 % faster, a still camera's first frames
-//! 2.4x, the demo's trace 20–35 %). The walk stays the method's query: the GPU tracer
-//! walks the subfields, counted queries (`--stats` of the walk, `tune`) walk them, and so
-//! does a ray the tree cannot take ([`BoxTree::takes`]).
+//! where no point grid takes the ray (reflections off curved and moving surfaces, every
+//! ray of a deeper Whitted level), in place of the parallel subfields' walk. On the
+//! demo's scene (Whitted depth 4) the trace is 17–19 % faster and the whole render 7–11
+//! %; on the benches' dolly scene (depth 1), where such rays are a quarter of a frame's
+//! trace, nothing measurable (benches/PERF.md, issue 38, round 25). The walk stays the
+//! method's query: the GPU tracer walks the subfields, counted queries (`tune`, the
+//! benches' counts) walk them, and so does a ray the tree cannot take
+//! ([`BoxTree::takes`]).
 //!
 //! # Why every hit is found
 //!
