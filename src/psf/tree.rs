@@ -430,93 +430,59 @@ impl BoxTree {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{intersect_pre, Aabb};
+    use crate::gen::synth::{lattice_floor, Rng};
+    use crate::geometry::{Aabb, BruteForce, Intersector};
     use crate::psf::margin_for;
 
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            self.0
-        }
-        fn f(&mut self) -> f32 {
-            (self.next() >> 40) as f32 / (1u64 << 24) as f32
-        }
-        fn v(&mut self, s: f32) -> Vec3 {
-            Vec3::new(self.f() - 0.5, self.f() - 0.5, self.f() - 0.5) * s
-        }
-    }
-
-    fn brute<const ANY: bool>(tris: &[[Vec3; 3]], ray: &Ray) -> Option<Hit> {
-        let pre = RayPre::new(ray.origin, ray.dir);
-        let mut best: Option<Hit> = None;
-        for (k, t) in tris.iter().enumerate() {
-            let t_max = best.map_or(ray.t_max, |b| b.t);
-            if let Some((t, u, v)) = intersect_pre(&pre, &TriPre::new(t), ray.t_min, t_max) {
-                let hit = Hit {
-                    t,
-                    tri: k as u32,
-                    u,
-                    v,
-                };
-                if best.is_none_or(|b| hit.is_closer_than(&b)) {
-                    best = Some(hit);
-                }
-            }
-        }
-        best
-    }
-
-    /// Soups of small and large triangles, shared edges, a plane of tiles and grazing
-    /// rays aimed at vertices and edges: the tree's hit is brute force's, to the bit,
-    /// and an any-hit query answers whenever brute force finds a hit. The seed is
-    /// printed on a failure.
+    /// Soups of small and large triangles, a tiled plane (shared edges and vertices) and
+    /// grazing rays aimed at vertices and edges, at three scales: the tree's hit is brute
+    /// force's, to the bit, and an any-hit query answers whenever brute force finds a
+    /// hit. The seed is printed on a failure.
     #[test]
     fn the_tree_finds_what_brute_force_finds() {
         for seed in 1..=40u64 {
-            let mut r = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            let mut r = Rng::new(seed);
             let scale = [1.0f32, 1e-3, 1e4][seed as usize % 3];
+            let v = |r: &mut Rng, s: f32| r.in_box(Vec3::splat(-0.5 * s), Vec3::splat(0.5 * s));
             let mut tris = Vec::new();
-            for _ in 0..(50 + r.next() % 400) {
-                let a = r.v(10.0 * scale);
-                let s = if r.next().is_multiple_of(4) { 8.0 } else { 0.4 } * scale;
-                tris.push([a, a + r.v(s), a + r.v(s)]);
+            for _ in 0..50 + r.below(400) {
+                let a = v(&mut r, 10.0 * scale);
+                let s = if r.below(4) == 0 { 8.0 } else { 0.4 } * scale;
+                tris.push([a, a + v(&mut r, s), a + v(&mut r, s)]);
             }
-            // A tiled plane: edges and vertices shared.
-            for i in 0..6 {
-                for j in 0..6 {
-                    let p = |x: f32, z: f32| Vec3::new(x, 0.25, z) * scale;
-                    let (x, z) = (i as f32 - 3.0, j as f32 - 3.0);
-                    tris.push([p(x, z), p(x + 1.0, z), p(x + 1.0, z + 1.0)]);
-                    tris.push([p(x, z), p(x + 1.0, z + 1.0), p(x, z + 1.0)]);
-                }
-            }
-            let b = Aabb::from_triangles(&tris);
-            let tree = BoxTree::build(&tris, margin_for(&b), seed % 2 == 0).unwrap();
+            let offset = Vec3::new(-3.0, 0.0, -3.0);
+            tris.extend(
+                lattice_floor(6, 0.25)
+                    .into_iter()
+                    .map(|t| t.map(|p| (p + offset) * scale)),
+            );
+            let tree = BoxTree::build(
+                &tris,
+                margin_for(&Aabb::from_triangles(&tris)),
+                seed % 2 == 0,
+            )
+            .unwrap();
             assert!(tree.len() >= 1);
+            let brute = BruteForce::new(&tris);
             for n in 0..600 {
-                let o = r.v(30.0 * scale);
+                let o = v(&mut r, 30.0 * scale);
+                let t = tris[r.below(tris.len())];
                 let aim = match n % 3 {
-                    0 => tris[(r.next() % tris.len() as u64) as usize][(r.next() % 3) as usize],
-                    1 => {
-                        let t = tris[(r.next() % tris.len() as u64) as usize];
-                        t[0] + (t[1] - t[0]) * r.f()
-                    }
-                    _ => r.v(10.0 * scale),
+                    0 => t[r.below(3)],
+                    1 => t[0] + (t[1] - t[0]) * r.f32(),
+                    _ => v(&mut r, 10.0 * scale),
                 };
                 let mut ray = Ray::new(o, aim - o);
                 if n % 5 == 0 {
-                    ray.t_min = r.f();
-                    ray.t_max = 0.5 + r.f();
+                    ray.t_min = r.f32();
+                    ray.t_max = 0.5 + r.f32();
                 }
                 if !ray.is_valid() || !tree.takes(&ray) {
                     continue;
                 }
                 let pre = RayPre::new(ray.origin, ray.dir);
                 let got = tree.trace::<false>(&ray, &pre);
-                let want = brute::<false>(&tris, &ray);
+                let want = brute.intersect(&ray);
                 let bits = |h: Option<Hit>| {
                     h.map(|h| (h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits()))
                 };
@@ -524,7 +490,7 @@ mod tests {
                 let any = tree.trace::<true>(&ray, &pre);
                 assert_eq!(
                     any.is_some(),
-                    want.is_some(),
+                    brute.occluded(&ray),
                     "seed {seed}, ray {n} (any hit): {ray:?}"
                 );
             }
