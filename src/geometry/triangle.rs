@@ -38,6 +38,7 @@ pub struct Shear {
 }
 
 impl Shear {
+    #[inline]
     pub fn new(dir: Vec3) -> Shear {
         let a = dir.abs();
         let kz = if a.x >= a.y && a.x >= a.z {
@@ -71,6 +72,10 @@ impl Shear {
 }
 
 impl RayPre {
+    /// Inline: made once a ray in every query, whose own module may sit in another
+    /// codegen unit than this one (where it was not inlined, an unrelated change
+    /// moved it out of the queries: 3 % of a dolly frame in calls).
+    #[inline]
     pub fn new(org: Vec3, dir: Vec3) -> RayPre {
         let Shear {
             kx,
