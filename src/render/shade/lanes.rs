@@ -3,11 +3,14 @@
 //! [`ShadeContext::shade`] does a hit's vector arithmetic in `Vec3A`, three of four lanes
 //! busy and a shuffle for every dot product, normalisation and broadcast scalar. Here
 //! the same operations run on four hits side by side (`V3`: the x, y and z of four
-//! vectors), for the common case of a frame without random numbers, area lights or
+//! vectors), for the common case of a frame without area lights, diffuse bounces or
 //! light-path passes, lit by punctual lights (point, spot, directional; any number),
 //! and hits on plain materials (no texture but the base colour's, opaque, not
-//! transmissive, not emissive, no ambient colour of their own); a textured hit's base
-//! colour is looked up lane by lane, as `shade` looks it up. The museum class's dolly:
+//! transmissive, not emissive, not glossy, no ambient colour of their own); a textured
+//! hit's base colour is looked up lane by lane, as `shade` looks it up. A frame with a
+//! glossy material takes the lanes for its other hits (its mirror rays' seeds derived
+//! as `secondary` derives them): the demo's shading, least of ten frames at 1 thread,
+//! 80–85 → 72–77 ms (benches/PERF.md, issue 38, round 27). The museum class's dolly:
 //! 883 → 817 M instructions a frame, its shading 67–70 → 52–56 ms a frame at 1 thread
 //! (benches/PERF.md, issue 38, round 13).
 //!
@@ -24,7 +27,7 @@
 use glam::{BVec4A, Mat4, Vec2, Vec3, Vec3A, Vec4};
 
 use super::block::{BlockOut, Item};
-use super::bsdf::{powi, powi4, Factors};
+use super::bsdf::{may_be_glossy, powi, powi4, Factors};
 use super::direct::{cone, PreLight};
 use super::surface::level_of_detail;
 use super::{LightPath, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT};
@@ -68,7 +71,9 @@ impl PlainMaterial {
             && m.transmission == 0.0
             && m.metallic.is_finite()
             && m.roughness.is_finite()
-            && m.base_color.is_finite();
+            && m.base_color.is_finite()
+            // A glossy lobe draws its direction at random: `shade` reflects it.
+            && !may_be_glossy(m);
         if !plain {
             return None;
         }
@@ -537,7 +542,12 @@ impl ShadeContext<'_> {
                     passes: item.passes,
                     bounces: item.bounces,
                     diffuse: false,
-                    seed: item.seed,
+                    // As `secondary` derives it (kind 0: the reflection).
+                    seed: if self.random {
+                        item.seed.child(0)
+                    } else {
+                        item.seed
+                    },
                     cone: super::Cone {
                         width: width[k],
                         spread: spread[k],
@@ -795,9 +805,10 @@ mod tests {
     fn material(rng: &mut Rng) -> Material {
         let mut m = Material {
             base_color: Vec4::new(rng.f32(), rng.range(0.0, 1.5), rng.f32(), 1.0),
-            // Polished (a mirror ray) or rough (none): a glossy lobe draws random
-            // numbers, which leaves the whole frame to the scalar path.
-            roughness: rng.pick(&[0.0, 0.01, 0.4, 0.5, 0.9, 1.0]),
+            // Polished (a mirror ray), rough (none) or glossy (a random direction,
+            // which `shade` draws: its groups are shaded one hit at a time, and the
+            // frame's mirror rays get seeds of their own).
+            roughness: rng.pick(&[0.0, 0.01, 0.4, 0.5, 0.9, 1.0, 0.2, 0.3]),
             metallic: rng.pick(&[0.0, 0.3, 1.0]),
             double_sided: rng.next().is_multiple_of(2),
             ..Material::default()
@@ -899,7 +910,7 @@ mod tests {
 
     #[test]
     fn four_hits_at_once_push_what_four_calls_push() {
-        let (mut took, mut groups, mut frames) = (0, 0, 0);
+        let (mut took, mut groups, mut frames, mut random) = (0, 0, 0, 0);
         for seed in 1..=400u64 {
             let mut rng = Rng::new(seed);
             let mut scene = Scene::default();
@@ -933,6 +944,7 @@ mod tests {
                 continue;
             }
             frames += 1;
+            random += usize::from(ctx.random);
             for _ in 0..16 {
                 let max_depth = rng.pick(&[0, 1, 2]);
                 let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); 4];
@@ -988,16 +1000,19 @@ mod tests {
             }
         }
         // Most groups take the lanes (the others: a miss, a triangle out of range, a
-        // transmissive material).
-        println!("{frames} frames, {took} of {groups} groups in lanes");
+        // transmissive or glossy material), some of them in frames that draw random
+        // numbers (a glossy material).
+        println!(
+            "{frames} frames ({random} with random numbers), {took} of {groups} groups in lanes"
+        );
         assert!(
-            frames > 100 && took * 4 > groups,
-            "{frames} frames, {took} of {groups}"
+            frames > 100 && random > 20 && took * 4 > groups,
+            "{frames} frames ({random} random), {took} of {groups}"
         );
     }
 
     #[test]
-    fn a_frame_with_random_numbers_stays_scalar_and_any_number_of_lights_takes_the_lanes() {
+    fn a_glossy_frame_takes_the_lanes_area_lights_and_bounces_do_not() {
         let mut scene = Scene::default();
         scene.materials.push(Material {
             roughness: 0.2, // glossy: a random direction
@@ -1030,9 +1045,12 @@ mod tests {
             )
             .lanes
         };
-        assert!(!ctx(&scene, std::slice::from_ref(&point)));
+        // The glossy material's hits go to `shade`, the frame's others to the lanes.
+        assert!(ctx(&scene, std::slice::from_ref(&point)));
+        assert!(PlainMaterial::of(&scene.materials[0]).is_none());
         scene.materials[0].roughness = 1.0;
         assert!(ctx(&scene, std::slice::from_ref(&point)));
+        assert!(PlainMaterial::of(&scene.materials[0]).is_some());
         let spot = Light {
             kind: LightKind::Spot {
                 inner_cone_angle: 0.1,
@@ -1042,7 +1060,24 @@ mod tests {
             ..point.clone()
         };
         assert!(ctx(&scene, &[spot, point.clone()]));
-        assert!(ctx(&scene, &vec![point; 9]));
+        assert!(ctx(&scene, &vec![point.clone(); 9]));
         assert!(ctx(&scene, &[]));
+        // Diffuse bounces and area lights draw random numbers at every hit.
+        let bounces = ShadingOptions {
+            diffuse_bounces: 1,
+            ..ShadingOptions::default()
+        };
+        let lights = std::slice::from_ref(&point);
+        let with = |scene: &Scene, soup: &TriangleSoup, options: ShadingOptions| {
+            let none = TriangleSoup::default();
+            ShadeContext::new(scene, soup, &none, lights, &camera, options, 1.0, &mips).lanes
+        };
+        assert!(!with(&scene, &soup, bounces));
+        scene.materials[0].emissive = Vec3::ONE;
+        let mut emitter = TriangleSoup::default();
+        emitter.positions.push([Vec3::ZERO, Vec3::X, Vec3::Y]);
+        emitter.material.push(0);
+        assert!(!with(&scene, &emitter, ShadingOptions::default()));
+        assert!(with(&scene, &soup, ShadingOptions::default()));
     }
 }

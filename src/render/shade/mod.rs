@@ -108,7 +108,8 @@ pub struct ShadeContext<'a> {
     plain: Vec<Option<lanes::PlainMaterial>>,
     plain_default: Option<lanes::PlainMaterial>,
     /// Whether the frame's hits may be shaded four at once ([`ShadeContext::shade4`]):
-    /// no random numbers, area lights or bounces (punctual lights only, any number).
+    /// no area lights or bounces (punctual lights only, any number); a glossy
+    /// material's hits are shaded one at a time.
     lanes: bool,
 }
 
@@ -193,7 +194,9 @@ impl<'a> ShadeContext<'a> {
                 .iter()
                 .chain(std::iter::once(&default_material))
                 .any(bsdf::may_be_glossy);
-        let lanes = !random;
+        // A glossy lobe's random direction is left to `shade` hit by hit (its material
+        // is not a plain one); area lights and bounces draw numbers at every hit.
+        let lanes = area.is_empty() && options.diffuse_bounces == 0;
         ShadeContext {
             plain: scene
                 .materials
