@@ -6,11 +6,12 @@
 //! vectors), for the common case of a frame without area lights, diffuse bounces or
 //! light-path passes, lit by punctual lights (point, spot, directional; any number),
 //! and hits on plain materials (no texture but the base colour's, opaque, not
-//! transmissive, not emissive, not glossy, no ambient colour of their own); a textured
-//! hit's base colour is looked up lane by lane, as `shade` looks it up. A frame with a
-//! glossy material takes the lanes for its other hits (its mirror rays' seeds derived
-//! as `secondary` derives them): the demo's shading, least of ten frames at 1 thread,
-//! 80–85 → 72–77 ms (benches/PERF.md, issue 38, round 27). The museum class's dolly:
+//! transmissive, not emissive, no ambient colour of their own); a textured hit's base
+//! colour is looked up lane by lane, as `shade` looks it up, and so is a glossy hit's
+//! reflection, drawn from the GGX lobe with the ray's seed as `secondary` draws it (a
+//! frame that draws random numbers derives its reflections' seeds as `secondary`
+//! does). The demo (GGX floors and metals) had all its frames shaded one hit at a
+//! time; its shading is now about a fifth faster (benches/PERF.md, issue 38, round 27). The museum class's dolly:
 //! 883 → 817 M instructions a frame, its shading 67–70 → 52–56 ms a frame at 1 thread
 //! (benches/PERF.md, issue 38, round 13).
 //!
@@ -27,12 +28,13 @@
 use glam::{BVec4A, Mat4, Vec2, Vec3, Vec3A, Vec4};
 
 use super::block::{BlockOut, Item};
-use super::bsdf::{may_be_glossy, powi, powi4, Factors};
+use super::bsdf::{powi, powi4, reflect, Factors};
 use super::direct::{cone, PreLight};
 use super::surface::level_of_detail;
-use super::{LightPath, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT};
+use super::{LightPath, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT, MIRROR_ALPHA};
 use crate::geometry::{Hit, Ray};
 use crate::psf::Prim;
+use crate::render::sampling::{sample_ggx_vndf, smith_g1, Purpose};
 use crate::scene::{AlphaMode, Falloff, LightKind, Material};
 
 /// What the four-lane path needs of a material, worked out once a frame with the
@@ -50,6 +52,9 @@ pub(super) struct PlainMaterial {
     /// `f0 (1 − gloss / 2)`, the glint's colour.
     glint: Vec3A,
     reflects: bool,
+    /// The GGX lobe's width where the reflection is drawn from it (`Lobes::glossy_alpha`):
+    /// that lane's reflection is drawn as `secondary` draws it.
+    glossy_alpha: Option<f32>,
     shininess: f32,
     /// The glint's normalisation, `(shininess + 8) / 8π`.
     norm: f32,
@@ -71,9 +76,7 @@ impl PlainMaterial {
             && m.transmission == 0.0
             && m.metallic.is_finite()
             && m.roughness.is_finite()
-            && m.base_color.is_finite()
-            // A glossy lobe draws its direction at random: `shade` reflects it.
-            && !may_be_glossy(m);
+            && m.base_color.is_finite();
         if !plain {
             return None;
         }
@@ -119,6 +122,10 @@ impl PlainMaterial {
             f0,
             glint: f0 * (1.0 - gloss * 0.5),
             reflects: roughness < GLOSSY_LIMIT,
+            glossy_alpha: {
+                let alpha = roughness * roughness;
+                (roughness < GLOSSY_LIMIT && alpha >= MIRROR_ALPHA).then_some(alpha)
+            },
             shininess,
             norm: (shininess + 8.0) / (8.0 * std::f32::consts::PI),
             factors,
@@ -527,16 +534,51 @@ impl ShadeContext<'_> {
             self.light4(l, &mats, origin, ns, ng, view, kd, weight, li, samples, out);
         }
         let (origin, r, kr_w) = (origin.lanes(), r.lanes(), kr_w.lanes());
+        let glossy = mats.iter().any(|m| m.glossy_alpha.is_some());
+        let (view_l, ns_l, ng_l, dir_l) = if glossy {
+            (view.lanes(), ns.lanes(), ng.lanes(), dir.lanes())
+        } else {
+            (
+                [Vec3A::ZERO; 4],
+                [Vec3A::ZERO; 4],
+                [Vec3A::ZERO; 4],
+                [Vec3A::ZERO; 4],
+            )
+        };
         for k in 0..4 {
             let item = items[k];
             if item.depth >= max_depth || krmax[k] <= MIN_WEIGHT {
                 continue;
             }
+            // A mirror's reflection, or one drawn from the GGX lobe as `secondary`
+            // draws it (the lane's vectors are the scalar model's to the bit).
+            let (dir_k, w, spread_k) = match mats[k].glossy_alpha {
+                None => (r[k], kr_w[k], spread[k]),
+                Some(alpha) => {
+                    let m = sample_ggx_vndf(
+                        view_l[k].into(),
+                        ns_l[k].into(),
+                        alpha,
+                        item.seed.get(Purpose::Glossy, 0),
+                    );
+                    let r = reflect(dir_l[k], m.into());
+                    let cos_l = r.dot(ns_l[k]);
+                    if cos_l <= 0.0 || r.dot(ng_l[k]) <= 0.0 {
+                        continue; // into the surface: this sample reflects nothing
+                    }
+                    let w = kr_w[k] * smith_g1(cos_l, alpha);
+                    if w.max_element() > MIN_WEIGHT {
+                        (r, w, spread[k] + alpha)
+                    } else {
+                        continue;
+                    }
+                }
+            };
             out.next(
-                Ray::new(origin[k].into(), r[k].into()),
+                Ray::new(origin[k].into(), dir_k.into()),
                 Item {
                     sample: item.sample,
-                    weight: kr_w[k].into(),
+                    weight: w.into(),
                     coverage: 0.0,
                     depth: item.depth + 1,
                     passes: item.passes,
@@ -550,7 +592,7 @@ impl ShadeContext<'_> {
                     },
                     cone: super::Cone {
                         width: width[k],
-                        spread: spread[k],
+                        spread: spread_k,
                     },
                     path: item.path.or(Some(LightPath::Specular)),
                 },
@@ -805,9 +847,9 @@ mod tests {
     fn material(rng: &mut Rng) -> Material {
         let mut m = Material {
             base_color: Vec4::new(rng.f32(), rng.range(0.0, 1.5), rng.f32(), 1.0),
-            // Polished (a mirror ray), rough (none) or glossy (a random direction,
-            // which `shade` draws: its groups are shaded one hit at a time, and the
-            // frame's mirror rays get seeds of their own).
+            // Polished (a mirror ray), rough (none) or glossy (a direction drawn from
+            // the GGX lobe with the ray's seed; the frame's reflections then get
+            // seeds of their own).
             roughness: rng.pick(&[0.0, 0.01, 0.4, 0.5, 0.9, 1.0, 0.2, 0.3]),
             metallic: rng.pick(&[0.0, 0.3, 1.0]),
             double_sided: rng.next().is_multiple_of(2),
@@ -1000,8 +1042,8 @@ mod tests {
             }
         }
         // Most groups take the lanes (the others: a miss, a triangle out of range, a
-        // transmissive or glossy material), some of them in frames that draw random
-        // numbers (a glossy material).
+        // transmissive material), some of them in frames that draw random numbers (a
+        // glossy material, whose reflections the lanes draw).
         println!(
             "{frames} frames ({random} with random numbers), {took} of {groups} groups in lanes"
         );
@@ -1045,12 +1087,14 @@ mod tests {
             )
             .lanes
         };
-        // The glossy material's hits go to `shade`, the frame's others to the lanes.
+        // A glossy material's hits take the lanes, their reflections drawn lane by lane.
         assert!(ctx(&scene, std::slice::from_ref(&point)));
-        assert!(PlainMaterial::of(&scene.materials[0]).is_none());
+        let glossy = PlainMaterial::of(&scene.materials[0]).map(|p| p.glossy_alpha);
+        assert_eq!(glossy, Some(Some(0.2 * 0.2)));
         scene.materials[0].roughness = 1.0;
         assert!(ctx(&scene, std::slice::from_ref(&point)));
-        assert!(PlainMaterial::of(&scene.materials[0]).is_some());
+        let rough = PlainMaterial::of(&scene.materials[0]).map(|p| p.glossy_alpha);
+        assert_eq!(rough, Some(None));
         let spot = Light {
             kind: LightKind::Spot {
                 inner_cone_angle: 0.1,

@@ -108,8 +108,7 @@ pub struct ShadeContext<'a> {
     plain: Vec<Option<lanes::PlainMaterial>>,
     plain_default: Option<lanes::PlainMaterial>,
     /// Whether the frame's hits may be shaded four at once ([`ShadeContext::shade4`]):
-    /// no area lights or bounces (punctual lights only, any number); a glossy
-    /// material's hits are shaded one at a time.
+    /// no area lights or bounces (punctual lights only, any number).
     lanes: bool,
 }
 
@@ -194,8 +193,8 @@ impl<'a> ShadeContext<'a> {
                 .iter()
                 .chain(std::iter::once(&default_material))
                 .any(bsdf::may_be_glossy);
-        // A glossy lobe's random direction is left to `shade` hit by hit (its material
-        // is not a plain one); area lights and bounces draw numbers at every hit.
+        // The lanes draw a glossy lobe's direction lane by lane; area lights and
+        // bounces draw numbers at every hit, which only `shade` does.
         let lanes = area.is_empty() && options.diffuse_bounces == 0;
         ShadeContext {
             plain: scene
