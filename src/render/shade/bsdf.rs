@@ -11,7 +11,7 @@ use super::{
     Cone, LightPath, ShadeContext, Split, GLOSSY_LIMIT, MAX_SHININESS, MIN_WEIGHT, MIRROR_ALPHA,
 };
 use crate::geometry::Ray;
-use crate::render::sampling::{sample_cosine, sample_ggx_vndf, smith_g1, Purpose};
+use crate::render::sampling::{sample_cosine, sample_ggx_vndf, smith_g1, Purpose, Seed};
 use crate::scene::Material;
 
 /// `x` (at least 0) to the whole power `n` by binary exponentiation (the same products
@@ -230,21 +230,8 @@ pub(super) fn secondary(
             );
         }
         Some(alpha) => {
-            // One direction from the visible normals: the estimator's weight is
-            // F · G2/G1(v), with Smith's separable G2 that is F · G1(l).
-            let m = sample_ggx_vndf(
-                lobes.v.into(),
-                s.ns.into(),
-                alpha,
-                item.seed.get(Purpose::Glossy, 0),
-            );
-            let r = reflect(s.dir, m.into());
-            let cos_l = r.dot(s.ns);
-            if cos_l <= 0.0 || r.dot(s.ng) <= 0.0 {
-                return; // into the surface: this sample reflects nothing
-            }
-            let w = kr_w * smith_g1(cos_l, alpha);
-            if w.max_element() > MIN_WEIGHT {
+            let drawn = glossy_reflection(s.dir, lobes.v, s.ns, s.ng, alpha, item.seed, kr_w);
+            if let Some((r, w)) = drawn {
                 // The lobe's width widens the cone (for the texture level of detail).
                 out.next(
                     Ray::new(origin.into(), r.into()),
@@ -253,6 +240,34 @@ pub(super) fn secondary(
             }
         }
     }
+}
+
+/// A reflection drawn from the GGX lobe of width `alpha` (one direction from the visible
+/// normals: the estimator's weight is F · G2/G1(v), with Smith's separable G2 that is
+/// F · G1(l)): for a ray of unit direction `dir` (`v = -dir`) meeting a surface of
+/// shading normal `ns` and geometric normal `ng` (both facing the ray), `seed`'s
+/// numbers and the reflected weight `kr_w` (F times the ray's weight), the direction
+/// and the weight `kr_w · G1(l)`; `None` where it goes into the surface (this sample
+/// reflects nothing) or carries no more than [`MIN_WEIGHT`]. `secondary` and the four
+/// lanes (`lanes.rs`) both draw it here, so their bits agree.
+#[inline]
+pub(super) fn glossy_reflection(
+    dir: Vec3A,
+    v: Vec3A,
+    ns: Vec3A,
+    ng: Vec3A,
+    alpha: f32,
+    seed: Seed,
+    kr_w: Vec3A,
+) -> Option<(Vec3A, Vec3A)> {
+    let m = sample_ggx_vndf(v.into(), ns.into(), alpha, seed.get(Purpose::Glossy, 0));
+    let r = reflect(dir, m.into());
+    let cos_l = r.dot(ns);
+    if cos_l <= 0.0 || r.dot(ng) <= 0.0 {
+        return None;
+    }
+    let w = kr_w * smith_g1(cos_l, alpha);
+    (w.max_element() > MIN_WEIGHT).then_some((r, w))
 }
 
 /// One cosine-weighted diffuse bounce (`--diffuse-bounces`): with the Lambertian BRDF

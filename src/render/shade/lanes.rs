@@ -28,13 +28,12 @@
 use glam::{BVec4A, Mat4, Vec2, Vec3, Vec3A, Vec4};
 
 use super::block::{BlockOut, Item};
-use super::bsdf::{powi, powi4, reflect, Factors};
+use super::bsdf::{glossy_reflection, powi, powi4, Factors};
 use super::direct::{cone, PreLight};
 use super::surface::level_of_detail;
 use super::{LightPath, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT, MIRROR_ALPHA};
 use crate::geometry::{Hit, Ray};
 use crate::psf::Prim;
-use crate::render::sampling::{sample_ggx_vndf, smith_g1, Purpose};
 use crate::scene::{AlphaMode, Falloff, LightKind, Material};
 
 /// What the four-lane path needs of a material, worked out once a frame with the
@@ -555,22 +554,10 @@ impl ShadeContext<'_> {
             let (dir_k, w, spread_k) = match mats[k].glossy_alpha {
                 None => (r[k], kr_w[k], spread[k]),
                 Some(alpha) => {
-                    let m = sample_ggx_vndf(
-                        view_l[k].into(),
-                        ns_l[k].into(),
-                        alpha,
-                        item.seed.get(Purpose::Glossy, 0),
-                    );
-                    let r = reflect(dir_l[k], m.into());
-                    let cos_l = r.dot(ns_l[k]);
-                    if cos_l <= 0.0 || r.dot(ng_l[k]) <= 0.0 {
-                        continue; // into the surface: this sample reflects nothing
-                    }
-                    let w = kr_w[k] * smith_g1(cos_l, alpha);
-                    if w.max_element() > MIN_WEIGHT {
-                        (r, w, spread[k] + alpha)
-                    } else {
-                        continue;
+                    let (v, n, g) = (view_l[k], ns_l[k], ng_l[k]);
+                    match glossy_reflection(dir_l[k], v, n, g, alpha, item.seed, kr_w[k]) {
+                        Some((r, w)) => (r, w, spread[k] + alpha),
+                        None => continue,
                     }
                 }
             };
