@@ -10,10 +10,10 @@
 //! colour is looked up lane by lane, as `shade` looks it up, and so is a glossy hit's
 //! reflection, drawn from the GGX lobe with the ray's seed as `secondary` draws it (a
 //! frame that draws random numbers derives its reflections' seeds as `secondary`
-//! does). The demo (GGX floors and metals) had all its frames shaded one hit at a
-//! time; its shading is now about a fifth faster (benches/PERF.md, issue 38, round 27). The museum class's dolly:
-//! 883 → 817 M instructions a frame, its shading 67–70 → 52–56 ms a frame at 1 thread
-//! (benches/PERF.md, issue 38, round 13).
+//! does). The museum class's dolly: 883 → 817 M instructions a frame, its shading
+//! 67–70 → 52–56 ms a frame at 1 thread (benches/PERF.md, issue 38, round 13). The
+//! demo (GGX floors and metals) had all its frames shaded one hit at a time; its
+//! shading is now about a fifth faster (round 27).
 //!
 //! The answers are those of four calls of `shade`, bit for bit: each lane does the
 //! scalar model's operations in the scalar model's order (glam's `Vec3A` dot product is
