@@ -80,8 +80,17 @@ pub(super) fn may_be_glossy(m: &Material) -> bool {
     if m.metallic_roughness_texture.is_some() {
         return true;
     }
-    let roughness = m.roughness.clamp(0.0, 1.0);
-    roughness < GLOSSY_LIMIT && roughness * roughness >= MIRROR_ALPHA
+    glossy_alpha(m.roughness.clamp(0.0, 1.0)).is_some()
+}
+
+/// The GGX lobe's width `roughness²` where a surface of this (clamped) roughness draws
+/// its reflection from the lobe: it reflects (under [`GLOSSY_LIMIT`]) and is no mirror
+/// (`roughness²` of at least [`MIRROR_ALPHA`]). The lobes, the four lanes and
+/// [`may_be_glossy`] all ask here.
+#[inline]
+pub(super) fn glossy_alpha(roughness: f32) -> Option<f32> {
+    let alpha = roughness * roughness;
+    (roughness < GLOSSY_LIMIT && alpha >= MIRROR_ALPHA).then_some(alpha)
 }
 
 /// A material's factors as the lobes read them, once any texture has scaled metallic
@@ -378,7 +387,6 @@ impl ShadeContext<'_> {
             f0 + (Vec3A::ONE - f0) * (x * (x2 * x2))
         };
         let reflects = roughness < GLOSSY_LIMIT;
-        let alpha = roughness * roughness;
         let kt = (Vec3A::ONE - fresnel) * transmission * albedo;
         let (kr, kd) = if reflects {
             (
@@ -398,7 +406,7 @@ impl ShadeContext<'_> {
         Lobes {
             roughness,
             gloss,
-            glossy_alpha: (reflects && alpha >= MIRROR_ALPHA).then_some(alpha),
+            glossy_alpha: glossy_alpha(roughness),
             reflects,
             v,
             f0,

@@ -28,10 +28,10 @@
 use glam::{BVec4A, Mat4, Vec2, Vec3, Vec3A, Vec4};
 
 use super::block::{BlockOut, Item};
-use super::bsdf::{glossy_reflection, powi, powi4, Factors};
+use super::bsdf::{glossy_alpha, glossy_reflection, powi, powi4, Factors};
 use super::direct::{cone, PreLight};
 use super::surface::level_of_detail;
-use super::{LightPath, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT, MIRROR_ALPHA};
+use super::{LightPath, ShadeContext, GLOSSY_LIMIT, MIN_WEIGHT};
 use crate::geometry::{Hit, Ray};
 use crate::psf::Prim;
 use crate::scene::{AlphaMode, Falloff, LightKind, Material};
@@ -121,10 +121,7 @@ impl PlainMaterial {
             f0,
             glint: f0 * (1.0 - gloss * 0.5),
             reflects: roughness < GLOSSY_LIMIT,
-            glossy_alpha: {
-                let alpha = roughness * roughness;
-                (roughness < GLOSSY_LIMIT && alpha >= MIRROR_ALPHA).then_some(alpha)
-            },
+            glossy_alpha: glossy_alpha(roughness),
             shininess,
             norm: (shininess + 8.0) / (8.0 * std::f32::consts::PI),
             factors,
