@@ -29,7 +29,23 @@
 //! * the slab interval is computed in `f32` lanes as `traverse::surely_outside` computes
 //!   its own, and widened the same way (`1e-5 |t| + 1e-30`), which by that function's
 //!   proof contains the exact interval for origins and box coordinates under `1e15` and
-//!   direction components of at least `1e-20` in size: the rays [`BoxTree::takes`].
+//!   direction components of at least `1e-20` in size;
+//! * a direction component that is zero (either sign) makes that axis's two slab values
+//!   `(lo − o) · ±∞`: where `lo < o < hi` they are `−∞` and `+∞`, no bound, as the exact
+//!   slab (the line keeps `o` on that axis) has none; where `o` lies outside `[lo, hi]`
+//!   both are the same infinity, so the entry is `+∞` or the exit `−∞`, the widened
+//!   bound `∞ − ∞` is NaN, every comparison with it is false and the child is passed
+//!   over, as the exact slab is empty. Where `o` equals `lo` or `hi` the product `0 · ∞`
+//!   is NaN, and what `min` and `max` make of it differs between instruction sets; but
+//!   the line then lies in a face of a box grown by twice the margin, at least twice the
+//!   margin away from each of the child's triangles along that axis, where no reported
+//!   hit can lie (above): passed over or visited, the child gives no answer. A child is
+//!   visited only where its entry compared as at most its exit, so a NaN entry never
+//!   orders the stack.
+//!
+//! These are the rays [`BoxTree::takes`]: each direction component zero or at least
+//! `1e-20` in size, so an axis-aligned ray (an orthographic camera looking along an axis,
+//! a reflection off a wall at normal incidence) is the tree's too.
 //!
 //! A child skipped so holds no triangle that could be the answer; one kept on the stack
 //! is passed over when popped if its entry lies beyond `best + s` by then (the same
@@ -321,12 +337,14 @@ impl BoxTree {
     }
 
     /// Whether the tree answers `ray` (a valid one): its origin and direction within the
-    /// ranges of the `f32` box test (the module's notes).
+    /// ranges of the `f32` box test, a direction component zero or at least `MIN_DIR` in
+    /// size (the module's notes).
     #[inline]
     pub(crate) fn takes(&self, ray: &Ray) -> bool {
         let o = Vec3A::from(ray.origin);
-        let d = Vec3A::from(ray.dir);
-        o.abs().max_element() < MAX_COORD && d.abs().min_element() >= MIN_DIR
+        let d = Vec3A::from(ray.dir).abs();
+        o.abs().max_element() < MAX_COORD
+            && (d.cmpge(Vec3A::splat(MIN_DIR)) | d.cmpeq(Vec3A::ZERO)).all()
     }
 
     /// The closest hit among the tree's triangles (any hit for `ANY`) of a ray the tree
@@ -492,7 +510,88 @@ mod tests {
             Vec3::new(0.2, 0.2, 1.0),
             Vec3::new(1e-3, 1e-3, -1.0)
         )));
-        assert!(!tree.takes(&Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z)));
+        assert!(tree.takes(&Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z)));
+        assert!(tree.takes(&Ray::new(Vec3::ZERO, Vec3::new(-0.0, 0.0, 1.0))));
+        assert!(!tree.takes(&Ray::new(
+            Vec3::new(0.2, 0.2, 1.0),
+            Vec3::new(1e-25, 0.0, -1.0)
+        )));
         assert!(!tree.takes(&Ray::new(Vec3::splat(2e15), Vec3::ONE)));
+    }
+
+    /// Rays with zero direction components (of either sign), most of them starting on
+    /// the lattices' vertex and edge coordinates, so that they run in the planes of
+    /// triangles, edges and boxes' faces: the tree's hit is brute force's, to the bit,
+    /// and an any-hit query answers whenever brute force finds a hit. The seed is
+    /// printed on a failure.
+    #[test]
+    fn axis_aligned_rays_find_what_brute_force_finds() {
+        let mut taken = 0;
+        for seed in 1..=24u64 {
+            let mut r = Rng::new(seed);
+            let scale = [1.0f32, 1e-3, 1e4][seed as usize % 3];
+            // A floor at y = 0 and a wall at z = 2, both lattices of unit squares, and
+            // triangles strewn among them.
+            let mut tris: Vec<[Vec3; 3]> = lattice_floor(8, 0.0);
+            tris.extend(
+                lattice_floor(6, 2.0)
+                    .into_iter()
+                    .map(|t| t.map(|p| Vec3::new(p.x, p.z, p.y))),
+            );
+            for _ in 0..40 + r.below(100) {
+                let a = r.in_box(Vec3::ZERO, Vec3::splat(8.0));
+                let e = |r: &mut Rng| r.in_box(Vec3::splat(-0.5), Vec3::splat(0.5));
+                tris.push([a, a + e(&mut r), a + e(&mut r)]);
+            }
+            for t in &mut tris {
+                *t = t.map(|p| p * scale);
+            }
+            let tree = BoxTree::build(
+                &tris,
+                margin_for(&Aabb::from_triangles(&tris)),
+                seed % 2 == 1,
+            )
+            .unwrap();
+            let brute = BruteForce::new(&tris);
+            // A lattice coordinate (a vertex's or an edge's), exactly, or any.
+            let at = |r: &mut Rng| {
+                if r.below(4) == 0 {
+                    r.f32() * 9.0 - 0.5
+                } else {
+                    r.below(10) as f32 - 1.0
+                }
+            };
+            for n in 0..1000 {
+                let o = Vec3::new(at(&mut r), at(&mut r), at(&mut r)) * scale;
+                let mut d = r.in_box(Vec3::splat(-1.0), Vec3::ONE);
+                for _ in 0..1 + r.below(2) {
+                    d[r.below(3)] = if r.below(2) == 0 { 0.0 } else { -0.0 };
+                }
+                let mut ray = Ray::new(o, d);
+                if n % 5 == 0 {
+                    ray.t_min = r.f32() * scale;
+                    ray.t_max = (1.0 + 8.0 * r.f32()) * scale;
+                }
+                if !ray.is_valid() {
+                    continue;
+                }
+                assert!(tree.takes(&ray), "seed {seed}, ray {n}: {ray:?}");
+                taken += 1;
+                let pre = RayPre::new(ray.origin, ray.dir);
+                let got = tree.trace::<false>(&ray, &pre);
+                let want = brute.intersect(&ray);
+                let bits = |h: Option<Hit>| {
+                    h.map(|h| (h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits()))
+                };
+                assert_eq!(bits(got), bits(want), "seed {seed}, ray {n}: {ray:?}");
+                let any = tree.trace::<true>(&ray, &pre);
+                assert_eq!(
+                    any.is_some(),
+                    brute.occluded(&ray),
+                    "seed {seed}, ray {n} (any hit): {ray:?}"
+                );
+            }
+        }
+        assert!(taken > 20_000, "{taken} rays taken");
     }
 }
