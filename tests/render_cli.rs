@@ -83,6 +83,54 @@ fn frames_do_not_depend_on_the_thread_count() {
     assert_eq!(snapshot(&dir.join("t1")), a);
 }
 
+/// A render that bakes in memory (on the CPU at level 0, `PsfParams::for_cpu_render`)
+/// writes the frames of one that opens the scene's default bake (level 2 here): the
+/// point grids and the box tree find the same hits whatever the subfields. The museum
+/// at Whitted depth 4: mirrors, glossy floors, glass and moving triangles.
+#[test]
+fn a_render_baked_in_memory_writes_the_frames_of_the_default_bake() {
+    let dir = temp_dir("in_memory");
+    let scene = dir.join("museum.glb");
+    ok(&[
+        "generate",
+        "museum",
+        "-o",
+        s(&scene),
+        "--static-tris",
+        "3000",
+        "--dynamic-tris",
+        "500",
+        "--frames",
+        "40",
+        "--quiet",
+    ]);
+    let psf = dir.join("museum.psf");
+    ok(&["bake", s(&scene), "-o", s(&psf), "--quiet"]);
+    let render = |sub: &str, baked: bool| {
+        let out = dir.join(format!("{sub}/f.##.exr"));
+        let mut args = vec![
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--frames",
+            "19..21",
+            "--size",
+            "40x30",
+            "--quiet",
+        ];
+        if baked {
+            args.extend(["--baked", s(&psf)]);
+        }
+        ok(&args);
+    };
+    render("file", true);
+    render("memory", false);
+    let a = snapshot(&dir.join("file"));
+    assert_eq!(a.len(), 2);
+    assert_eq!(a, snapshot(&dir.join("memory")));
+}
+
 /// Frame `k` of the render into `dir/sub` (`f.##.exr`).
 fn frame_of(dir: &Path, sub: &str, k: u32) -> Vec<u8> {
     std::fs::read(dir.join(format!("{sub}/f.{k:02}.exr"))).unwrap()

@@ -141,6 +141,21 @@ impl PsfParams {
         }
     }
 
+    /// A CPU render's bake in memory (`render` without `--baked`): [`for_scene`](Self::for_scene)'s
+    /// tiles at level 0 (4 subfields, not 25 or 109). On the CPU the point grids and the
+    /// box tree answer a render's static queries, all but those of a ray beyond the
+    /// tree's `f32` range (`BoxTree::takes`), so more directions buy a render nothing
+    /// and cost it their bake: on the museum class (10,284 triangles, 2 threads) the
+    /// start before the first frame went from 0.10 to 0.05 s, 0.16 to 0.07 s of CPU
+    /// (`benches/PERF.md`, issue 38, round 28), the same frames to the bit. A file
+    /// (`subfield bake`) keeps `for_scene`: the GPU walks its subfields.
+    pub fn for_cpu_render(n: usize, parallel_light: bool) -> PsfParams {
+        PsfParams {
+            level: 0,
+            ..Self::for_scene(n, parallel_light)
+        }
+    }
+
     /// Below this many static triangles a bake is small ([`for_static`](Self::for_static)).
     pub const SMALL: usize = 1024;
 
@@ -758,6 +773,16 @@ mod params_tests {
             PsfParams::for_scene(10_284, false).tiles,
             PsfParams::for_static(10_284).tiles
         );
+        // A CPU render's bake in memory: level 0, the scene's tiles.
+        for (n, sun) in [(500, false), (10_284, true), (100_000, false)] {
+            assert_eq!(
+                PsfParams::for_cpu_render(n, sun),
+                PsfParams {
+                    level: 0,
+                    ..PsfParams::for_scene(n, sun)
+                }
+            );
+        }
         let l = |n| PsfParams::for_triangles(n).level;
         assert_eq!(
             [

@@ -92,7 +92,7 @@ pub fn render_sequence(
     #[cfg(not(feature = "gpu"))]
     let frame_path = false;
     let clock = Instant::now();
-    let psf = static_part(&static_soup, scene.has_parallel_light(), opts)?;
+    let psf = static_part(&static_soup, scene.has_parallel_light(), used, opts)?;
     let static_seconds = clock.elapsed().as_secs_f64();
 
     // Folders, last of the checks.
@@ -166,11 +166,13 @@ pub fn render_sequence(
 }
 
 /// The static part of a render: opened from `--baked` (refused when stale) or baked in
-/// memory with the scene's default parameters (`parallel_light`:
+/// memory, for the CPU at level 0 ([`PsfParams::for_cpu_render`]), for the GPU with the
+/// scene's default parameters (`parallel_light`:
 /// [`Scene::has_parallel_light`](crate::scene::Scene::has_parallel_light)).
 fn static_part(
     static_soup: &TriangleSoup,
     parallel_light: bool,
+    device: TraceDevice,
     opts: &RenderOptions,
 ) -> Result<Psf, RenderError> {
     Ok(match &opts.baked {
@@ -185,10 +187,14 @@ fn static_part(
             .map_err(|e| RenderError::baked(path, e))?
             .psf
         }
-        None => Psf::build(
-            &static_soup.positions,
-            &PsfParams::for_scene(static_soup.len(), parallel_light),
-        )?,
+        None => {
+            let n = static_soup.len();
+            let params = match device {
+                TraceDevice::Cpu => PsfParams::for_cpu_render(n, parallel_light),
+                _ => PsfParams::for_scene(n, parallel_light),
+            };
+            Psf::build(&static_soup.positions, &params)?
+        }
     })
 }
 
