@@ -1,14 +1,18 @@
 #!/usr/bin/env python3
 """A variant of a generated benchmark scene (../shared/peers/gen_scene.py) for shading
-benchmarks: more point lights, or a base colour texture on its first mesh.
+benchmarks: more point lights, a base colour texture on its first mesh, or a sun.
 
     python3 benches/scene_variant.py IN.glb OUT.glb --lights 6
     python3 benches/scene_variant.py IN.glb OUT.glb --texture 256
+    python3 benches/scene_variant.py IN.glb OUT.glb --sun z
 
 --lights N: N point lights in all, the file's first light copied to N-1 more nodes at
 fixed places in the generator's room (N at most 6). --texture S: an S x S RGB PNG
 (checkers over noise, fixed seed) as the base colour texture of the first mesh's
-material, with TEXCOORD_0 made from its positions (a planar mapping). Both may be given.
+material, with TEXCOORD_0 made from its positions (a planar mapping). --sun z|tilt: the
+file's light made a directional one (intensity 3) on its node, unrotated (z: it shines
+along -Z, so its shadow rays run along +Z exactly, two direction components zero) or
+turned 40 degrees about (0.6, 0.8, 0) (tilt); not with --lights. Any may be combined.
 Deterministic: same input and arguments, same bytes. Only numpy + stdlib.
 """
 import argparse
@@ -71,8 +75,23 @@ def main():
     ap.add_argument("output")
     ap.add_argument("--lights", type=int, default=0)
     ap.add_argument("--texture", type=int, default=0)
+    ap.add_argument("--sun", choices=["z", "tilt"])
     a = ap.parse_args()
+    if a.sun and a.lights:
+        raise SystemExit("--sun and --lights do not go together")
     js, binary = read_glb(a.input)
+    if a.sun:
+        lights = js.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
+        node = next((n for n in js["nodes"] if "KHR_lights_punctual" in n.get("extensions", {})), None)
+        if not lights or node is None:
+            raise SystemExit(f"{a.input}: no light to turn into a sun")
+        lights[node["extensions"]["KHR_lights_punctual"]["light"]] = {
+            "type": "directional", "color": [1, 1, 1], "intensity": 3.0, "name": "sun"}
+        node.pop("translation", None)
+        node.pop("rotation", None)
+        if a.sun == "tilt":
+            h = np.radians(-40.0) / 2
+            node["rotation"] = [0.6 * np.sin(h), 0.8 * np.sin(h), 0.0, np.cos(h)]
     if a.lights:
         lights = js.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
         node = next((n for n in js["nodes"] if "KHR_lights_punctual" in n.get("extensions", {})), None)
