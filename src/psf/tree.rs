@@ -36,12 +36,14 @@
 //!   both are the same infinity, so the entry is `+∞` or the exit `−∞`, the widened
 //!   bound `∞ − ∞` is NaN, every comparison with it is false and the child is passed
 //!   over, as the exact slab is empty. Where `o` equals `lo` or `hi` the product `0 · ∞`
-//!   is NaN, and what `min` and `max` make of it differs between instruction sets; but
-//!   the line then lies in a face of a box grown by twice the margin, at least twice the
-//!   margin away from each of the child's triangles along that axis, where no reported
-//!   hit can lie (above): passed over or visited, the child gives no answer. A child is
-//!   visited only where its entry compared as at most its exit, so a NaN entry never
-//!   orders the stack.
+//!   is NaN, and what `min` and `max` make of it differs between instruction sets (it
+//!   may hide another axis's bound, or reach the comparisons); but the line then lies
+//!   in a face of a box grown by twice the margin, at least twice the margin away from
+//!   each of the child's triangles along that axis, where no reported hit can lie
+//!   (above): passed over or visited, the child gives no answer. A NaN reaches the
+//!   comparisons from no other case, and a bound hidden only makes a visit, which is
+//!   never wrong. A child is visited only where its entry compared as at most its exit,
+//!   so a NaN entry never orders the stack.
 //!
 //! These are the rays [`BoxTree::takes`]: each direction component zero or at least
 //! `1e-20` in size, so an axis-aligned ray (an orthographic camera looking along an axis,
