@@ -106,26 +106,15 @@ fn a_render_baked_in_memory_writes_the_frames_of_the_default_bake() {
     ]);
     let psf = dir.join("museum.psf");
     ok(&["bake", s(&scene), "-o", s(&psf), "--quiet"]);
-    let render = |sub: &str, baked: bool| {
+    // Two frames into `sub`, then `extra`.
+    let render = |sub: &str, extra: &[&str]| {
         let out = dir.join(format!("{sub}/f.##.exr"));
-        let mut args = vec![
-            "render",
-            s(&scene),
-            "-o",
-            s(&out),
-            "--frames",
-            "19..21",
-            "--size",
-            "40x30",
-            "--quiet",
-        ];
-        if baked {
-            args.extend(["--baked", s(&psf)]);
-        }
+        let frames = ["--frames", "19..21", "--size", "40x30", "--quiet"];
+        let args = [&["render", s(&scene), "-o", s(&out)][..], &frames, extra].concat();
         ok(&args);
     };
-    render("file", true);
-    render("memory", false);
+    render("file", &["--baked", s(&psf)]);
+    render("memory", &[]);
     let a = snapshot(&dir.join("file"));
     assert_eq!(a.len(), 2);
     assert_eq!(a, snapshot(&dir.join("memory")));

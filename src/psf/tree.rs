@@ -432,6 +432,17 @@ mod tests {
     use crate::geometry::{Aabb, BruteForce, Intersector};
     use crate::psf::margin_for;
 
+    /// The tree's closest hit is brute force's to the bit, and its any-hit query answers
+    /// whenever brute force finds a hit; `what` names the ray on a failure.
+    fn agrees(tree: &BoxTree, brute: &BruteForce, ray: &Ray, what: &str) {
+        let pre = RayPre::new(ray.origin, ray.dir);
+        let bits = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits()));
+        let (got, want) = (tree.trace::<false>(ray, &pre), brute.intersect(ray));
+        assert_eq!(bits(got), bits(want), "{what}: {ray:?}");
+        let any = tree.trace::<true>(ray, &pre).is_some();
+        assert_eq!(any, brute.occluded(ray), "{what} (any hit): {ray:?}");
+    }
+
     /// Soups of small and large triangles, a tiled plane (shared edges and vertices) and
     /// grazing rays aimed at vertices and edges, at three scales: the tree's hit is brute
     /// force's, to the bit, and an any-hit query answers whenever brute force finds a
@@ -478,19 +489,7 @@ mod tests {
                 if !ray.is_valid() || !tree.takes(&ray) {
                     continue;
                 }
-                let pre = RayPre::new(ray.origin, ray.dir);
-                let got = tree.trace::<false>(&ray, &pre);
-                let want = brute.intersect(&ray);
-                let bits = |h: Option<Hit>| {
-                    h.map(|h| (h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits()))
-                };
-                assert_eq!(bits(got), bits(want), "seed {seed}, ray {n}: {ray:?}");
-                let any = tree.trace::<true>(&ray, &pre);
-                assert_eq!(
-                    any.is_some(),
-                    brute.occluded(&ray),
-                    "seed {seed}, ray {n} (any hit): {ray:?}"
-                );
+                agrees(&tree, &brute, &ray, &format!("seed {seed}, ray {n}"));
             }
         }
     }
@@ -579,19 +578,7 @@ mod tests {
                 }
                 assert!(tree.takes(&ray), "seed {seed}, ray {n}: {ray:?}");
                 taken += 1;
-                let pre = RayPre::new(ray.origin, ray.dir);
-                let got = tree.trace::<false>(&ray, &pre);
-                let want = brute.intersect(&ray);
-                let bits = |h: Option<Hit>| {
-                    h.map(|h| (h.t.to_bits(), h.tri, h.u.to_bits(), h.v.to_bits()))
-                };
-                assert_eq!(bits(got), bits(want), "seed {seed}, ray {n}: {ray:?}");
-                let any = tree.trace::<true>(&ray, &pre);
-                assert_eq!(
-                    any.is_some(),
-                    brute.occluded(&ray),
-                    "seed {seed}, ray {n} (any hit): {ray:?}"
-                );
+                agrees(&tree, &brute, &ray, &format!("seed {seed}, ray {n}"));
             }
         }
         assert!(taken > 20_000, "{taken} rays taken");
