@@ -44,6 +44,9 @@ fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
 }
 
 const SIZE: &str = "48x36";
+/// `--replay-bytes` for 256 MB of slots: the replay of a still camera's shading, which
+/// the default (none: the records alone) does not keep.
+const SLOTS: &str = "268435456";
 /// Every AOV: frames stay byte-identical across threads and shards with all of them on.
 const ALL_AOVS: &str = "depth,normal,albedo,position,motion,cryptomatte";
 
@@ -142,9 +145,9 @@ fn sequence_is_its_frames_alone(
     sequence_is_its_frames_alone_keeping(dir, scene, camera, frames, check, aovs, "0");
 }
 
-/// [`sequence_is_its_frames_alone`] with `--replay-bytes keep` on every render: `1`
-/// leaves a still camera's replay no room for slots, so that it keeps only the records
-/// of the samples that settle (as at 1920x1080 by default).
+/// [`sequence_is_its_frames_alone`] with `--replay-bytes keep` on every render: `0` (the
+/// default) leaves a still camera's replay no room for slots, so that it keeps only the
+/// records of the samples that settle; [`SLOTS`] gives it two levels of slots.
 fn sequence_is_its_frames_alone_keeping(
     dir: &Path,
     scene: &Path,
@@ -277,7 +280,8 @@ fn frames_in_flight_fill_a_still_camera_once() {
             .map(|l| l.split(',').nth(col).unwrap().to_string())
             .collect()
     };
-    let kept = |camera: &str, in_flight: &str| kept_with(camera, in_flight, "0");
+    // With the replay's slots.
+    let kept = |camera: &str, in_flight: &str| kept_with(camera, in_flight, SLOTS);
     let words = |v: &[&str]| v.iter().map(|w| w.to_string()).collect::<Vec<_>>();
     let once = words(&["fill", "reuse", "reuse", "reuse", "reuse", "reuse", "reuse"]);
     for in_flight in ["1", "3", "4"] {
@@ -290,10 +294,10 @@ fn frames_in_flight_fill_a_still_camera_once() {
     let each = words(&["fill", "fill", "reuse", "reuse", "reuse", "reuse", "reuse"]);
     assert_eq!(kept("side camera", "2"), each, "2 in flight");
     assert_eq!(kept("main", "3"), words(&["none"; 7]));
-    // Without room for the replay's slots (records alone, as at 1920x1080) two frames
-    // in flight fill once too: the copy's records and sums let the other lane settle.
+    // Without slots (the default: records alone) two frames in flight fill once too:
+    // the copy's records and sums let the other lane settle.
     assert_eq!(
-        kept_with("side camera", "2", "1"),
+        kept_with("side camera", "2", "0"),
         once,
         "2 in flight, records"
     );
@@ -323,7 +327,7 @@ fn a_still_camera_replays_its_shading_and_frames_stay_the_same() {
     // The light moves: frames 2 and 7 differ; the cube moves: 7 and 11 differ.
     assert!(frame_of(&dir, "seq", 2) != frame_of(&dir, "seq", 7));
     assert!(frame_of(&dir, "seq", 7) != frame_of(&dir, "seq", 11));
-    // The records alone (no room for slots), the same bytes.
+    // With slots, the shading replayed where the rays repeat: the same bytes.
     sequence_is_its_frames_alone_keeping(
         &dir,
         &scene,
@@ -331,7 +335,7 @@ fn a_still_camera_replays_its_shading_and_frames_stay_the_same() {
         "0..12",
         &checked,
         "Z,N",
-        "1",
+        SLOTS,
     );
     for k in checked {
         assert!(
@@ -455,7 +459,7 @@ fn settled_samples_follow_what_moves_into_and_out_of_their_rays() {
     // The cube's shadow leaves the floor at frame 2 and its image enters the mirror at 4.
     assert!(frame_of(&dir, "jumps", 1) != frame_of(&dir, "jumps", 2));
     assert!(frame_of(&dir, "jumps", 3) != frame_of(&dir, "jumps", 4));
-    // The records alone (no room for slots, as at 1920x1080), the same bytes.
+    // With slots as well as the records, the same bytes.
     sequence_is_its_frames_alone_keeping(
         &dir,
         &scene,
@@ -463,7 +467,7 @@ fn settled_samples_follow_what_moves_into_and_out_of_their_rays() {
         "0..8",
         &[0, 1, 2, 3, 4, 5, 7],
         "Z",
-        "1",
+        SLOTS,
     );
     for k in 0..8 {
         assert!(
@@ -474,7 +478,7 @@ fn settled_samples_follow_what_moves_into_and_out_of_their_rays() {
     // Both forms settle most samples once a frame has kept them (frame 1 replays what
     // frame 0 kept, but frame 0's sums are not complete until it ends: from frame 1 on,
     // one frame in flight), and none in the first.
-    for keep in ["0", "1"] {
+    for keep in ["0", SLOTS] {
         let settled = settled_counts(&dir, &scene, "still", "0..8", keep);
         let pixels = 96 * 72;
         assert_eq!(settled[0], 0, "--replay-bytes {keep}: {settled:?}");
@@ -544,7 +548,7 @@ fn a_pixel_that_saw_a_mover_is_not_settled_after_it_leaves() {
     assert!(frame_of(&dir, "seen", 3) != frame_of(&dir, "seen", 4));
     assert!(frame_of(&dir, "seen", 4) != frame_of(&dir, "seen", 5));
     assert!(frame_of(&dir, "seen", 3) == frame_of(&dir, "seen", 5));
-    // The records alone: a record dropped as its sample is shaded, the same bytes.
+    // With slots as well: the same bytes.
     sequence_is_its_frames_alone_keeping(
         &dir,
         &scene,
@@ -552,7 +556,7 @@ fn a_pixel_that_saw_a_mover_is_not_settled_after_it_leaves() {
         "0..8",
         &[3, 4, 5, 6, 7],
         "Z",
-        "1",
+        SLOTS,
     );
     for k in [3, 4, 5, 6, 7] {
         assert!(

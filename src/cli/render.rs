@@ -175,7 +175,7 @@ pub struct Args {
     #[arg(long, value_name = "N", hide = true)]
     pub chunk_samples: Option<usize>,
     /// Bytes a still camera's kept shading may take in slots, a frame in flight (0 or
-    /// absent: 256 MB; beyond, only the settled samples' records); for tests, which hold
+    /// absent: none, only the settled samples' records); for tests, which hold
     /// that frames do not depend on it.
     #[arg(long, value_name = "BYTES", hide = true)]
     pub replay_bytes: Option<usize>,

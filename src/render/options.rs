@@ -597,9 +597,9 @@ pub struct RenderOptions {
     /// more often. Not an option of the pixels: the tests render with small chunks to
     /// hold that a frame is the same bytes however it is cut.
     pub chunk_samples: usize,
-    /// The memory a still camera's kept shading may take in slots, a frame in flight (0:
-    /// the default, 256 MB, which holds two levels at 640x480 and none at 1920x1080,
-    /// where only the records of the samples that settle are kept; `render::replay`).
+    /// The memory a still camera's kept shading may take in slots, a frame in flight (0,
+    /// the default: none, so that only the records of the samples that settle are kept;
+    /// 256 MB holds two levels at 640x480 and none at 1920x1080; `render::replay`).
     /// Not an option of the pixels: the tests set it to hold that a frame is the same
     /// bytes whatever is kept.
     pub replay_bytes: usize,

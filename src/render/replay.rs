@@ -26,14 +26,16 @@
 //! their rays again (benches/PERF.md, issue 38, round 11).
 //!
 //! Memory: 216 bytes a pixel and level ([`Kept`]) plus 52 a pixel, light and level,
-//! within [`REPLAY_BYTES`] for every level together: the camera rays and the mirror
-//! level at 640x480 with one light (157 MB), the camera rays alone at 1280x720 (247 MB);
-//! nothing either with more than [`REPLAY_LIGHTS`] lights. A test holds these numbers.
+//! within the budget a render gives the slots for every level together (`render
+//! --replay-bytes`, hidden; none by default, below): with 256 MB, the camera rays and
+//! the mirror level at 640x480 with one light (157 MB), the camera rays alone at
+//! 1280x720 (247 MB); nothing either with more than [`REPLAY_LIGHTS`] lights. A test
+//! holds these numbers.
 //! The last frame's sums take 16 bytes a pixel besides, and the settled samples' records
 //! ([`Settle`]) `20 + 32 · (2 · lights + 1)` (116 with one light, 34 MB at 640x480; none
 //! beyond [`SETTLE_LIGHTS`] lights).
 //!
-//! Where no level's slots fit (1920x1080 and beyond with the default), the records are
+//! Where no level's slots fit (always with the default budget, none), the records are
 //! kept alone, within [`RECORD_BYTES`], and the shading writes them as it shades a
 //! sample ([`ShadeReplay::records`]): what the settled check would have found in the
 //! slots (the camera ray's static hit, the shadow rays of both levels, the mirror ray up
@@ -43,6 +45,11 @@
 //! camera it was made with. 132 bytes a pixel with the sums (274 MB at 1920x1080, one
 //! light), against 536 for two levels of slots: a still camera's 1920x1080 frames on 2
 //! threads went from 440 to 306–340 ms a frame (benches/PERF.md, issue 38, round 24).
+//! At 640x480 too the slots' memory cost more than their replay saved: with the
+//! records alone the benches' still camera on 2 threads took 0.59–0.63 s for 8 frames
+//! against 0.79–0.82, 1.02–1.12 s for 24 against 1.23–1.48, and as long for 60 and 120,
+//! in 418–562 MB against 832–886 MB (round 28). So the default gives the slots
+//! nothing, at every size.
 
 use glam::Vec3;
 
@@ -52,9 +59,6 @@ use super::memo::{copy_all, copy_par, fill_par};
 use super::shade::{BlockOut, Item, ShadeContext, REPLAY_LIGHTS};
 use crate::geometry::{same_words, Aabb, Hit, Ray};
 use crate::psf::{BoxTest, Prim};
-
-/// The memory every level's kept shading may take together.
-pub(super) const REPLAY_BYTES: usize = 256 << 20;
 
 /// Levels whose shading is kept, at most (the camera rays' and the mirror's).
 const REPLAY_LEVELS: usize = 2;
@@ -169,14 +173,7 @@ struct Last {
     complete: bool,
 }
 
-/// The levels the replay keeps for `samples` samples and `lights` punctual lights (none
-/// beyond [`REPLAY_LIGHTS`] lights).
-#[cfg(test)]
-fn levels_replayed(samples: usize, lights: usize) -> usize {
-    levels_within(samples, lights, REPLAY_BYTES)
-}
-
-/// The levels whose slots fit within `budget` bytes ([`REPLAY_BYTES`] by default).
+/// The levels whose slots fit within `budget` bytes (0 by default: none).
 fn levels_within(samples: usize, lights: usize, budget: usize) -> usize {
     if lights > REPLAY_LIGHTS {
         return 0;
@@ -187,11 +184,10 @@ fn levels_within(samples: usize, lights: usize, budget: usize) -> usize {
 }
 
 /// Whether a still camera's frames of `samples` samples have no room for slots within
-/// `budget` (0: [`REPLAY_BYTES`]) even with one light, so that they keep the records
+/// `budget` (0, the default: none) even with one light, so that they keep the records
 /// alone (or nothing): the frame that fills them is worth rendering alone and copying,
 /// rather than one a frame in flight (`render::sequence`).
 pub(super) fn slots_do_not_fit(samples: usize, budget: usize) -> bool {
-    let budget = if budget == 0 { REPLAY_BYTES } else { budget };
     levels_within(samples, 1, budget) == 0
 }
 
@@ -224,13 +220,14 @@ impl ShadeReplay {
     /// module's notes). Kept shading made in another context is dropped. The levels it
     /// keeps this frame.
     ///
-    /// `budget`: the bytes the slots may take ([`REPLAY_BYTES`] unless the options say
-    /// otherwise). Where two levels of slots do not fit (1920x1080 with the default) but
-    /// the [`Settle`] records do (within [`RECORD_BYTES`]), only the records are kept,
+    /// `budget`: the bytes the slots may take (none unless the options say
+    /// otherwise). Where no level of slots fits (always with the default) but the
+    /// [`Settle`] records do (within [`RECORD_BYTES`]), only the records are kept,
     /// written by the shading itself ([`ShadeReplay::records`]): the samples that settle
     /// are most of a still camera's frame, and what the slots add beyond them (shading
     /// replayed for the samples that do not settle) is not worth their 536 bytes a
-    /// pixel there. The levels returned are then the two the records cover.
+    /// pixel (the module's notes). The levels returned are then the two the records
+    /// cover.
     pub(super) fn begin(
         &mut self,
         ctx: &ShadeContext<'_>,
@@ -1022,6 +1019,12 @@ pub(super) fn block_records<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The levels 256 MB of slots keep for `samples` samples and `lights` punctual
+    /// lights (none beyond [`REPLAY_LIGHTS`] lights).
+    fn levels_replayed(samples: usize, lights: usize) -> usize {
+        levels_within(samples, lights, 256 << 20)
+    }
 
     #[test]
     fn what_is_kept_at_each_size_is_as_documented() {

@@ -545,7 +545,8 @@ const GPU_LANES: usize = 2;
 /// lanes ([`Frames::starts_still`]). 24 still frames at 640x480 on 2 threads: four in
 /// flight 2.08 → 1.84 s with it; two in flight no faster (1.69 s either way), and a
 /// stretch of three frames slower (0.59 → 0.65 s) (benches/PERF.md, issue 38, round 7).
-/// Two where the replay keeps records alone ([`Frames::seed_lanes`]).
+/// Two where the replay keeps records alone, as it does by default
+/// ([`Frames::seed_lanes`]).
 const SEED_LANES: usize = 3;
 
 /// The threads a frame in flight gets when `--frames-in-flight` is left to the render.
@@ -919,10 +920,10 @@ impl Frames<'_> {
     }
 
     /// Lanes from which a still stretch is filled once ([`SEED_LANES`]); two where the
-    /// frame has no room for the replay's slots (1920x1080 and beyond): its records and
-    /// sums, copied, let the other lane's first frame settle its samples, where filling
-    /// its own was a whole frame's tracing and shading again (benches/PERF.md, issue 38,
-    /// round 24).
+    /// frame has no room for the replay's slots (by default, which keeps the records
+    /// alone; with slots asked for, from 1920x1080): its records and sums, copied, let
+    /// the other lane's first frame settle its samples, where filling its own was a
+    /// whole frame's tracing and shading again (benches/PERF.md, issue 38, round 24).
     fn seed_lanes(&self) -> usize {
         let opts = self.opts;
         let pixels =

@@ -14,7 +14,6 @@ use super::memo::{levels_kept, lights_kept, Mode, StaticMemo};
 use super::options::Aovs;
 use super::replay::{
     block_records, block_slots, record_block, shade_kept, BlockSlots, ShadeReplay, PREFETCH_AHEAD,
-    REPLAY_BYTES,
 };
 use super::sampling::Seed;
 use super::shade::{
@@ -90,15 +89,15 @@ pub struct FrameScratch {
     crypto_ids: Vec<[Option<u32>; 2]>,
     /// Samples a chunk traces at most (0: [`CHUNK_SAMPLES`]).
     chunk_samples: usize,
-    /// The memory the replay's slots may take (0: `REPLAY_BYTES`).
+    /// The memory the replay's slots may take (0, the default: none, the records alone).
     replay_bytes: usize,
 }
 
 impl FrameScratch {
     /// Buffers that trace `chunk_samples` samples at a time at most (0: the default,
-    /// 2^19), and whose still camera's kept shading may take `replay_bytes` in slots (0:
-    /// the default, 256 MB; beyond it only the records of the samples that settle are
-    /// kept, see `render::replay`); the pixels depend on neither.
+    /// 2^19), and whose still camera's kept shading may take `replay_bytes` in slots (0,
+    /// the default: none, only the records of the samples that settle are kept, see
+    /// `render::replay`); the pixels depend on neither.
     pub fn with_budgets(chunk_samples: usize, replay_bytes: usize) -> FrameScratch {
         FrameScratch {
             chunk_samples,
@@ -609,11 +608,7 @@ fn trace_pass<T: Intersector>(
     // frame replays instead of keeping, which had cost a still camera's second frame
     // 140 ms of CPU at 640x480 (benches/PERF.md, issue 38, round 6). A camera that
     // moves every frame allocates and fills nothing.
-    let budget = match *replay_bytes {
-        0 => REPLAY_BYTES,
-        n => n,
-    };
-    let replayed = replay.begin(ctx, mode != Mode::Off && !light_paths, w * h, budget);
+    let replayed = replay.begin(ctx, mode != Mode::Off && !light_paths, w * h, *replay_bytes);
     // Without the memo or the replay, which read a level's rays and bookkeeping as one
     // array, the levels below the camera rays are traced and shaded from the lists the
     // blocks of the level above made, and the shadow rays from the blocks' lists: their
