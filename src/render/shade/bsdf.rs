@@ -239,7 +239,7 @@ pub(super) fn secondary(
             );
         }
         Some(alpha) => {
-            let drawn = glossy_reflection(s.dir, lobes.v, s.ns, s.ng, alpha, item.seed, kr_w);
+            let drawn = glossy_reflection(s.dir, s.ns, s.ng, alpha, item.seed, kr_w);
             if let Some((r, w)) = drawn {
                 // The lobe's width widens the cone (for the texture level of detail).
                 out.next(
@@ -253,7 +253,7 @@ pub(super) fn secondary(
 
 /// A reflection drawn from the GGX lobe of width `alpha` (one direction from the visible
 /// normals: the estimator's weight is F · G2/G1(v), with Smith's separable G2 that is
-/// F · G1(l)): for a ray of unit direction `dir` (`v = -dir`) meeting a surface of
+/// F · G1(l)): for a ray of unit direction `dir` (the view `v = -dir`) meeting a surface of
 /// shading normal `ns` and geometric normal `ng` (both facing the ray), `seed`'s
 /// numbers and the reflected weight `kr_w` (F times the ray's weight), the direction
 /// and the weight `kr_w · G1(l)`; `None` where it goes into the surface (this sample
@@ -262,13 +262,13 @@ pub(super) fn secondary(
 #[inline]
 pub(super) fn glossy_reflection(
     dir: Vec3A,
-    v: Vec3A,
     ns: Vec3A,
     ng: Vec3A,
     alpha: f32,
     seed: Seed,
     kr_w: Vec3A,
 ) -> Option<(Vec3A, Vec3A)> {
+    let v = -dir;
     let m = sample_ggx_vndf(v.into(), ns.into(), alpha, seed.get(Purpose::Glossy, 0));
     let r = reflect(dir, m.into());
     let cos_l = r.dot(ns);

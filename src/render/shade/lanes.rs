@@ -531,15 +531,10 @@ impl ShadeContext<'_> {
         }
         let (origin, r, kr_w) = (origin.lanes(), r.lanes(), kr_w.lanes());
         let glossy = mats.iter().any(|m| m.glossy_alpha.is_some());
-        let (view_l, ns_l, ng_l, dir_l) = if glossy {
-            (view.lanes(), ns.lanes(), ng.lanes(), dir.lanes())
+        let (ns_l, ng_l, dir_l) = if glossy {
+            (ns.lanes(), ng.lanes(), dir.lanes())
         } else {
-            (
-                [Vec3A::ZERO; 4],
-                [Vec3A::ZERO; 4],
-                [Vec3A::ZERO; 4],
-                [Vec3A::ZERO; 4],
-            )
+            ([Vec3A::ZERO; 4], [Vec3A::ZERO; 4], [Vec3A::ZERO; 4])
         };
         for k in 0..4 {
             let item = items[k];
@@ -551,8 +546,7 @@ impl ShadeContext<'_> {
             let (dir_k, w, spread_k) = match mats[k].glossy_alpha {
                 None => (r[k], kr_w[k], spread[k]),
                 Some(alpha) => {
-                    let (v, n, g) = (view_l[k], ns_l[k], ng_l[k]);
-                    match glossy_reflection(dir_l[k], v, n, g, alpha, item.seed, kr_w[k]) {
+                    match glossy_reflection(dir_l[k], ns_l[k], ng_l[k], alpha, item.seed, kr_w[k]) {
                         Some((r, w)) => (r, w, spread[k] + alpha),
                         None => continue,
                     }
