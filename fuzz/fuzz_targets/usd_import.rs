@@ -39,7 +39,8 @@ fn folder() -> &'static PathBuf {
 }
 
 /// The system's allocator, refusing (a null pointer) an allocation beyond the command's
-/// bound on the thread that reads a stage, as `cli::oom` refuses it.
+/// bound on the thread that reads a stage, where `cli::oom` ends the command with one
+/// line.
 struct Bounded;
 
 fn beyond(size: usize) -> bool {
