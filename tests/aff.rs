@@ -285,6 +285,39 @@ fn animated_triangles_interpolate_linearly_and_clamp() {
 }
 
 #[test]
+fn the_default_range_is_the_a_lines_frames_whatever_the_keys_cover() {
+    // Keys at AFF times 1..5 of a line `a -1 7 9`: its frames are 0..9 (t = -1 .. 7),
+    // not the keys' 2..7; the same through the glTF that `convert` writes.
+    let path = write_scene(
+        "range",
+        &[(
+            "range.aff",
+            "a -1 7 9\n\
+             tpa 2\n\
+             1\n 0 0 0  0 0 1\n 1 0 0  0 0 1\n 0 1 0  0 0 1\n\
+             5\n 4 0 2  0 0 1\n 5 0 2  0 0 1\n 4 1 2  0 0 1\n",
+        )],
+    );
+    let plan_of = |scene: &Scene| {
+        let opts = subfield::render::RenderOptions {
+            output: path.with_file_name("o/f.####.exr"),
+            width: 8,
+            height: 6,
+            ..Default::default()
+        };
+        let plan = subfield::render::plan(scene, &opts).unwrap();
+        plan.frames.iter().collect::<Vec<u32>>()
+    };
+    let scene = import::load(&path).unwrap();
+    assert_eq!(plan_of(&scene), (0..9).collect::<Vec<u32>>());
+    let glb = path.with_file_name("range.glb");
+    import::write_gltf(&scene, &glb).unwrap();
+    let converted = import::load(&glb).unwrap();
+    assert_eq!(converted.time_range, scene.time_range);
+    assert_eq!(plan_of(&converted), (0..9).collect::<Vec<u32>>());
+}
+
+#[test]
 fn spheres_are_closed_round_and_outward() {
     let c = Vec3::new(1.0, -2.0, 3.0);
     for r in [0.5f32, -2.0] {

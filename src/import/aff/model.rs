@@ -146,6 +146,9 @@ pub(super) fn to_scene(aff: &AffScene) -> Result<Scene, ImportError> {
                     )));
                 }
                 s.fps = Some(fps as f32);
+                // The `a` line's frames are the authored range, whatever the keys
+                // cover: frame `i` at model time `keys[i]`, so 0..n by default.
+                s.time_range = keys.last().map(|&end| (0.0, end));
                 Some(Frames {
                     t0: r.start,
                     aff: times,

@@ -269,6 +269,7 @@ impl Importer<'_> {
         }
         scene.fps = self.fps(shown);
         scene.ambient = self.ambient(shown);
+        scene.time_range = self.time_range(shown);
         scene.warnings = std::mem::take(&mut self.warnings);
         super::validate(&scene)?;
         Ok(scene)
@@ -295,6 +296,40 @@ impl Importer<'_> {
             _ => {
                 self.warn(format!(
                     "scene extras.ambient {v} is not three numbers of at least 0; ignored"
+                ));
+                None
+            }
+        }
+    }
+
+    /// The scene's authored time range, `extras.timeRange` (two numbers of seconds,
+    /// the first no later than the second), as subfield writes it for an AFF scene's
+    /// `a t0 t1 n` line (from 0, its `t0`, to its last frame).
+    fn time_range(&mut self, shown: Option<&json::Scene>) -> Option<(f32, f32)> {
+        let read = |s: &json::Scene| -> Option<serde_json::Value> {
+            s.extras.as_ref()?.get("timeRange").cloned()
+        };
+        let v = shown
+            .and_then(read)
+            .or_else(|| self.root.scenes.first().and_then(read))?;
+        let pair = v.as_array().and_then(|a| match a.as_slice() {
+            [a, b] => Some((a.as_f64()?, b.as_f64()?)),
+            _ => None,
+        });
+        match pair {
+            Some((a, b))
+                if a.is_finite()
+                    && b.is_finite()
+                    && a <= b
+                    && a.abs() < f64::from(f32::MAX)
+                    && b.abs() < f64::from(f32::MAX) =>
+            {
+                Some((a as f32, b as f32))
+            }
+            _ => {
+                self.warn(format!(
+                    "scene extras.timeRange {v} is not two numbers of seconds, the first \
+                     no later than the second; ignored"
                 ));
                 None
             }

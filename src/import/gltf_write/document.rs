@@ -582,7 +582,8 @@ fn textures_json(scene: &Scene) -> (Vec<Value>, Vec<Value>) {
     (textures, samplers)
 }
 
-/// The one scene: its roots, and `extras` (the scene's extras and `fps`).
+/// The one scene: its roots, and `extras` (the scene's extras, `fps`, `ambient` and
+/// `timeRange`).
 fn scene_json(scene: &Scene) -> Value {
     let mut o = Map::new();
     o.insert("nodes".into(), json!(scene.roots));
@@ -592,6 +593,9 @@ fn scene_json(scene: &Scene) -> Value {
     }
     if let Some(a) = scene.ambient {
         extras.insert("ambient".into(), json!(a.to_array()));
+    }
+    if let Some((start, end)) = scene.time_range {
+        extras.insert("timeRange".into(), json!([start, end]));
     }
     if !extras.is_empty() {
         o.insert("extras".into(), Value::Object(extras));
