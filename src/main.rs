@@ -34,8 +34,19 @@ fn main() -> ExitCode {
                 .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more"))
                 .filter(|l| !l.is_empty())
                 .collect();
-            eprintln!("{} (see --help)", parts.join(" "));
-            return ExitCode::from(cli::exit::ExitClass::Usage.code());
+            // The reporter says `error:` itself.
+            let joined = parts.join(" ");
+            let line = format!(
+                "{} (see --help)",
+                joined.strip_prefix("error: ").unwrap_or(&joined)
+            );
+            let class = cli::exit::clap_class(&e);
+            // Reported as every other error is: a JSON event with `--log-format json`,
+            // and `openjd_fail:` under Open Job Description, read off the raw arguments.
+            let (log, progress) = cli::report::formats_in(std::env::args_os().skip(1));
+            cli::report::set(log, progress);
+            cli::report::error(&line, class);
+            return ExitCode::from(class.code());
         }
     };
     let quiet = panics_in_one_line();

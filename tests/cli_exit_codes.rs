@@ -47,8 +47,62 @@ fn events(o: &Output) -> Vec<Value> {
 fn a_bad_flag_is_a_usage_error_2() {
     let o = subfield(&["render", "x.glb", "-o", "f.exr", "--no-such-flag"]);
     assert_eq!(code(&o), Some(2), "{}", stderr(&o));
-    let o = subfield(&["render", "x.glb", "-o", "f.exr", "--spp", "many"]);
+    // A flag without its value is syntax too.
+    let o = subfield(&["render", "x.glb", "-o", "f.exr", "--spp"]);
     assert_eq!(code(&o), Some(2), "{}", stderr(&o));
+    assert_eq!(stderr(&o).lines().count(), 1, "{}", stderr(&o));
+}
+
+#[test]
+fn a_value_a_flag_cannot_take_is_bad_input_3_whichever_flag() {
+    // Not a number, a negative count, not one of the choices, refused by the flag's
+    // own parser: each an option value, as the library's checks (`--spp 0`) are.
+    for extra in [
+        &["--spp", "many"][..],
+        &["--max-depth", "-1"],
+        &["--overscan", "-1"],
+        &["--fps", "abc"],
+        &["--device", "bogus"],
+        &["--compression", "dwaa"],
+        &["--size", "-5x10"],
+        &["--background", "-1,0,0"],
+        &["--threads", "100000"],
+    ] {
+        let mut args = vec!["render", "x.glb", "-o", "f.exr"];
+        args.extend(extra);
+        let o = subfield(&args);
+        assert_eq!(code(&o), Some(3), "{extra:?}: {}", stderr(&o));
+        let line = stderr(&o);
+        assert_eq!(line.lines().count(), 1, "{line}");
+        assert!(
+            line.starts_with("error: ") && !line.contains("error: error"),
+            "{line}"
+        );
+    }
+    // Reported as any error is: a JSON event with --log-format json, and openjd_fail
+    // on stdout for Open Job Description, though clap found it before parsing.
+    let o = subfield(&[
+        "render",
+        "x.glb",
+        "-o",
+        "f.exr",
+        "--log-format",
+        "json",
+        "--progress",
+        "openjd",
+        "--fps",
+        "abc",
+    ]);
+    assert_eq!(code(&o), Some(3), "{}", stderr(&o));
+    let ev = events(&o);
+    assert_eq!(ev.len(), 1, "{}", stderr(&o));
+    assert_eq!(ev[0]["event"], "error");
+    assert_eq!(ev[0]["exit_code"], 3);
+    assert!(
+        String::from_utf8_lossy(&o.stdout).starts_with("openjd_fail: "),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
 }
 
 #[test]
@@ -342,4 +396,36 @@ fn openjd_progress_lines_on_stdout() {
         .find_map(|l| l.strip_prefix("openjd_fail: "))
         .unwrap_or_else(|| panic!("{text}"));
     assert!(fail.contains("--spp 0"), "{fail}");
+}
+
+/// A long sequence's `start` event says its frames as `frame_set` and `frame_count` and
+/// leaves the list out beyond 10,000 (it was one line of 79 MB for 10 million frames).
+#[test]
+fn the_json_start_of_a_long_sequence_does_not_list_every_frame() {
+    use std::io::BufRead;
+    let dir = temp_dir("json-long");
+    let scene = write_scene(&dir);
+    let out = dir.join("out/f.######.exr");
+    let mut args = render_args(&scene, &out, "0..20000");
+    args.retain(|a| *a != "--quiet");
+    args.extend(["--log-format", "json"]);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_subfield"))
+        .args(&args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
+    let start = loop {
+        let line = lines.next().expect("no start event").unwrap();
+        let v: Value = serde_json::from_str(&line).unwrap();
+        if v["event"] == "start" {
+            break v;
+        }
+    };
+    let _ = child.kill();
+    let _ = child.wait();
+    assert_eq!(start["frame_set"], "0..20000", "{start}");
+    assert_eq!(start["frame_count"], 20000, "{start}");
+    assert!(start.get("frames").is_none(), "{start}");
 }

@@ -61,8 +61,8 @@ pub const HELP: &str = "\
 Exit codes (the same for every command):
   0            done
   1            internal error (a bug: please report it)
-  2            usage: unknown flag, bad flag syntax
-  3            bad input: scene, bake or option values (retrying cannot help)
+  2            usage: unknown flag, bad flag syntax, a flag without its value
+  3            bad input: scene, bake or option values, a value a flag cannot take (retrying cannot help)
   4            a bake or scene file whose hash is not the one expected (re-bake or resubmit)
   5            I/O or resource failure: disk full, out of memory, GPU lost (retry, perhaps elsewhere)
   129/130/143  stopped by SIGHUP/SIGINT/SIGTERM after the frames in flight (--resume carries on)";
@@ -70,6 +70,22 @@ Exit codes (the same for every command):
 /// The class of a command's error: the first cause in its chain (outermost first) that
 /// is one of the library's typed errors or an I/O error decides. A message the command
 /// line made itself with no typed cause (a flag value it checked) is bad input.
+/// The class of an error clap finds in the arguments: a value it cannot take (not a
+/// number, not one of the choices, refused by the flag's parser) is an option value, 3;
+/// the rest (an unknown flag, a flag without its value, two that conflict) is usage, 2.
+pub fn clap_class(e: &clap::Error) -> ExitClass {
+    use clap::error::{ContextKind, ContextValue, ErrorKind::*};
+    match e.kind() {
+        // clap says "a value is required" as an invalid empty value: that is syntax.
+        InvalidValue => match e.get(ContextKind::InvalidValue) {
+            Some(ContextValue::String(v)) if !v.is_empty() => ExitClass::BadInput,
+            _ => ExitClass::Usage,
+        },
+        ValueValidation | InvalidUtf8 => ExitClass::BadInput,
+        _ => ExitClass::Usage,
+    }
+}
+
 pub fn exit_class(e: &anyhow::Error) -> ExitClass {
     e.chain().find_map(classify).unwrap_or(ExitClass::BadInput)
 }

@@ -20,9 +20,11 @@ pub struct Args {
 pub enum Generator {
     /// The demo scene as glTF: a museum room (static) and triangles flying between
     /// formations (morph targets).
+    #[command(allow_negative_numbers = true)]
     Museum(MuseumArgs),
     /// BART-style animart: N triangles in unstructured motion, as an AFF file of `tpa`
     /// entries sized to pair with the BART museum's static part.
+    #[command(allow_negative_numbers = true)]
     Animart(AnimartArgs),
 }
 
@@ -31,7 +33,8 @@ pub struct MuseumArgs {
     /// The file to write (atomically): .glb, or .gltf for JSON with an embedded buffer.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Static triangles, exactly (the room, pillars, paintings, sculptures).
+    /// Static triangles, exactly (the room, pillars, paintings, sculptures); at least
+    /// 852, the room at its coarsest.
     #[arg(long, default_value_t = MuseumParams::default().static_tris)]
     pub static_tris: usize,
     /// Moving triangles, each on its own path.
@@ -67,6 +70,7 @@ fn museum(a: MuseumArgs) -> anyhow::Result<ExitCode> {
         seed: a.seed,
     };
     p.validate()?;
+    output_is(&a.output, "the museum is glTF", &["glb", "gltf"])?;
     super::prepare_output(&a.output)?;
     write_museum(&p, &a.output)
         .with_context(|| format!("cannot write the museum to {}", a.output.display()))?;
@@ -113,6 +117,7 @@ fn animart(a: AnimartArgs) -> anyhow::Result<ExitCode> {
     if a.frames < 2 {
         anyhow::bail!("--frames must be at least 2");
     }
+    output_is(&a.output, "animart is an AFF scene", &["aff"])?;
     let text = generate_animart(&AnimartParams {
         triangles: a.triangles,
         seed: a.seed,
@@ -131,4 +136,19 @@ fn animart(a: AnimartArgs) -> anyhow::Result<ExitCode> {
         );
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Refuses an output whose extension is not one of `exts` (any case): a scene written
+/// under another name would be read as something it is not.
+fn output_is(path: &std::path::Path, what: &str, exts: &[&str]) -> anyhow::Result<()> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    if exts.iter().any(|e| e.eq_ignore_ascii_case(ext)) {
+        return Ok(());
+    }
+    let names: Vec<String> = exts.iter().map(|e| format!(".{e}")).collect();
+    anyhow::bail!(
+        "{}: {what}: give a file ending in {}",
+        path.display(),
+        names.join(" or ")
+    )
 }

@@ -44,7 +44,7 @@ pub struct Args {
     pub animation: Option<String>,
     /// Image size; default: 640 wide at the camera's aspect ratio, else 640x480. Pixels
     /// are square: a size of another shape shows more or less of the scene (warned).
-    #[arg(long, value_name = "WxH")]
+    #[arg(long, value_name = "WxH", allow_hyphen_values = true)]
     pub size: Option<String>,
     /// Exposure in stops: the RGB written is the radiance × 2^EV (alpha and AOVs as
     /// traced).
@@ -57,7 +57,7 @@ pub struct Args {
     pub exposure: f32,
     /// Radiance seen by rays that leave the scene (linear RGB; primary misses keep alpha
     /// 0). Default 0,0,0. Not with --environment.
-    #[arg(long, value_name = "R,G,B")]
+    #[arg(long, value_name = "R,G,B", allow_hyphen_values = true)]
     pub background: Option<String>,
     /// An equirectangular environment map (.hdr or .exr, linear RGB) seen by rays that
     /// leave the scene; its centre looks along +X, its top straight up (+Y), as Blender
@@ -139,9 +139,9 @@ pub struct Args {
     /// side, its display window stays the image.
     #[arg(long, value_name = "PX", default_value_t = 0)]
     pub overscan: u32,
-    /// Cryptomatte ranks kept per pixel (two a layer).
-    #[arg(long, value_name = "N", default_value_t = render::DEFAULT_CRYPTO_LEVELS)]
-    pub crypto_levels: u32,
+    /// Cryptomatte ranks kept per pixel (two a layer); default 6.
+    #[arg(long, value_name = "N")]
+    pub crypto_levels: Option<u32>,
     /// RGBA as 16-bit half floats (the default).
     #[arg(long, conflicts_with = "float")]
     pub half: bool,
@@ -281,8 +281,9 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         }
         _ => bail!("--look-from and --look-at go together"),
     };
-    if a.crypto_levels == 0 || a.crypto_levels > 64 {
-        bail!("--crypto-levels {}: must be 1 to 64", a.crypto_levels);
+    let crypto_levels = a.crypto_levels.unwrap_or(render::DEFAULT_CRYPTO_LEVELS);
+    if crypto_levels == 0 || crypto_levels > 64 {
+        bail!("--crypto-levels {crypto_levels}: must be 1 to 64");
     }
     let mut aovs = a
         .aov
@@ -290,7 +291,7 @@ pub fn options(a: &Args) -> anyhow::Result<RenderOptions> {
         .map(parse::parse_aovs)
         .transpose()?
         .unwrap_or_default();
-    aovs.crypto_levels = a.crypto_levels;
+    aovs.crypto_levels = crypto_levels;
     let mut shading = render::ShadingOptions {
         diffuse_bounces: a.diffuse_bounces,
         ..Default::default()
@@ -384,6 +385,38 @@ fn motion_blur(a: &Args) -> anyhow::Result<Option<render::MotionBlur>> {
     })
 }
 
+/// The JSON log's `start` event lists this run's frame numbers up to this many; beyond,
+/// `frame_set` (the `--frames` form) and `frame_count` say them.
+const LISTED_FRAMES: usize = 10_000;
+
+/// Options given that this run leaves unused or cannot use in full, each said once
+/// before the render: a user who typed them expected something of them.
+fn ignored_options(a: &Args) -> Vec<String> {
+    let mut w = Vec::new();
+    if let (Some(s), Some(k)) = (a.shutter, a.motion_steps) {
+        if s == 0.0 {
+            w.push(format!(
+                "--motion-steps {k} does nothing with --shutter 0 (no motion blur)"
+            ));
+        }
+    }
+    if let Some(n) = a.crypto_levels {
+        if !a.aov.as_deref().is_some_and(|v| v.contains("cryptomatte")) {
+            w.push(format!(
+                "--crypto-levels {n} does nothing without --aov cryptomatte"
+            ));
+        }
+    }
+    if let Some(t) = a.threads.filter(|&t| t > super::cores()) {
+        w.push(format!(
+            "--threads {t} is more than the {} cores this process may use: the threads \
+             take turns on them",
+            super::cores()
+        ));
+    }
+    w
+}
+
 /// Without `--size`, the image is 640 wide at the aspect ratio of the camera the options
 /// choose (DESIGN.md §4); `options` left 640x480 until the scene is known.
 pub fn size_from_scene(a: &Args, scene: &Scene, opts: &mut RenderOptions) {
@@ -405,6 +438,11 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     let scene = super::load_scene(&a.scene)?;
     size_from_scene(&a, &scene, &mut opts);
     let mut preface: Vec<String> = staged.into_iter().collect();
+    preface.extend(
+        ignored_options(&a)
+            .into_iter()
+            .map(|w| format!("warning: {w}")),
+    );
     preface.push(format!(
         "imported {} in {:.2} s",
         a.scene.display(),
@@ -470,7 +508,11 @@ pub fn drive(
                         .options_string(p.fps, p.ambient, p.default_light)
                         .into();
                     start["frame_set"] = p.set.to_string().into();
-                    start["frames"] = p.frames.iter().collect::<Vec<u32>>().into();
+                    start["frame_count"] = p.frames.len().into();
+                    // Listed up to a bound: a line of megabytes chokes log shippers.
+                    if p.frames.len() <= LISTED_FRAMES {
+                        start["frames"] = p.frames.iter().collect::<Vec<u32>>().into();
+                    }
                     start["fps"] = p.fps.into();
                     start["size"] = serde_json::json!([opts.width, opts.height]);
                     start["spp"] = opts.spp.into();

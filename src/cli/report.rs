@@ -54,6 +54,34 @@ pub fn set(log: LogFormat, progress: Option<ProgressFormat>) -> Reporting {
     r
 }
 
+/// `--log-format` and `--progress` as the raw arguments give them (`--flag value` or
+/// `--flag=value`), for an error clap found before the arguments were parsed; an
+/// unknown value counts as none.
+pub fn formats_in(
+    args: impl IntoIterator<Item = std::ffi::OsString>,
+) -> (LogFormat, Option<ProgressFormat>) {
+    use clap::ValueEnum;
+    let args: Vec<String> = args
+        .into_iter()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
+    let value = |flag: &str| -> Option<String> {
+        let eq = format!("{flag}=");
+        args.iter().enumerate().rev().find_map(|(i, a)| {
+            if a == flag {
+                args.get(i + 1).cloned()
+            } else {
+                a.strip_prefix(&eq).map(str::to_owned)
+            }
+        })
+    };
+    let log = value("--log-format")
+        .and_then(|v| LogFormat::from_str(&v, false).ok())
+        .unwrap_or_default();
+    let progress = value("--progress").and_then(|v| ProgressFormat::from_str(&v, false).ok());
+    (log, progress)
+}
+
 /// How this process reports (text alone until [`set`]).
 pub fn get() -> Reporting {
     REPORTING.get().copied().unwrap_or_default()

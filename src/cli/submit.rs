@@ -31,8 +31,10 @@ pub struct Args {
 #[derive(clap::Subcommand, Debug)]
 pub enum Engine {
     /// Submit a Slurm job array (one task per shard) with sbatch and print its job id.
+    #[command(allow_negative_numbers = true)]
     Slurm(Box<SlurmArgs>),
     /// Write an Open Job Description job template (one task per chunk of frames).
+    #[command(allow_negative_numbers = true)]
     Openjd(Box<OpenJdArgs>),
 }
 
@@ -194,11 +196,7 @@ fn render_flags(r: &render_cmd::Args) -> Vec<String> {
     opt("up", r.up.clone());
     opt("yfov", r.yfov.map(|f| f.to_string()));
     opt("aov", r.aov.clone());
-    opt(
-        "crypto-levels",
-        (r.crypto_levels != subfield::render::DEFAULT_CRYPTO_LEVELS)
-            .then(|| r.crypto_levels.to_string()),
-    );
+    opt("crypto-levels", r.crypto_levels.map(|n| n.to_string()));
     opt(
         "compression",
         (r.compression != subfield::render::ExrCompression::Zip)

@@ -1,0 +1,109 @@
+//! Options a render leaves unused or cannot use in full are said, once, before it
+//! starts (a contract audit found them silently ignored); and `--threads` has a bound.
+
+mod common;
+
+use common::farm::{s, stderr, subfield};
+use common::render_scene::{temp_dir, write_scene};
+
+#[test]
+fn options_that_do_nothing_are_warned_and_too_many_threads_refused() {
+    let dir = temp_dir("cli-options");
+    let scene = write_scene(&dir);
+    let out = dir.join("o/f.#.exr");
+    let base = [
+        "render",
+        s(&scene),
+        "-o",
+        s(&out),
+        "--frames",
+        "0",
+        "--size",
+        "8x6",
+    ];
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let many = (2 * cores).to_string();
+    let mut args = base.to_vec();
+    args.extend([
+        "--shutter",
+        "0",
+        "--motion-steps",
+        "3",
+        "--crypto-levels",
+        "4",
+        "--threads",
+        &many,
+    ]);
+    let o = subfield(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    for want in [
+        "warning: --motion-steps 3 does nothing with --shutter 0",
+        "warning: --crypto-levels 4 does nothing without --aov cryptomatte",
+        &format!("warning: --threads {many} is more than the {cores} cores"),
+    ] {
+        assert_eq!(err.matches(want).count(), 1, "{want:?} in {err}");
+    }
+    // Used as given: no warning.
+    let mut args = base.to_vec();
+    args.extend(["--shutter", "0.5", "--motion-steps", "3", "--threads", "1"]);
+    args.extend(["--aov", "cryptomatte", "--crypto-levels", "4"]);
+    let o = subfield(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("warning"), "{}", stderr(&o));
+    // Past the bound: one line, exit 3, nothing written.
+    let dir2 = dir.join("refused");
+    let out2 = dir2.join("f.#.exr");
+    let o = subfield(&["render", s(&scene), "-o", s(&out2), "--threads", "5000"]);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    assert_eq!(stderr(&o).lines().count(), 1, "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("--threads 5000: at most 1024"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir2.exists());
+    let o = subfield(&[
+        "bake",
+        s(&scene),
+        "-o",
+        s(&dir2.join("b.psf")),
+        "--threads",
+        "5000",
+    ]);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+}
+
+#[test]
+fn generate_refuses_an_output_it_would_misname_and_says_its_minimum() {
+    let dir = temp_dir("cli-generate");
+    for (args, ok) in [
+        (vec!["generate", "museum", "-o", "m.obj"], false),
+        (vec!["generate", "museum", "-o", "m.GLB"], true),
+        (vec!["generate", "animart", "-o", "a.txt"], false),
+        (
+            vec!["generate", "animart", "-o", "a.aff", "--triangles", "20"],
+            true,
+        ),
+    ] {
+        let mut args = args.clone();
+        let out = dir.join(args[3]);
+        args[3] = s(&out);
+        let o = subfield(&args);
+        if ok {
+            assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        } else {
+            assert_eq!(o.status.code(), Some(3), "{args:?}: {}", stderr(&o));
+            assert!(
+                stderr(&o).contains("give a file ending in"),
+                "{}",
+                stderr(&o)
+            );
+            assert!(!out.exists());
+        }
+    }
+    let o = subfield(&["generate", "museum", "--help"]);
+    let help = String::from_utf8_lossy(&o.stdout).replace('\n', " ");
+    let least = format!("at least {}", subfield::gen::museum::MIN_STATIC_TRIS);
+    assert!(help.contains(&least), "{least:?} in {help}");
+}
