@@ -402,14 +402,48 @@ fn a_dry_run_prints_a_script_naming_both_hashes_and_the_missing_shards() {
         SIZE,
         "--dry-run",
     ]);
-    let script = String::from_utf8(o.stdout).unwrap();
+    let script = String::from_utf8(o.stdout.clone()).unwrap();
     assert!(script.contains("--frames=20..50:10,3"), "{script}");
+    // Frames 3, 20, 30, 40 by k % 4 would be shards 3, 0, 2, 0: one task of four with
+    // nothing to do; by k % 6 they are 3, 2, 0, 4, a frame a task.
+    assert!(
+        script.contains("--shard \"${SLURM_ARRAY_TASK_ID}/6\""),
+        "{script}"
+    );
+    assert!(script.contains("#SBATCH --array=0,2-4\n"), "{script}");
+    assert!(
+        stderr(&o).contains("note: 4 tasks as 6 shards"),
+        "{}",
+        stderr(&o)
+    );
+
+    // Every other frame on two tasks: four shards, two of them with five frames each
+    // (by k % 2 every frame was shard 0's); sbatch's own options named in the script.
+    let o = ok(&[
+        "submit",
+        "slurm",
+        s(&scene),
+        "--baked",
+        s(&psf),
+        "-o",
+        s(&dir.join("step/f.##.exr")),
+        "--frames",
+        "0..20:2",
+        "--size",
+        SIZE,
+        "--tasks",
+        "2",
+        "--dry-run",
+        "--",
+        "--mem=4G",
+    ]);
+    let script = String::from_utf8(o.stdout).unwrap();
     assert!(
         script.contains("--shard \"${SLURM_ARRAY_TASK_ID}/4\""),
         "{script}"
     );
-    // Frames 3, 20, 30, 40 by k % 4: shards 3, 0, 2, 0.
-    assert!(script.contains("#SBATCH --array=0,2-3\n"), "{script}");
+    assert!(script.contains("#SBATCH --array=0,2\n"), "{script}");
+    assert!(script.contains("(sbatch --mem=4G FILE)"), "{script}");
 }
 
 #[test]

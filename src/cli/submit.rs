@@ -404,7 +404,23 @@ fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let count = u32::try_from(w.plan.frames.len()).unwrap_or(u32::MAX);
-    let shards = a.tasks.unwrap_or_else(|| count.min(8)).min(count).max(1);
+    let tasks = a.tasks.unwrap_or_else(|| count.min(8)).min(count).max(1);
+    // As many shards as give each task frames: stepped frames (`0..20:2`) leave some
+    // of `tasks` shards empty, since a shard takes the frames `k % N == i`.
+    let shards = if count <= 1_000_000 {
+        farm::shard_count(&w.plan.frames.iter().collect::<Vec<u32>>(), tasks)
+    } else {
+        tasks
+    };
+    if shards != tasks && !r.quiet {
+        eprintln!(
+            "note: {} as {} (a shard takes the frames k with k % {shards} == i), so that \
+             each holds some of the frames {}",
+            plural(tasks, "task"),
+            plural(shards, "shard"),
+            w.plan.set
+        );
+    }
     let mut array: Vec<u32> = w.missing.iter().map(|f| f % shards).collect();
     array.sort_unstable();
     array.dedup();
@@ -426,6 +442,7 @@ fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
         command,
         stage_dir: r.stage_dir.clone(),
         gpus_per_task: a.gpus_per_task,
+        sbatch_args: a.sbatch_args.clone(),
     };
     let script = job.script();
     if a.dry_run {

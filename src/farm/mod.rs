@@ -94,6 +94,29 @@ pub fn frame_runs(frames: &[u32]) -> Vec<(u32, u32)> {
     runs
 }
 
+/// The shard count `N` for a job of `tasks` array tasks over `frames` (task `i` renders
+/// the frames `k` with `k % N == i`, DESIGN.md §4): `tasks` where that puts frames in
+/// as many shards as it can (`tasks`, or one a frame when fewer); else the least `N`
+/// up to 64 × `tasks` whose shards holding frames are exactly that many (every frame
+/// even, `0..20:2`, filled one shard of two and none of the other: four shards fill
+/// two, five frames each); `tasks` again when none does, or beyond a million frames.
+pub fn shard_count(frames: &[u32], tasks: u32) -> u32 {
+    let tasks = tasks.max(1);
+    let want = (frames.len() as u64).min(u64::from(tasks));
+    let filled = |n: u32| -> u64 {
+        let mut seen: Vec<u32> = frames.iter().map(|&f| f % n).collect();
+        seen.sort_unstable();
+        seen.dedup();
+        seen.len() as u64
+    };
+    if want == 0 || frames.len() > 1_000_000 || filled(tasks) == want {
+        return tasks;
+    }
+    (tasks + 1..=tasks.saturating_mul(64))
+        .find(|&n| filled(n) == want)
+        .unwrap_or(tasks)
+}
+
 /// `frames` (ascending) cut into chunks of at most `k` consecutive frames each, as
 /// `(A, B)` ranges; a gap always starts a new chunk.
 pub fn frame_chunks(frames: &[u32], k: u32) -> Vec<(u32, u32)> {
@@ -113,6 +136,27 @@ pub fn frame_chunks(frames: &[u32], k: u32) -> Vec<(u32, u32)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn shard_counts_spread_stepped_frames_over_the_tasks_asked() {
+        let even: Vec<u32> = (0..20).step_by(2).collect();
+        assert_eq!(shard_count(&even, 2), 4);
+        let shards = |n: u32| {
+            let mut s: Vec<u32> = even.iter().map(|f| f % n).collect();
+            s.sort_unstable();
+            s.dedup();
+            s
+        };
+        assert_eq!(shards(4), [0, 2]);
+        // Eight tasks over ten even frames: sixteen shards, eight of them holding frames.
+        assert_eq!(shards(shard_count(&even, 8)).len(), 8);
+        // Consecutive frames keep the count asked; fewer frames than tasks, one a frame.
+        let run: Vec<u32> = (5..25).collect();
+        assert_eq!(shard_count(&run, 3), 3);
+        assert_eq!(shard_count(&[7, 9], 8), 8);
+        assert_eq!(shard_count(&[], 4), 4);
+        assert_eq!(shard_count(&[3], 0), 1);
+    }
 
     #[test]
     fn quoting_survives_a_shell() {

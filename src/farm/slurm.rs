@@ -42,6 +42,9 @@ pub struct SlurmJob {
     pub stage_dir: Option<PathBuf>,
     /// GPUs per task (`--gres=gpu:N`); the command then renders with `--device gpu`.
     pub gpus_per_task: Option<u32>,
+    /// sbatch's own options given after `--`, which the script names so that it can be
+    /// submitted again as it was.
+    pub sbatch_args: Vec<String>,
 }
 
 /// How many times a task requeues itself after an I/O or resource failure (exit 5).
@@ -79,10 +82,24 @@ impl SlurmJob {
             "# shard i/{} of the frames with --resume, from the bake staged by content hash.",
             self.shards
         );
-        let _ = writeln!(
-            s,
-            "# Submitting it again (sbatch FILE) renders only the frames still missing."
-        );
+        if self.sbatch_args.is_empty() {
+            let _ = writeln!(
+                s,
+                "# Submitting it again (sbatch FILE) renders only the frames still missing."
+            );
+        } else {
+            let args: Vec<String> = self.sbatch_args.iter().map(|a| shell_quote(a)).collect();
+            let _ = writeln!(
+                s,
+                "# Submitted with sbatch's options {}: submitting it again with them",
+                args.join(" ")
+            );
+            let _ = writeln!(
+                s,
+                "# (sbatch {} FILE) renders only the frames still missing.",
+                args.join(" ")
+            );
+        }
         let _ = writeln!(s, "#SBATCH --job-name={}", self.name);
         let _ = writeln!(s, "#SBATCH --array={}", array_spec(&self.array));
         let _ = writeln!(
@@ -315,8 +332,13 @@ mod tests {
             ],
             stage_dir: None,
             gpus_per_task: Some(2),
+            sbatch_args: vec!["--mem=4G".into(), "--qos".into(), "low prio".into()],
         };
         let s = job.script();
+        assert!(
+            s.contains("# (sbatch --mem=4G --qos 'low prio' FILE) renders only"),
+            "{s}"
+        );
         assert!(s.contains("#SBATCH --gres=gpu:2\n"), "{s}");
         assert!(s.starts_with("#!/bin/bash\n"));
         assert!(s.contains("#SBATCH --array=0,2-3\n"), "{s}");
@@ -380,6 +402,7 @@ mod tests {
                 command: vec!["sh".into(), "-c".into(), format!("exit {code}")],
                 stage_dir: Some(dir.join("stage")),
                 gpus_per_task: None,
+                sbatch_args: Vec::new(),
             };
             let out = Command::new("bash")
                 .arg("-c")
