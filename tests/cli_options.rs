@@ -107,3 +107,36 @@ fn generate_refuses_an_output_it_would_misname_and_says_its_minimum() {
     let least = format!("at least {}", subfield::gen::museum::MIN_STATIC_TRIS);
     assert!(help.contains(&least), "{least:?} in {help}");
 }
+
+#[test]
+fn a_file_where_an_output_folder_should_be_is_bad_input_named() {
+    let dir = temp_dir("cli-folder");
+    let scene = write_scene(&dir);
+    let file = dir.join("file");
+    std::fs::write(&file, b"x").unwrap();
+    let out = file.join("sub/f.#.exr");
+    let psf = file.join("b.psf");
+    for args in [
+        vec![
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--frames",
+            "0",
+            "--size",
+            "8x6",
+        ],
+        vec!["bake", s(&scene), "-o", s(&psf)],
+    ] {
+        let o = subfield(&args);
+        assert_eq!(o.status.code(), Some(3), "{args:?}: {}", stderr(&o));
+        let err = stderr(&o);
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(
+            err.contains(&format!("{} is a file", file.display())),
+            "{err}"
+        );
+        assert!(!err.contains("File exists"), "{err}");
+    }
+}

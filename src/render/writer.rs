@@ -27,12 +27,13 @@ fn create_parent(path: &Path) -> Result<(), RenderError> {
         std::fs::create_dir_all(parent).map_err(|source| {
             // "File exists" says little when a file sits where a folder should be.
             match parent.ancestors().find(|a| a.exists()) {
+                // Bad input, not a resource failure: no retry makes a file a folder.
                 Some(a) if !a.is_dir() => RenderError::Io {
                     path: parent.to_path_buf(),
-                    source: std::io::Error::other(format!(
-                        "cannot create the folder: {} is a file",
-                        a.display()
-                    )),
+                    source: std::io::Error::new(
+                        std::io::ErrorKind::NotADirectory,
+                        format!("cannot create the folder: {} is a file", a.display()),
+                    ),
                 },
                 _ => RenderError::Io {
                     path: parent.to_path_buf(),
@@ -63,9 +64,13 @@ pub(super) fn check_writable(path: &Path) -> Result<(), RenderError> {
     create_parent(path)?;
     let folder = crate::atomic::folder_of(path);
     let probe = folder.join(format!(".subfield-probe-{}", std::process::id()));
+    // Said as what failed: the folder exists (or was just made), a file in it did not.
     std::fs::File::create(&probe).map_err(|source| RenderError::Io {
         path: folder.clone(),
-        source,
+        source: std::io::Error::new(
+            source.kind(),
+            format!("cannot create a file in this folder: {source}"),
+        ),
     })?;
     let _ = std::fs::remove_file(&probe);
     Ok(())
