@@ -140,3 +140,34 @@ fn a_file_where_an_output_folder_should_be_is_bad_input_named() {
         assert!(!err.contains("File exists"), "{err}");
     }
 }
+
+#[test]
+fn a_scene_of_a_format_not_read_says_which_are() {
+    let dir = temp_dir("cli-format");
+    let obj = dir.join("t.obj");
+    std::fs::write(&obj, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let out = dir.join("o/f.#.exr");
+    let o = subfield(&["render", s(&obj), "-o", s(&out), "--frames", "0"]);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("a .obj file, which subfield does not read"),
+        "{err}"
+    );
+    assert!(err.contains(".gltf or .glb"), "{err}");
+    // A GLB under another name is still read by its bytes.
+    let scene = write_scene(&dir);
+    let renamed = dir.join("scene.bin");
+    std::fs::copy(&scene, &renamed).unwrap();
+    let o = subfield(&[
+        "render",
+        s(&renamed),
+        "-o",
+        s(&out),
+        "--frames",
+        "0",
+        "--size",
+        "8x6",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}

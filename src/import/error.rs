@@ -86,6 +86,11 @@ pub enum ImportError {
     #[error("{path}: a baked file (from `subfield bake`), not a scene: give the scene it was baked from, and this file with --baked (subfield render SCENE --baked {path} ...)")]
     BakedFile { path: PathBuf },
 
+    /// A file of a format subfield does not read, by its extension and first bytes
+    /// (neither a GLB's `glTF` nor JSON's `{`): `.obj`, `.fbx`, `.ply` and the like.
+    #[error("{path}: a .{ext} file, which subfield does not read: give a scene as .gltf or .glb, USD (.usd, .usda, .usdc, .usdz) or BART (.aff, .nff), exported from the tool that made it (Blender: File > Export > glTF 2.0)")]
+    UnknownFormat { path: PathBuf, ext: String },
+
     /// The JSON could not be parsed as glTF.
     #[error("{path}: not valid glTF JSON: {reason}")]
     Json { path: PathBuf, reason: String },

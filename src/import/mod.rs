@@ -93,6 +93,15 @@ pub fn load(path: &Path) -> Result<Scene, ImportError> {
             path: path.to_path_buf(),
         });
     }
+    // Another extension is read as glTF only where the bytes are (a GLB or JSON under
+    // another name); else the message names what is read.
+    let gltf_name = ext.is_empty() || ["gltf", "glb"].iter().any(|g| ext.eq_ignore_ascii_case(g));
+    if !gltf_name && matches!(magic, Some(Magic::Other)) {
+        return Err(ImportError::UnknownFormat {
+            path: path.to_path_buf(),
+            ext: ext.to_owned(),
+        });
+    }
     gltf_read::load(path)
 }
 
@@ -109,6 +118,8 @@ enum Magic {
     Blend,
     /// The baked file's signature ([`crate::format::MAGIC`]).
     Baked,
+    /// Neither a GLB's `glTF` nor JSON (a `{` after any blanks): not glTF.
+    Other,
 }
 
 /// What `path`'s first bytes say it is, where they say it is not a scene; a file that
@@ -121,8 +132,17 @@ fn magic_of(path: &Path) -> Option<Magic> {
         Some(Magic::Blend)
     } else if head == crate::format::MAGIC {
         Some(Magic::Baked)
-    } else {
+    } else if head.starts_with(b"glTF")
+        || head
+            .iter()
+            .find(|b| !b.is_ascii_whitespace())
+            .is_none_or(|&b| b == b'{' || b == 0xEF)
+    {
+        // GLB, JSON (or a UTF-8 byte-order mark before it), or blanks alone: the glTF
+        // reader says what is wrong with it.
         None
+    } else {
+        Some(Magic::Other)
     }
 }
 
