@@ -70,6 +70,8 @@ fn museum(a: MuseumArgs) -> anyhow::Result<ExitCode> {
         seed: a.seed,
     };
     p.validate()?;
+    // What sits at the path first (a FIFO, a folder), then the name.
+    super::check_target("-o", &a.output)?;
     output_is(&a.output, "the museum is glTF", &["glb", "gltf"])?;
     super::prepare_output(&a.output)?;
     write_museum(&p, &a.output)
@@ -117,6 +119,7 @@ fn animart(a: AnimartArgs) -> anyhow::Result<ExitCode> {
     if a.frames < 2 {
         anyhow::bail!("--frames must be at least 2");
     }
+    super::check_target("-o", &a.output)?;
     output_is(&a.output, "animart is an AFF scene", &["aff"])?;
     let text = generate_animart(&AnimartParams {
         triangles: a.triangles,
