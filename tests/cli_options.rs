@@ -171,3 +171,35 @@ fn a_scene_of_a_format_not_read_says_which_are() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
 }
+
+#[test]
+fn a_shard_that_holds_no_frame_says_why() {
+    let dir = temp_dir("cli-shard");
+    let scene = write_scene(&dir);
+    let out = dir.join("o/f.##.exr");
+    let run = |shard: &str| {
+        subfield(&[
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--frames",
+            "1..10:2",
+            "--shard",
+            shard,
+            "--size",
+            "8x6",
+        ])
+    };
+    // Frames 1, 3, 5, 7, 9 are all odd: shard 0 of 2 has none of them.
+    let o = run("0/2");
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("warning: --shard 0/2 holds none of the frames 1..10:2"),
+        "{}",
+        stderr(&o)
+    );
+    let o = run("1/2");
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("holds none"), "{}", stderr(&o));
+}

@@ -329,6 +329,16 @@ pub fn plan(scene: &Scene, opts: &RenderOptions) -> Result<RenderPlan, RenderErr
         Some(_) => FramePlan::new(set.clone(), opts.shard),
         None => all,
     };
+    if let (Some(sh), true) = (opts.shard, frames.is_empty()) {
+        // Stepped frames can leave a shard nothing (every frame even: `--shard 1/2`);
+        // `subfield submit` picks its shard count so that none is, a shard by hand may
+        // not be.
+        warnings.push(format!(
+            "--shard {}/{} holds none of the frames {set}: a shard takes the frames k with \
+             k % {} == {}",
+            sh.index, sh.count, sh.count, sh.index
+        ));
+    }
     if let (Some(name), Some(_)) = (&opts.camera, &opts.look_at) {
         return Err(OptionError::CameraAndLookFrom {
             camera: name.clone(),
