@@ -8,7 +8,7 @@
 //! *of its own host* and never another node's frame in flight.
 
 use std::fs::{self, File, OpenOptions};
-use std::io::Write;
+use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::OnceLock;
@@ -240,6 +240,21 @@ pub fn folder_of(path: &Path) -> PathBuf {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     }
+}
+
+/// Creates `folder` and the folders above it (`create_dir_all`); where a file sits where
+/// one of them should be, the error says which, with [`ErrorKind::NotADirectory`]
+/// (bad input: no retry makes a file a folder), not "File exists".
+///
+/// [`ErrorKind::NotADirectory`]: std::io::ErrorKind::NotADirectory
+pub fn create_folder(folder: &Path) -> io::Result<()> {
+    fs::create_dir_all(folder).map_err(|e| match folder.ancestors().find(|a| a.exists()) {
+        Some(a) if !a.is_dir() => io::Error::new(
+            io::ErrorKind::NotADirectory,
+            format!("{} is a file, not a folder", a.display()),
+        ),
+        _ => e,
+    })
 }
 
 /// Removes the temporaries that killed processes of this host left in `dir` (see

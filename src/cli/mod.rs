@@ -138,26 +138,13 @@ pub fn prepare_output(path: &std::path::Path) -> anyhow::Result<()> {
     }
     check_target("-o", path)?;
     let folder = subfield::atomic::folder_of(path);
-    if let Err(e) = std::fs::create_dir_all(&folder) {
-        // "File exists" says little when a file sits where a folder should be; that is
-        // bad input (no retry makes it a folder).
-        if let Some(a) = folder
-            .ancestors()
-            .find(|a| a.exists())
-            .filter(|a| !a.is_dir())
-        {
-            return Err(anyhow::Error::new(std::io::Error::new(
-                std::io::ErrorKind::NotADirectory,
-                format!("{} is a file, not a folder", a.display()),
-            ))
-            .context(format!("cannot write {}", path.display())));
-        }
-        return Err(anyhow::Error::new(e).context(format!(
+    subfield::atomic::create_folder(&folder).with_context(|| {
+        format!(
             "cannot write {}: cannot create the folder {}",
             path.display(),
             folder.display()
-        )));
-    }
+        )
+    })?;
     let probe = folder.join(format!(".subfield-probe-{}", std::process::id()));
     std::fs::File::create(&probe).with_context(|| {
         format!(

@@ -407,7 +407,7 @@ fn slurm(a: SlurmArgs) -> anyhow::Result<ExitCode> {
     let tasks = a.tasks.unwrap_or_else(|| count.min(8)).min(count).max(1);
     // As many shards as give each task frames: stepped frames (`0..20:2`) leave some
     // of `tasks` shards empty, since a shard takes the frames `k % N == i`.
-    let shards = if count <= 1_000_000 {
+    let shards = if (count as usize) <= farm::SHARD_SEARCH / 64 {
         farm::shard_count(&w.plan.frames.iter().collect::<Vec<u32>>(), tasks)
     } else {
         tasks

@@ -99,23 +99,31 @@ pub fn frame_runs(frames: &[u32]) -> Vec<(u32, u32)> {
 /// as many shards as it can (`tasks`, or one a frame when fewer); else the least `N`
 /// up to 64 × `tasks` whose shards holding frames are exactly that many (every frame
 /// even, `0..20:2`, filled one shard of two and none of the other: four shards fill
-/// two, five frames each); `tasks` again when none does, or beyond a million frames.
+/// two, five frames each); `tasks` again when none does within [`SHARD_SEARCH`] frame
+/// visits.
 pub fn shard_count(frames: &[u32], tasks: u32) -> u32 {
     let tasks = tasks.max(1);
     let want = (frames.len() as u64).min(u64::from(tasks));
-    let filled = |n: u32| -> u64 {
-        let mut seen: Vec<u32> = frames.iter().map(|&f| f % n).collect();
-        seen.sort_unstable();
-        seen.dedup();
-        seen.len() as u64
+    let mut seen = Vec::new();
+    let mut filled = |n: u32| -> u64 {
+        seen.clear();
+        seen.resize(n as usize, false);
+        for &f in frames {
+            seen[(f % n) as usize] = true;
+        }
+        seen.iter().filter(|&&b| b).count() as u64
     };
-    if want == 0 || frames.len() > 1_000_000 || filled(tasks) == want {
+    if want == 0 || filled(tasks) == want {
         return tasks;
     }
-    (tasks + 1..=tasks.saturating_mul(64))
+    let tries = (SHARD_SEARCH / frames.len().max(1)) as u32;
+    (tasks + 1..=tasks.saturating_mul(64).min(tasks.saturating_add(tries)))
         .find(|&n| filled(n) == want)
         .unwrap_or(tasks)
 }
+
+/// Frames [`shard_count`] visits at most in its search (a few tenths of a second).
+pub const SHARD_SEARCH: usize = 100_000_000;
 
 /// `frames` (ascending) cut into chunks of at most `k` consecutive frames each, as
 /// `(A, B)` ranges; a gap always starts a new chunk.

@@ -24,22 +24,9 @@ pub(super) struct Job {
 
 fn create_parent(path: &Path) -> Result<(), RenderError> {
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(|source| {
-            // "File exists" says little when a file sits where a folder should be.
-            match parent.ancestors().find(|a| a.exists()) {
-                // Bad input, not a resource failure: no retry makes a file a folder.
-                Some(a) if !a.is_dir() => RenderError::Io {
-                    path: parent.to_path_buf(),
-                    source: std::io::Error::new(
-                        std::io::ErrorKind::NotADirectory,
-                        format!("cannot create the folder: {} is a file", a.display()),
-                    ),
-                },
-                _ => RenderError::Io {
-                    path: parent.to_path_buf(),
-                    source,
-                },
-            }
+        crate::atomic::create_folder(parent).map_err(|source| RenderError::Io {
+            path: parent.to_path_buf(),
+            source,
         })?;
     }
     Ok(())

@@ -275,15 +275,18 @@ impl Importer<'_> {
         Ok(scene)
     }
 
+    /// The shown scene's `extras.key`, else the first scene's.
+    fn scene_extra(&self, shown: Option<&json::Scene>, key: &str) -> Option<serde_json::Value> {
+        let read = |s: &json::Scene| s.extras.as_ref()?.get(key).cloned();
+        shown
+            .and_then(read)
+            .or_else(|| self.root.scenes.first().and_then(read))
+    }
+
     /// The scene's ambient light, `extras.ambient` (three numbers, none negative), as
     /// subfield writes it for AFF's `am`.
     fn ambient(&mut self, shown: Option<&json::Scene>) -> Option<Vec3> {
-        let read = |s: &json::Scene| -> Option<serde_json::Value> {
-            s.extras.as_ref()?.get("ambient").cloned()
-        };
-        let v = shown
-            .and_then(read)
-            .or_else(|| self.root.scenes.first().and_then(read))?;
+        let v = self.scene_extra(shown, "ambient")?;
         let rgb: Option<Vec<f32>> = v.as_array().and_then(|a| {
             a.iter()
                 .map(|x| x.as_f64().map(|x| x as f32))
@@ -306,12 +309,7 @@ impl Importer<'_> {
     /// the first no later than the second), as subfield writes it for an AFF scene's
     /// `a t0 t1 n` line (from 0, its `t0`, to its last frame).
     fn time_range(&mut self, shown: Option<&json::Scene>) -> Option<(f32, f32)> {
-        let read = |s: &json::Scene| -> Option<serde_json::Value> {
-            s.extras.as_ref()?.get("timeRange").cloned()
-        };
-        let v = shown
-            .and_then(read)
-            .or_else(|| self.root.scenes.first().and_then(read))?;
+        let v = self.scene_extra(shown, "timeRange")?;
         let pair = v.as_array().and_then(|a| match a.as_slice() {
             [a, b] => Some((a.as_f64()?, b.as_f64()?)),
             _ => None,
